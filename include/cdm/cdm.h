@@ -1,0 +1,396 @@
+/*
+ * cdm.h - the one public header of libcdm, the driver for the cable-driven
+ * haptic master (four string pots, four cables to a holder, an IMU on the grip,
+ * a Hall sensor on the jaw).
+ *
+ * Stable C ABI, major version 1 (SONAME libcdm.so.1).
+ *
+ * Conventions, for every function below:
+ *  - Functions return an `int`: CDM_OK (0) or a negative `cdm_error`. Some
+ *    return a negative code *and* fill their output (a stale or disconnected
+ *    pose is still the last pose): each says so.
+ *  - Handles are opaque, created and freed in pairs; every free accepts NULL.
+ *  - Public structs begin with `uint32_t struct_size`, which the caller sets to
+ *    sizeof(struct) before passing it in. The library writes only the fields
+ *    that fit in that size, so a program built against 1.0 keeps working with
+ *    1.x, where structs only ever grow at the end (new fields marked "since").
+ *  - Lengths in mm, angles in rad, times in us (device) or ns (host,
+ *    CLOCK_MONOTONIC). Device frame: the cable plane is y-z, x is out of the
+ *    plane (the seed paper's frame, ../docs/protocol.md).
+ *  - No global "current device". Detail text of an error lives per handle
+ *    (cdm_device_error) or per thread (cdm_thread_error), never in a shared
+ *    global.
+ *  - Thread safety is written on every function. "Any thread" means the call
+ *    may run concurrently with any other call on the same handle except
+ *    cdm_close.
+ */
+#ifndef CDM_CDM_H
+#define CDM_CDM_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#if defined(_WIN32)
+#  if defined(CDM_BUILDING_LIBRARY)
+#    define CDM_API __declspec(dllexport)
+#  else
+#    define CDM_API
+#  endif
+#else
+#  define CDM_API __attribute__((visibility("default")))
+#endif
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define CDM_VERSION_MAJOR 1
+#define CDM_VERSION_MINOR 0
+#define CDM_VERSION_PATCH 0
+#define CDM_VERSION_NUMBER (CDM_VERSION_MAJOR * 10000 + CDM_VERSION_MINOR * 100 + CDM_VERSION_PATCH)
+
+/** "1.0.0": the version of the library actually loaded. Static text. Any thread. */
+CDM_API const char *cdm_version(void);
+/** CDM_VERSION_NUMBER of the library actually loaded. Any thread. */
+CDM_API int cdm_version_number(void);
+
+/* ------------------------------------------------------------------ errors */
+
+/** Error codes. Values are pinned: they never change once released. */
+typedef enum cdm_error {
+    CDM_OK = 0,
+    CDM_ERR_INVALID_ARG = -1,    /**< NULL pointer, bad size field, bad option value */
+    CDM_ERR_NO_DEVICE = -2,      /**< no such device, or unknown URI scheme */
+    CDM_ERR_IO = -3,             /**< the transport failed (hidapi, file) */
+    CDM_ERR_TIMEOUT = -4,        /**< nothing arrived in time */
+    CDM_ERR_DISCONNECTED = -5,   /**< device gone; the handle reconnects by itself */
+    CDM_ERR_STALE = -6,          /**< the newest pose is older than the stale deadline */
+    CDM_ERR_NO_DATA = -7,        /**< no report has arrived yet */
+    CDM_ERR_PROTOCOL = -8,       /**< malformed or wrong-version report */
+    CDM_ERR_UNSUPPORTED = -9,    /**< the transport or device cannot do this */
+    CDM_ERR_NO_MEM = -10,
+    CDM_ERR_PARSE = -11,         /**< malformed file (JSON, CSV, recording): see the detail text */
+    CDM_ERR_NUMERIC = -12,       /**< no real solution, or a fit that did not converge */
+    CDM_ERR_END_OF_STREAM = -13, /**< a replay or a scripted simulation has ended */
+    CDM_ERR_CRC = -14,           /**< stored calibration failed its CRC */
+    CDM_ERR_INTERNAL = -15,      /**< a bug in libcdm: please report it */
+    CDM_ERROR_COUNT = 16         /**< number of codes above, CDM_OK included */
+} cdm_error;
+
+/** Static English text for a code (unknown codes get "unknown error"). Any thread. */
+CDM_API const char *cdm_strerror(int code);
+
+/**
+ * Detail text of the last failing call made by *this thread* (for calls that
+ * have no handle, such as cdm_open or cdm_calibration_load): names what was
+ * wrong and where (file, line, column; URI option). Valid until this thread's
+ * next cdm_* call. Empty string when there is none.
+ */
+CDM_API const char *cdm_thread_error(void);
+
+/* ----------------------------------------------------------------- records */
+
+/** Pose flags (cdm_pose.flags). */
+enum cdm_pose_flag {
+    CDM_POSE_STALE = 1u << 0,            /**< older than the stale deadline */
+    CDM_POSE_DISCONNECTED = 1u << 1,     /**< device gone: last good pose, held */
+    CDM_POSE_COMPENSATED = 1u << 2,      /**< a loaded calibration was applied */
+    CDM_POSE_OUT_OF_WORKSPACE = 1u << 3, /**< lengths had no real solution: last good position, held */
+    CDM_POSE_END_OF_STREAM = 1u << 4     /**< replay or scripted simulation finished */
+};
+
+/** Button bits (cdm_pose.buttons). */
+enum cdm_button {
+    CDM_BUTTON_CLUTCH = 1u << 0, /**< thumb button; teleop clutch by convention */
+    CDM_BUTTON_AUX = 1u << 1,
+    CDM_BUTTON_MARK = 1u << 2    /**< "sample here": a jig session marks seated positions with it */
+};
+
+/**
+ * The master's state, as a generic haptic input device. Size 104 (1.0).
+ * Set struct_size = sizeof(cdm_pose) before the call.
+ */
+typedef struct cdm_pose {
+    uint32_t struct_size;
+    uint32_t flags;            /**< cdm_pose_flag bits */
+    double position[3];        /**< holder centre, mm, device frame (x out of the cable plane) */
+    double orientation[4];     /**< grip orientation, unit quaternion w,x,y,z (IMU) */
+    double grip;               /**< jaw opening, rad (0 = closed) */
+    uint32_t buttons;          /**< cdm_button bits */
+    uint32_t sequence;         /**< device report counter (wraps at 2^32) */
+    uint64_t device_time_us;   /**< device clock at sampling */
+    uint64_t host_time_ns;     /**< CLOCK_MONOTONIC when the report was received */
+    uint32_t dropped;          /**< reports lost so far (sequence gaps, disconnections) */
+    uint32_t reserved0;        /**< zero */
+} cdm_pose;
+
+/** Raw sensor values of the newest report. Size 80 (1.0). */
+typedef struct cdm_raw {
+    uint32_t struct_size;
+    uint32_t status;           /**< device status bits, as in the report (docs/protocol.md) */
+    uint16_t pot_adc[4];       /**< string-pot ADC counts, cables 1..4 */
+    uint16_t hall_adc;         /**< jaw Hall sensor ADC counts */
+    uint16_t buttons;          /**< button bits, as in the report */
+    int16_t quat_q14[4];       /**< IMU quaternion w,x,y,z, 1/16384 units */
+    uint32_t sequence;
+    double lengths_mm[4];      /**< pot_adc through each pot's nominal scale and offset */
+    uint64_t device_time_us;
+    uint64_t host_time_ns;
+} cdm_raw;
+
+/** What a device says about itself (feature report 0x02, or the simulation). Size 448 (1.0). */
+typedef struct cdm_device_info {
+    uint32_t struct_size;
+    uint16_t vendor_id;
+    uint16_t product_id;
+    char uri[256];             /**< a URI that cdm_open accepts for this device */
+    char serial[32];
+    char firmware[16];         /**< "major.minor.patch" */
+    char transport[16];        /**< "hid", "sim" or "replay" */
+    uint32_t protocol_version;
+    uint32_t adc_bits;         /**< resolution of the pot ADCs */
+    double pot_scale_mm[4];    /**< mm per ADC count, cables 1..4 */
+    double pot_offset_mm[4];   /**< mm at ADC count 0 */
+    double a_mm, b_mm, m_mm;   /**< nominal geometry (the seed's a, b, m) */
+    double report_rate_hz;     /**< nominal report rate */
+    double hall_closed;        /**< Hall counts with the jaw closed */
+    double hall_open;          /**< Hall counts with the jaw fully open */
+    double grip_open_rad;      /**< jaw angle when fully open */
+} cdm_device_info;
+
+/* ----------------------------------------------------------- enumeration */
+
+typedef struct cdm_device_list cdm_device_list;
+
+/**
+ * Lists the connected masters (hidapi, VID/PID of docs/protocol.md). An empty
+ * list is not an error. Free with cdm_device_list_free. Any thread.
+ */
+CDM_API int cdm_enumerate(cdm_device_list **out);
+CDM_API size_t cdm_device_list_count(const cdm_device_list *list);
+/** Copies entry i into *info (struct_size set by the caller). */
+CDM_API int cdm_device_list_get(const cdm_device_list *list, size_t i, cdm_device_info *info);
+CDM_API void cdm_device_list_free(cdm_device_list *list);
+
+/* ---------------------------------------------------------------- devices */
+
+typedef struct cdm_device cdm_device;
+
+/** One report as it arrives, handed to a sample callback. */
+typedef struct cdm_sample {
+    uint32_t struct_size;
+    uint32_t report_len;
+    const uint8_t *report;     /**< the input report's bytes, report ID first */
+    const cdm_raw *raw;
+    const cdm_pose *pose;
+} cdm_sample;
+
+/**
+ * Called on the device's reader thread for every parsed report, in order.
+ * It must return quickly at real-time rates; with `sim:?realtime=0` or
+ * `replay:FILE?speed=0` it paces the stream (nothing is dropped).
+ * The pointers are valid only during the call.
+ */
+typedef void (*cdm_sample_fn)(void *user, const cdm_sample *sample);
+
+/** Options for cdm_open_ex. Zero-initialise, set struct_size. */
+typedef struct cdm_open_options {
+    uint32_t struct_size;
+    uint32_t stale_timeout_us;  /**< 0: the default, 50000 */
+    cdm_sample_fn on_sample;    /**< optional; installed before the first report */
+    void *user;                 /**< passed to on_sample */
+} cdm_open_options;
+
+/**
+ * Opens a master. URIs:
+ *  - NULL or "": $CDM_DEVICE if set, else the first real device found.
+ *  - "hid:/dev/hidrawN" or "/dev/hidrawN": a hidraw path.
+ *  - "serial:SN" or "hid:serial=SN": the device with that serial number.
+ *  - "sim:" or "sim:?opt=v&...": the in-process simulated master (options in
+ *    docs/protocol.md: rate, noise, seed, motion, effects, device, realtime...).
+ *  - "replay:FILE" or "replay:FILE?speed=0": a recording made by `cdm record`.
+ * The reader thread starts before this returns. On failure *out is NULL and
+ * cdm_thread_error() names what was wrong. Any thread.
+ */
+CDM_API int cdm_open(const char *uri, cdm_device **out);
+CDM_API int cdm_open_ex(const char *uri, const cdm_open_options *options, cdm_device **out);
+
+/**
+ * Stops the reader thread and frees the handle. NULL is fine. Must not run
+ * concurrently with any other call on the same handle, nor from its callback.
+ */
+CDM_API void cdm_close(cdm_device *dev);
+
+/**
+ * Copies the newest pose. Real-time safe: no allocation, no blocking, no lock
+ * the reader thread can hold (a sequence lock; it retries only while a write
+ * is under way, which takes well under a microsecond). Any thread, at 1 kHz
+ * or faster.
+ * Returns CDM_OK; or, with *out still filled with the last pose:
+ * CDM_ERR_DISCONNECTED (flag DISCONNECTED), CDM_ERR_END_OF_STREAM,
+ * CDM_ERR_STALE (flag STALE: older than the stale deadline). Returns
+ * CDM_ERR_NO_DATA, *out zeroed but for struct_size, before the first report.
+ * Never hands out a NaN: an unsolvable report keeps the last good position
+ * and sets OUT_OF_WORKSPACE.
+ */
+CDM_API int cdm_get_pose(cdm_device *dev, cdm_pose *out);
+
+/**
+ * Blocks until a pose newer than the newest at the time of the call arrives,
+ * or timeout_ms passes (CDM_ERR_TIMEOUT; *out then holds the newest pose).
+ * timeout_ms < 0 waits without limit. Same returns as cdm_get_pose. Any thread.
+ */
+CDM_API int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out);
+
+/** Raw values of the newest report. Same returns as cdm_get_pose. Any thread; does not block. */
+CDM_API int cdm_get_raw(cdm_device *dev, cdm_raw *out);
+
+/** Device information. Any thread. */
+CDM_API int cdm_get_info(cdm_device *dev, cdm_device_info *out);
+
+/** A pose older than this (host clock) is flagged stale. 0 restores the default (50 ms). Any thread. */
+CDM_API int cdm_set_stale_timeout(cdm_device *dev, uint32_t timeout_us);
+
+/** Counters of the reader thread. Size 48 (1.0). */
+typedef struct cdm_stats {
+    uint32_t struct_size;
+    uint32_t reserved0;
+    uint64_t reports;          /**< reports parsed and published */
+    uint64_t malformed;        /**< reports rejected by the parser */
+    uint64_t dropped;          /**< sequence gaps */
+    uint64_t out_of_workspace; /**< reports whose lengths had no solution */
+    uint64_t reconnects;       /**< successful reconnections after an unplug */
+} cdm_stats;
+
+/** Any thread. */
+CDM_API int cdm_get_stats(cdm_device *dev, cdm_stats *out);
+
+/**
+ * Detail text of the handle's last asynchronous problem (reader thread: a
+ * malformed report, an unplug, a failed reconnection), copied into buf
+ * (always NUL-terminated, truncated to len). Any thread.
+ */
+CDM_API int cdm_device_error(cdm_device *dev, char *buf, size_t len);
+
+/* ------------------------------------------------------------ calibration */
+
+/**
+ * A fitted calibration: nominal geometry plus physical effects with their
+ * parameters (`cdm calib fit` writes it as JSON, docs/calibration.md).
+ */
+typedef struct cdm_calibration cdm_calibration;
+
+/** Loads a calibration JSON file. Errors name the file, line and column. Any thread. */
+CDM_API int cdm_calibration_load(const char *path, cdm_calibration **out);
+/** The same from text in memory. */
+CDM_API int cdm_calibration_parse(const char *json, size_t len, cdm_calibration **out);
+CDM_API void cdm_calibration_free(cdm_calibration *cal);
+
+/**
+ * Corrected forward kinematics: the holder position (device frame, mm) whose
+ * predicted readings best match `lengths_mm` (the pots' nominal-scale
+ * readings). CDM_ERR_NUMERIC, position untouched, when there is no solution.
+ * Does not allocate. Any thread; cal is read-only.
+ */
+CDM_API int cdm_calibration_position(const cdm_calibration *cal, const double lengths_mm[4],
+                                     double position_mm[3]);
+
+/** The inverse: the readings the calibrated model predicts at a position. */
+CDM_API int cdm_calibration_lengths(const cdm_calibration *cal, const double position_mm[3],
+                                    double lengths_mm[4]);
+
+/** Number of effects in the calibration, and the name of effect i (static while cal lives). */
+CDM_API size_t cdm_calibration_effect_count(const cdm_calibration *cal);
+CDM_API const char *cdm_calibration_effect_name(const cdm_calibration *cal, size_t i);
+
+/**
+ * Applies a calibration to the device's poses from the next report on (the
+ * library keeps its own copy; cal may be freed after). NULL returns to the
+ * nominal model. Poses computed with a calibration carry CDM_POSE_COMPENSATED.
+ * Any thread.
+ */
+CDM_API int cdm_set_calibration(cdm_device *dev, const cdm_calibration *cal);
+
+/**
+ * The calibration stored in the device (feature reports 0x03/0x04, with
+ * length and CRC-32). Read: *len receives the size; returns CDM_ERR_NO_MEM if
+ * cap is too small (then *len says how much is needed), CDM_ERR_CRC when the
+ * stored CRC does not match. Write: stores len bytes. Any thread; these talk
+ * to the device and may block for some milliseconds.
+ */
+CDM_API int cdm_device_calibration_read(cdm_device *dev, char *buf, size_t cap, size_t *len);
+CDM_API int cdm_device_calibration_write(cdm_device *dev, const char *data, size_t len);
+
+/* ---------------------------------------------- experimental: model debugging
+ * Define CDM_EXPERIMENTAL before including this header to use the functions
+ * below. Their signatures may change in a minor release until they settle;
+ * they are exported from the library all the same.
+ */
+#if defined(CDM_EXPERIMENTAL)
+
+/**
+ * A user-defined physical effect, acting on the cable readings. The model
+ * calls `apply` with the readings predicted by the nominal geometry and every
+ * effect before it; `apply` changes them in place (mm). Derivatives are taken
+ * by central differences, so `apply` must be smooth in params and position.
+ */
+typedef int (*cdm_effect_apply_fn)(void *user, const double *params, const double position_mm[3],
+                                   double readings_mm[4]);
+
+typedef struct cdm_effect_def {
+    uint32_t struct_size;
+    uint32_t n_params;
+    const char *name;              /**< unique, [a-z0-9_]+; copied */
+    const char *doc;               /**< one paragraph: the physics; copied */
+    const char *const *param_names;/**< n_params names; copied */
+    const double *param_scale;     /**< typical magnitude of each parameter (for conditioning) */
+    const double *lower;           /**< bounds, or NULL for +-1e3 * scale */
+    const double *upper;
+    cdm_effect_apply_fn apply;
+    void *user;                    /**< passed to apply; must outlive the registration */
+} cdm_effect_def;
+
+/**
+ * Registers a user effect under def->name (in-process, for every later fit,
+ * diagnosis and calibration load). CDM_ERR_INVALID_ARG names a clash with a
+ * built-in. Any thread (the registry has its own lock); not from inside apply.
+ */
+CDM_API int cdm_effect_register(const cdm_effect_def *def);
+CDM_API int cdm_effect_unregister(const char *name);
+
+/**
+ * Loads a plugin (a shared object exporting
+ * `int cdm_plugin_init(int (*register_fn)(const cdm_effect_def *))`) and runs
+ * its init, which registers its effects.
+ */
+CDM_API int cdm_effect_load_plugin(const char *path);
+
+/** Number of effects known (built-in first, then user), and the name of effect i. */
+CDM_API size_t cdm_effect_count(void);
+CDM_API const char *cdm_effect_name(size_t i);
+
+/** Progress of a long fit: stage text and fraction done. Return non-zero to cancel. */
+typedef int (*cdm_progress_fn)(void *user, const char *stage, double fraction);
+
+/**
+ * Runs the model-debugging diagnosis (`cdm calib diagnose`) and returns its
+ * result as JSON text (docs/calibration.md gives the schema), allocated by the
+ * library: free it with cdm_free_string. `options_json` may be NULL or e.g.
+ * {"effects": ["exit_pulley"], "jig_tolerance_mm": 0.03, "candidates": true,
+ *  "per_position": true, "calibration_out": "calib.json"}.
+ * Errors name the file, line and column (cdm_thread_error). Any thread.
+ */
+CDM_API int cdm_diagnose(const char *data_csv_path, const char *device_json_path,
+                         const char *options_json, cdm_progress_fn progress, void *user,
+                         char **result_json);
+
+/** Frees a string returned by libcdm. NULL is fine. */
+CDM_API void cdm_free_string(char *s);
+
+#endif /* CDM_EXPERIMENTAL */
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* CDM_CDM_H */

@@ -1,0 +1,9 @@
+#!/usr/bin/env bash
+# Configures and builds into ./build (or $CDM_BUILD_DIR).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+BUILD=${CDM_BUILD_DIR:-build}
+if [ ! -f "$BUILD/build.ninja" ]; then
+  cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPython3_EXECUTABLE="$(command -v python3)"
+fi
+cmake --build "$BUILD" -j"$(nproc)"

@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# Installs what a fresh Debian 12 machine lacks to build, test and tour cdm.
+# Debian packages for the C/C++ side and Mono; numpy, matplotlib, mujoco and
+# pytest from PyPI into the python3 on PATH (Debian's own python3-* packages
+# when that python is the system one, which refuses pip installs).
+set -euo pipefail
+SUDO=""
+[ "$(id -u)" -eq 0 ] || SUDO="sudo"
+
+DEB_PKGS=(build-essential cmake ninja-build pkg-config git
+  libhidapi-dev libusb-1.0-0-dev libeigen3-dev libnlopt-dev libnlopt-cxx-dev libcmocka-dev
+  nlohmann-json3-dev libcli11-dev libfmt-dev libbenchmark-dev
+  mono-mcs mono-runtime python3 python3-pip)
+
+missing=()
+for p in "${DEB_PKGS[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "setup: installing Debian packages: ${missing[*]}"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}"
+fi
+
+PY=${PYTHON:-python3}
+need_py=()
+for m in numpy matplotlib pytest mujoco; do
+  "$PY" -c "import $m" 2>/dev/null || need_py+=("$m")
+done
+if [ ${#need_py[@]} -gt 0 ]; then
+  echo "setup: installing Python packages for $("$PY" -c 'import sys; print(sys.executable)'): ${need_py[*]}"
+  if ! "$PY" -m pip install -q "${need_py[@]}" 2>/tmp/cdm-pip.log; then
+    if grep -q externally-managed /tmp/cdm-pip.log; then
+      # Debian's system python: its own packages, mujoco from PyPI beside them.
+      DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-numpy python3-matplotlib python3-pytest
+      "$PY" -m pip install -q --break-system-packages mujoco
+    else
+      cat /tmp/cdm-pip.log >&2
+      exit 1
+    fi
+  fi
+fi

@@ -1,0 +1,2 @@
+list(APPEND CDM_SOURCES
+  api/version_error.cpp)

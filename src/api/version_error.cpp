@@ -1,0 +1,50 @@
+#include "api/errors.h"
+#include "cdm/cdm.h"
+
+namespace {
+thread_local std::string t_error;
+}
+
+namespace cdm {
+int fail(int code, const std::string &detail) {
+    t_error = detail;
+    return code;
+}
+void clear_thread_error() { t_error.clear(); }
+} // namespace cdm
+
+extern "C" {
+
+const char *cdm_version(void) {
+#define CDM_STR2(x) #x
+#define CDM_STR(x) CDM_STR2(x)
+    return CDM_STR(CDM_VERSION_MAJOR) "." CDM_STR(CDM_VERSION_MINOR) "." CDM_STR(CDM_VERSION_PATCH);
+}
+
+int cdm_version_number(void) { return CDM_VERSION_NUMBER; }
+
+const char *cdm_strerror(int code) {
+    switch (code) {
+    case CDM_OK: return "success";
+    case CDM_ERR_INVALID_ARG: return "invalid argument";
+    case CDM_ERR_NO_DEVICE: return "no such device";
+    case CDM_ERR_IO: return "input/output error";
+    case CDM_ERR_TIMEOUT: return "timed out";
+    case CDM_ERR_DISCONNECTED: return "device disconnected";
+    case CDM_ERR_STALE: return "pose is stale";
+    case CDM_ERR_NO_DATA: return "no report received yet";
+    case CDM_ERR_PROTOCOL: return "malformed or wrong-version report";
+    case CDM_ERR_UNSUPPORTED: return "not supported by this device or transport";
+    case CDM_ERR_NO_MEM: return "out of memory or buffer too small";
+    case CDM_ERR_PARSE: return "malformed input file";
+    case CDM_ERR_NUMERIC: return "no real solution or no convergence";
+    case CDM_ERR_END_OF_STREAM: return "end of stream";
+    case CDM_ERR_CRC: return "CRC mismatch";
+    case CDM_ERR_INTERNAL: return "internal error in libcdm";
+    default: return "unknown error";
+    }
+}
+
+const char *cdm_thread_error(void) { return t_error.c_str(); }
+
+} // extern "C"

@@ -1,0 +1,1 @@
+list(APPEND CDM_SOURCES)

@@ -1,0 +1,2 @@
+# Owned by the device layer: protocol, transports, reader thread.
+list(APPEND CDM_SOURCES)

@@ -1,0 +1,3 @@
+list(APPEND CDM_SOURCES
+  model/geometry.cpp
+  model/model.cpp)

@@ -1,1 +1,2 @@
-list(APPEND CDM_SOURCES)
+list(APPEND CDM_SOURCES
+  calib/jig_plan.cpp)

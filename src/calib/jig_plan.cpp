@@ -1,0 +1,1 @@
+#include "calib/jig_plan.h"

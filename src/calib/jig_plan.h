@@ -1,0 +1,2 @@
+#pragma once
+// Placeholder: the device layer replaces this with the jig plan.

@@ -138,7 +138,7 @@ typedef struct cdm_raw {
     uint64_t host_time_ns;
 } cdm_raw;
 
-/** What a device says about itself (feature report 0x02, or the simulation). Size 448 (1.0). */
+/** What a device says about itself (feature report 0x02, or the simulation). Size 456 (1.0). */
 typedef struct cdm_device_info {
     uint32_t struct_size;
     uint16_t vendor_id;

@@ -1,0 +1,1033 @@
+"""Figures and an HTML page for a ``cdm calib diagnose`` result.
+
+The numbers come from the C library (``cdm calib diagnose ... --json DIAG.json``);
+this module only draws them::
+
+    python3 -m cdm.report DIAG.json [DIAG_BEFORE.json ...] --out DIR
+    python3 bindings/python/cdm/report.py DIAG.json [...] --out DIR
+
+The first file is the diagnosis the report is about; further files are earlier
+runs (e.g. the nominal diagnosis before an effect was added) shown in an
+"error fell" comparison, in the order given, with the first file last.
+
+DIR receives PNG figures and ``index.html`` (relative image paths, inline CSS,
+no JavaScript, no external resources). Everything is written to a temporary
+directory inside DIR first and moved into place only when complete.
+
+Exit codes: 0 report written; 2 an input file is missing, does not parse or is
+not a diagnosis (the message names the file); 1 the report could not be written.
+
+Only numpy, matplotlib and the standard library are imported, so this runs
+whatever state the rest of the package (the ctypes binding) is in.
+"""
+
+import os
+import sys
+
+if __name__ == "__main__" and not __package__:
+    # Run as a script: do not let the package directory shadow stdlib modules.
+    _here = os.path.dirname(os.path.abspath(__file__))
+    sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != _here]
+
+import argparse
+import html
+import json
+import math
+import re
+import shutil
+import tempfile
+
+import numpy as np
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.colors import Normalize  # noqa: E402
+
+__all__ = ["DiagnosisError", "load_diagnosis", "write_report", "main"]
+
+AXES = ("x", "y", "z")
+CMAP = "RdBu_r"
+DPI = 100
+# Every figure this module writes starts with one of these; stale ones from an
+# earlier report in the same DIR are removed when a new report is moved in.
+FIGURE_PREFIXES = ("error_summary", "residual_map_", "residual_cut", "candidates",
+                   "fingerprint_", "vs_cable_length", "vs_variables", "comparison")
+
+
+class DiagnosisError(Exception):
+    """An input file that cannot be used; the message names the file."""
+
+
+# --------------------------------------------------------------------------- input
+
+def load_diagnosis(path):
+    """Read and sanity-check one diagnosis JSON; raise DiagnosisError if unusable."""
+    try:
+        with open(path, "r", encoding="utf-8") as f:
+            text = f.read()
+    except OSError as e:
+        raise DiagnosisError(f"{path}: cannot read: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise DiagnosisError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start})") from None
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise DiagnosisError(f"{path}: not valid JSON: {e.msg} at line {e.lineno} "
+                             f"column {e.colno}") from None
+    if not isinstance(d, dict):
+        raise DiagnosisError(f"{path}: not a diagnosis: the top level is a JSON "
+                             f"{type(d).__name__}, expected an object")
+    tool = d.get("tool")
+    if tool is not None and tool != "cdm calib diagnose":
+        raise DiagnosisError(f"{path}: not a diagnosis: \"tool\" is {tool!r}, "
+                             f"expected 'cdm calib diagnose'")
+    if tool is None and not any(k in d for k in ("error_mm", "positions", "model")):
+        raise DiagnosisError(f"{path}: not a diagnosis: none of \"tool\", \"model\", "
+                             f"\"error_mm\", \"positions\" is present")
+    return d
+
+
+def _num(v):
+    """A float, or nan for None / non-numbers / booleans."""
+    if isinstance(v, bool) or v is None:
+        return math.nan
+    if isinstance(v, (int, float)):
+        return float(v)
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def _finite(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _dict(d, key):
+    v = d.get(key) if isinstance(d, dict) else None
+    return v if isinstance(v, dict) else None
+
+
+def _list(d, key):
+    v = d.get(key) if isinstance(d, dict) else None
+    return v if isinstance(v, list) else None
+
+
+def _array(v, width=None):
+    """Nested list -> float array (None -> nan); None if the shape is unusable."""
+    if not isinstance(v, list):
+        return None
+    try:
+        if width is None:
+            a = np.array([_num(x) for x in v], dtype=float)
+        else:
+            rows = []
+            for r in v:
+                if isinstance(r, list) and len(r) == width:
+                    rows.append([_num(x) for x in r])
+                else:
+                    rows.append([math.nan] * width)
+            a = np.array(rows, dtype=float).reshape(len(rows), width)
+    except (TypeError, ValueError):
+        return None
+    return a
+
+
+def _label(diag):
+    model = diag.get("model")
+    if isinstance(model, list):
+        return "nominal" if not model else " + ".join(str(m) for m in model)
+    return "(model not given)"
+
+
+# ------------------------------------------------------------------- formatting
+
+def fmt_mm(v):
+    """Millimetre statistics: 4 decimals as the seed's Table 1; 'n/a' if missing."""
+    return f"{v:.4f}" if _finite(v) else "n/a"
+
+
+def fmt_g(v, digits=6):
+    return f"{v:.{digits}g}" if _finite(v) else "n/a"
+
+
+def _e(s):
+    return html.escape(str(s), quote=True)
+
+
+class Page:
+    """Collects HTML sections and notes about what was missing."""
+
+    def __init__(self):
+        self.parts = []
+        self.notes = []
+
+    def note(self, text):
+        self.notes.append(text)
+
+    def add(self, s):
+        self.parts.append(s)
+
+
+def _table(header, rows, cls=""):
+    h = "".join(f"<th>{_e(c)}</th>" for c in header)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
+    return f'<table class="{cls}"><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>'
+
+
+def _img(name, alt, caption):
+    return (f'<figure><img src="{_e(name)}" alt="{_e(alt)}">'
+            f"<figcaption>{caption}</figcaption></figure>")
+
+
+# ----------------------------------------------------------------- positions
+
+class Positions:
+    """The per-position arrays, checked for a common length P."""
+
+    def __init__(self, diag, page):
+        self.ok = False
+        pos = _dict(diag, "positions")
+        if pos is None:
+            page.note("The diagnosis has no \"positions\" section: no maps, cuts, "
+                      "fingerprints or residual-versus-variable plots.")
+            return
+        ref = _array(pos.get("ref"), 3)
+        if ref is None or len(ref) == 0:
+            page.note("\"positions.ref\" is missing or empty: no per-position figures.")
+            return
+        self.P = P = len(ref)
+        self.ref = ref
+
+        def get(key, width=None, required=False):
+            a = _array(pos.get(key), width)
+            if a is None:
+                if key in pos:
+                    page.note(f"\"positions.{key}\" has an unusable shape; ignored.")
+                elif required:
+                    page.note(f"\"positions.{key}\" is not in the diagnosis.")
+                return None
+            if len(a) != P:
+                page.note(f"\"positions.{key}\" has {len(a)} entries, \"positions.ref\" "
+                          f"has {P}; ignored.")
+                return None
+            return a
+
+        h = get("height")
+        self.height = h if h is not None else ref[:, 0].copy()
+        self.residual = get("residual_mm", 3, required=True)
+        self.nominal = get("nominal_residual_mm", 3, required=True)
+        self.ellipsoid = get("ellipsoid_residual_mm", 3)
+        self.sigma = get("sigma_mm", 3)
+        f = pos.get("failing")
+        if isinstance(f, list) and len(f) == P:
+            self.failing = np.array([bool(x) if isinstance(x, bool) else False for x in f])
+        else:
+            if "failing" in pos:
+                page.note("\"positions.failing\" does not match the positions; not marked.")
+            self.failing = np.zeros(P, dtype=bool)
+        self.lengths = get("lengths_mm", 4)
+        self.length_residual = get("length_residual_mm", 4)
+        self.angle = get("cable_angle_deg", 4)
+        # Heights: group positions whose height agrees to 0.01 mm.
+        hk = np.round(self.height, 2)
+        self.heights = [float(v) for v in np.unique(hk[np.isfinite(hk)])]
+        self.height_index = [np.flatnonzero(hk == v) for v in self.heights]
+        if not self.heights:
+            page.note("No finite heights in the positions; per-height figures skipped.")
+            return
+        if self.residual is None and self.nominal is None:
+            page.note("Neither \"positions.residual_mm\" nor "
+                      "\"positions.nominal_residual_mm\" is usable: no residual maps.")
+        self.ok = True
+
+
+def _regular_grid(y, z):
+    """(ycentres, zcentres, iy, iz) when (y, z) lie on a regular grid, else None."""
+    ok = np.isfinite(y) & np.isfinite(z)
+    if ok.sum() < 4 or not ok.all():
+        return None
+    out = []
+    for v in (y, z):
+        u = np.unique(np.round(v, 3))
+        if len(u) < 2:
+            return None
+        d = np.diff(u)
+        pitch = d.min()
+        steps = d / pitch
+        if pitch <= 0 or not np.allclose(steps, np.round(steps), atol=0.02):
+            return None
+        n = int(round((u[-1] - u[0]) / pitch)) + 1
+        if n > 400:
+            return None
+        idx = np.round((v - u[0]) / pitch).astype(int)
+        out.append((u[0] + pitch * np.arange(n), idx))
+    (yc, iy), (zc, iz) = out
+    if len(yc) * len(zc) > 4 * len(y):  # too sparse to draw as a raster
+        return None
+    return yc, zc, iy, iz
+
+
+def _edges(c):
+    if len(c) == 1:
+        return np.array([c[0] - 0.5, c[0] + 0.5])
+    p = c[1] - c[0]
+    return np.concatenate([c - p / 2, [c[-1] + p / 2]])
+
+
+def _map(ax, y, z, v, norm, failing=None):
+    """Draw values v at (y, z): raster on a regular grid, scatter otherwise."""
+    g = _regular_grid(y, z)
+    if g is not None:
+        yc, zc, iy, iz = g
+        G = np.full((len(zc), len(yc)), np.nan)
+        G[iz, iy] = v
+        ey, ez = _edges(yc), _edges(zc)
+        m = ax.imshow(np.ma.masked_invalid(G), cmap=CMAP, norm=norm, origin="lower",
+                      extent=(ey[0], ey[-1], ez[0], ez[-1]), interpolation="nearest")
+    else:
+        s = max(8.0, min(200.0, 4000.0 / max(1, len(y))))
+        m = ax.scatter(y, z, c=v, cmap=CMAP, norm=norm, s=s, edgecolors="0.5",
+                       linewidths=0.3, plotnonfinite=True)
+    if failing is not None and failing.any():
+        ax.scatter(y[failing], z[failing], marker="x", c="k", s=14, linewidths=0.8,
+                   label="failing")
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("y (mm)")
+    ax.set_ylabel("z (mm)")
+    return m
+
+
+def _symnorm(*arrays):
+    vals = [np.abs(a[np.isfinite(a)]) for a in arrays if a is not None]
+    vals = [v for v in vals if v.size]
+    vmax = max((float(v.max()) for v in vals), default=0.0)
+    if not vmax > 0:
+        vmax = 1e-3
+    return Normalize(-vmax, vmax)
+
+
+def _save(fig, tmp, name):
+    fig.savefig(os.path.join(tmp, name), dpi=DPI)
+    plt.close(fig)
+    return name
+
+
+# --------------------------------------------------------------------- sections
+
+STAT_ROWS = (("nominal_error_mm", "Nominal model"),
+             ("ellipsoid_error_mm", "Seed's ellipsoid (eq. 4-5)"),
+             ("error_mm", "Current model"),
+             ("noise_floor_mm", "Noise floor (repeatability + jig tolerance)"))
+
+
+def _stat_cells(block):
+    cells = []
+    for a in AXES:
+        s = _dict(block, a) or {}
+        mean, std = s.get("mean"), s.get("std")
+        cells.append(f"{fmt_mm(mean)} ± {fmt_mm(std)}")
+        cells.append(fmt_mm(s.get("rms")))
+        cells.append(fmt_mm(s.get("max")))
+    return cells
+
+
+def section_summary(diag, page, tmp, figs):
+    page.add("<h2>1. Summary</h2>")
+    verdict = diag.get("verdict")
+    explained = diag.get("explained")
+    if isinstance(explained, bool):
+        badge = ('<span class="ok">explained by the model (consistent with noise)</span>'
+                 if explained else
+                 '<span class="bad">not explained: structure beyond noise remains</span>')
+    else:
+        badge = '<span class="na">explained: not given</span>'
+        page.note("\"explained\" is not in the diagnosis.")
+    page.add(f'<p class="verdict"><b>Model:</b> {_e(_label(diag))} &mdash; {badge}</p>')
+    if isinstance(verdict, str) and verdict.strip():
+        page.add(f'<p class="verdict">{_e(verdict)}</p>')
+    else:
+        page.note("No \"verdict\" text in the diagnosis.")
+
+    header = ["", "x mean ± std", "x RMS", "x max", "y mean ± std", "y RMS", "y max",
+              "z mean ± std", "z RMS", "z max"]
+    rows = []
+    for key, name in STAT_ROWS:
+        block = _dict(diag, key)
+        if block is None:
+            page.note(f"\"{key}\" is not in the diagnosis; its row shows n/a.")
+        rows.append([_e(name)] + _stat_cells(block))
+    page.add("<h3>Position error (mm), estimated minus reference, over all samples</h3>")
+    page.add(_table(header, rows, "stats"))
+
+    # Scalar facts.
+    facts = []
+    facts.append(("chi²/dof", fmt_g(diag.get("chi2_per_dof"), 4)
+                  + (f" (dof {diag['dof']})" if _finite(diag.get("dof")) else "")))
+    st = _dict(diag, "structure")
+    if st is not None:
+        facts.append(("Spatial structure statistic", fmt_g(st.get("statistic"), 4)
+                      + (f" ({_e(st['method'])})" if isinstance(st.get("method"), str) else "")))
+        facts.append(("Structure p-value", fmt_g(st.get("p_value"), 3)))
+    else:
+        page.note("\"structure\" (spatial-structure test) is not in the diagnosis.")
+    if _finite(diag.get("failing_positions")):
+        facts.append(("Failing positions", str(int(diag["failing_positions"]))))
+    jt = _dict(diag, "jig_tolerance_mm")
+    if jt is not None:
+        facts.append(("Jig tolerance", f"{fmt_mm(jt.get('value'))} mm ({_e(jt.get('source', 'source not given'))})"))
+    fit = _dict(diag, "fit")
+    if fit is not None:
+        conv = fit.get("converged")
+        facts.append(("Fit", f"{_e(fit.get('algorithm', '?'))}, "
+                      f"{fmt_g(fit.get('evaluations'))} evaluations, "
+                      f"{fmt_g(fit.get('seconds'), 3)} s, "
+                      + ("converged" if conv is True else
+                         "<span class=\"bad\">NOT converged</span>" if conv is False else
+                         "convergence not given")))
+    el = _dict(diag, "ellipsoid")
+    if el is not None:
+        facts.append(("Seed ellipsoid L, M, N (mm)",
+                      ", ".join(fmt_g(el.get(k), 6) for k in ("L", "M", "N"))))
+    data = _dict(diag, "data")
+    if data is not None:
+        hs = data.get("heights")
+        hs = ", ".join(fmt_g(_num(h), 6) for h in hs) if isinstance(hs, list) else "n/a"
+        ign = data.get("ignored_columns")
+        facts.append(("Data", f"{_e(data.get('path', '?'))}: {fmt_g(data.get('rows'))} rows, "
+                      f"{fmt_g(data.get('positions'))} positions, heights {hs} mm"
+                      + (f"; ignored columns: {_e(', '.join(map(str, ign)))}"
+                         if isinstance(ign, list) and ign else "")))
+    dev = _dict(diag, "device")
+    if dev is not None:
+        facts.append(("Device (mm)", ", ".join(
+            f"{k[0]} = {fmt_g(dev.get(k), 6)}" for k in ("a_mm", "b_mm", "m_mm"))))
+    if isinstance(diag.get("version"), str):
+        facts.append(("Produced by", _e(f"{diag.get('tool', '?')} {diag['version']}")))
+    page.add(_table(["", ""], [[f"<b>{_e(k)}</b>", v] for k, v in facts], "facts"))
+
+    # Fitted parameters.
+    params = _dict(diag, "params")
+    page.add("<h3>Fitted parameters</h3>")
+    prow = []
+    if params:
+        for eff, ps in params.items():
+            if not isinstance(ps, dict):
+                continue
+            for pname, p in ps.items():
+                p = p if isinstance(p, dict) else {"value": p}
+                prow.append([_e(eff), _e(pname), fmt_g(p.get("value"), 6),
+                             fmt_g(p.get("std"), 3), _e(p.get("unit", ""))])
+    if prow:
+        page.add(_table(["effect", "parameter", "value", "std", "unit"], prow, "params"))
+    else:
+        page.add("<p>No fitted parameters (nominal model or not given).</p>")
+
+    # Validation.
+    val = _dict(diag, "validation")
+    if val is not None:
+        page.add(f"<h3>Validation ({_e(val.get('method', 'method not given'))})</h3>")
+        vrows = []
+        for fold in _list(val, "folds") or []:
+            if not isinstance(fold, dict):
+                continue
+            r = _dict(fold, "rms_mm") or {}
+            vrows.append([f"held out {fmt_g(fold.get('height'), 6)} mm"]
+                         + [fmt_mm(r.get(a)) for a in AXES])
+        r = _dict(val, "rms_mm") or {}
+        vrows.append(["<b>all folds</b>"] + [fmt_mm(r.get(a)) for a in AXES])
+        page.add(_table(["fold", "x RMS (mm)", "y RMS (mm)", "z RMS (mm)"], vrows, "stats"))
+
+    # A bar chart of the four RMS rows.
+    blocks = [(name, _dict(diag, key)) for key, name in STAT_ROWS]
+    blocks = [(n, b) for n, b in blocks if b is not None]
+    if blocks:
+        fig, ax = plt.subplots(figsize=(7.5, 3.6), constrained_layout=True)
+        w = 0.8 / len(blocks)
+        for i, (name, b) in enumerate(blocks):
+            vals = [_num((_dict(b, a) or {}).get("rms")) for a in AXES]
+            ax.bar(np.arange(3) + (i - (len(blocks) - 1) / 2) * w, vals, w, label=name)
+        ax.set_xticks(range(3), [f"{a} error" for a in AXES])
+        ax.set_ylabel("RMS (mm)")
+        ax.set_title("Position error RMS per axis")
+        ax.legend(fontsize=8)
+        ax.grid(axis="y", alpha=0.3)
+        name = _save(fig, tmp, "error_summary.png")
+        figs.append(name)
+        page.add(_img(name, "RMS error per axis", "RMS of the position error per axis for "
+                      "the nominal model, the seed's ellipsoid, the current model and the "
+                      "noise floor. The current model is done when its bars reach the "
+                      "noise floor's."))
+
+
+def section_maps(diag, page, tmp, figs, P):
+    page.add("<h2>2. Residual maps per height</h2>")
+    if not P.ok or (P.residual is None and P.nominal is None):
+        page.add("<p>Not available (see the notes).</p>")
+        return
+    before, after = P.nominal, P.residual
+    norms = [_symnorm(None if before is None else before[:, k],
+                      None if after is None else after[:, k]) for k in range(3)]
+    cols = [(c, t) for c, t in ((before, "before: nominal model"),
+                                (after, f"after: {_label(diag)}")) if c is not None]
+    for h, idx in zip(P.heights, P.height_index):
+        y, z = P.ref[idx, 1], P.ref[idx, 2]
+        fig, axs = plt.subplots(3, len(cols), figsize=(4.3 * len(cols) + 1.2, 11),
+                                squeeze=False, sharex=True, sharey=True,
+                                constrained_layout=True)
+        for k in range(3):
+            m = None
+            for j, (arr, title) in enumerate(cols):
+                ax = axs[k, j]
+                fail = P.failing[idx] if arr is after else None
+                m = _map(ax, y, z, arr[idx, k], norms[k], fail)
+                ax.set_title(f"{AXES[k]} residual, {title}", fontsize=9)
+            fig.colorbar(m, ax=axs[k, :], label=f"{AXES[k]} residual (mm)", shrink=0.9)
+        for ax in axs.ravel():
+            ax.label_outer()
+        nf = int(P.failing[idx].sum())
+        fig.suptitle(f"Residual (estimate - reference) at height x = {h:g} mm"
+                     + (f"; {nf} failing positions (x)" if nf else ""))
+        name = _save(fig, tmp, f"residual_map_h{h:g}.png".replace("-", "m"))
+        figs.append(name)
+        page.add(_img(name, f"residual maps at {h:g} mm",
+                      f"Height {h:g} mm: residual per jig position in the cable plane "
+                      f"(y right, z up), rows x, y, z; left before (nominal), right after "
+                      f"(current model). One symmetric colour scale per axis for all "
+                      f"heights; black crosses mark positions whose mean residual is beyond "
+                      f"what noise and jig tolerance explain."))
+    if len(P.heights) == 1:
+        page.note("Only one height in the data: the x error cannot be separated from a "
+                  "height-dependent effect.")
+    section_cut(diag, page, tmp, figs, P)
+
+
+def _cut(P, idx, along):
+    """Indices (into idx) on the grid line nearest the centre, sorted along `along`."""
+    other = 2 if along == 1 else 1
+    v = P.ref[idx, other]
+    ok = np.isfinite(v)
+    if not ok.any():
+        return None
+    u = np.unique(np.round(v[ok], 3))
+    c = u[np.argmin(np.abs(u))]
+    sel = idx[np.isfinite(v) & (np.abs(np.round(v, 3) - c) < 1e-6)]
+    sel = sel[np.argsort(P.ref[sel, along])]
+    return sel, c
+
+
+def section_cut(diag, page, tmp, figs, P):
+    fig, axs = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    cmap = plt.get_cmap("viridis")
+    drawn = False
+    for a, (along, ax) in enumerate(zip((1, 2), axs)):
+        for i, (h, idx) in enumerate(zip(P.heights, P.height_index)):
+            r = _cut(P, idx, along)
+            if r is None:
+                continue
+            sel, c = r
+            col = cmap(i / max(1, len(P.heights) - 1))
+            s = P.ref[sel, along]
+            if P.nominal is not None:
+                ax.plot(s, P.nominal[sel, 0], "--", color=col, marker=".", ms=3, lw=1)
+            if P.residual is not None:
+                ax.plot(s, P.residual[sel, 0], "-", color=col, marker="o", ms=3, lw=1.5,
+                        label=f"x = {h:g} mm")
+            drawn = True
+        other = "z" if along == 1 else "y"
+        ax.axhline(0, color="0.6", lw=0.8)
+        ax.set_xlabel(f"{'y' if along == 1 else 'z'} (mm), at {other} nearest 0")
+        ax.set_ylabel("x residual (mm)")
+        ax.set_title(f"x residual along {'y' if along == 1 else 'z'}")
+        ax.grid(alpha=0.3)
+    if P.residual is not None:
+        axs[0].legend(fontsize=8, title="solid: current\ndashed: nominal", title_fontsize=8)
+    if not drawn:
+        plt.close(fig)
+        page.note("No grid line through the centre: cut view skipped.")
+        return
+    name = _save(fig, tmp, "residual_cut.png")
+    figs.append(name)
+    page.add(_img(name, "x residual cut", "The seed's cut view: x residual along the "
+                  "grid line through the centre, one colour per height; dashed nominal, "
+                  "solid current model. A barrel distortion is an arch (x falls short "
+                  "toward the edges) with the same curvature at every height."))
+
+
+def _fmt_list(v):
+    return ", ".join(str(x) for x in v) if isinstance(v, list) and v else ""
+
+
+def section_candidates(diag, page, tmp, figs):
+    page.add("<h2>3. Which effect is missing: candidate ranking</h2>")
+    cands = _list(diag, "candidates")
+    if cands is None:
+        page.note("\"candidates\" is not in the diagnosis: no ranking.")
+        page.add("<p>Not available.</p>")
+        return
+    cands = [c for c in cands if isinstance(c, dict)]
+    if not cands:
+        page.add("<p>No candidate effects were scored (every catalogued effect is in "
+                 "the model, or none applies).</p>")
+    else:
+        metric = None
+        for key, label in (("bic_change", "BIC change (negative = better)"),
+                           ("score", "score"), ("delta_chi2", "Δχ² when fitted")):
+            if any(_finite(c.get(key)) for c in cands):
+                metric = (key, label)
+                break
+        if metric is not None:
+            key, label = metric
+            names = [str(c.get("effect", "?")) for c in cands]
+            vals = np.array([_num(c.get(key)) for c in cands])
+            # one colour per confused set
+            groups, colours = {}, []
+            pal = plt.get_cmap("tab10")
+            for c in cands:
+                cw = c.get("confused_with")
+                cw = cw if isinstance(cw, list) else []
+                s = frozenset([str(c.get("effect"))] + [str(x) for x in cw])
+                gk = next((g for g in groups if g & s), None)
+                if gk is None:
+                    groups[s] = len(groups)
+                    gk = s
+                colours.append(pal(groups[gk] % 10) if len(s) > 1 else "0.55")
+            fig, ax = plt.subplots(figsize=(8.5, 0.45 * len(cands) + 1.6), constrained_layout=True)
+            yy = np.arange(len(cands))
+            ax.barh(yy, np.nan_to_num(vals), color=colours)
+            ax.set_yticks(yy, names)
+            ax.invert_yaxis()
+            ax.axvline(0, color="k", lw=0.8)
+            ax.set_xlabel(label)
+            ax.set_title("Candidate effects, best first")
+            span = np.nanmax(np.abs(vals)) if np.isfinite(vals).any() else 1.0
+            for i, c in enumerate(cands):
+                t = _fmt_list(c.get("confused_with"))
+                txt = ("n/a" if not np.isfinite(vals[i]) else "") + \
+                      (f"  ≈ {t}" if t else "")
+                if txt:
+                    x0 = vals[i] if np.isfinite(vals[i]) and vals[i] > 0 else 0.0
+                    ax.text(x0 + 0.01 * span, i, txt, va="center", fontsize=8, color="0.15")
+            ax.grid(axis="x", alpha=0.3)
+            name = _save(fig, tmp, "candidates.png")
+            figs.append(name)
+            page.add(_img(name, "candidate ranking",
+                          f"Each catalogued effect not in the model, fitted on top of it, "
+                          f"ranked by {label}. Bars of one colour (and '≈' names) are "
+                          f"effects the data cannot tell apart."))
+        rows = []
+        for c in cands:
+            after = _dict(c, "error_mm_after") or {}
+            rows.append([_e(c.get("effect", "?")), fmt_g(c.get("score"), 4),
+                         fmt_g(c.get("delta_chi2"), 5), fmt_g(c.get("bic_change"), 5),
+                         fmt_g(c.get("n_params")),
+                         *[fmt_mm((_dict(after, a) or {}).get("rms")) for a in AXES],
+                         fmt_g(c.get("residual_correlation"), 3),
+                         _e(_fmt_list(c.get("confused_with")))])
+        page.add(_table(["effect", "score", "Δχ²", "BIC change", "params",
+                         "x RMS after (mm)", "y RMS after (mm)", "z RMS after (mm)",
+                         "corr. with residual", "confused with"], rows, "cands"))
+    ins = _list(diag, "inseparable")
+    if ins:
+        page.add("<h3>Inseparable effects</h3><ul>")
+        for s in ins:
+            if isinstance(s, dict):
+                page.add(f"<li><b>{_e(_fmt_list(s.get('effects')))}</b>: "
+                         f"{_e(s.get('separate_by', 'no separating measurement given'))}</li>")
+        page.add("</ul>")
+
+
+def _corr(a, b):
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 3:
+        return math.nan
+    a, b = a[ok] - a[ok].mean(), b[ok] - b[ok].mean()
+    d = math.sqrt(float((a * a).sum() * (b * b).sum()))
+    return float((a * b).sum() / d) if d > 0 else math.nan
+
+
+def section_fingerprints(diag, page, tmp, figs, P):
+    page.add("<h2>4. Fingerprints of the top candidates</h2>")
+    fps = _dict(diag, "fingerprints")
+    if fps is None:
+        page.note("\"fingerprints\" is not in the diagnosis.")
+        page.add("<p>Not available.</p>")
+        return
+    if not P.ok or P.residual is None:
+        page.add("<p>Not available: no per-position residual.</p>")
+        return
+    order = [str(c.get("effect")) for c in (_list(diag, "candidates") or [])
+             if isinstance(c, dict) and str(c.get("effect")) in fps]
+    order += [k for k in fps if k not in order]
+    cand_by = {str(c.get("effect")): c for c in (_list(diag, "candidates") or [])
+               if isinstance(c, dict)}
+    hsel = list(range(len(P.heights)))
+    if len(hsel) > 5:
+        hsel = sorted(set(np.linspace(0, len(hsel) - 1, 5).round().astype(int).tolist()))
+    n = 0
+    for eff in order:
+        if n >= 4:
+            break
+        fp = _array(fps[eff], 3)
+        if fp is None or len(fp) != P.P:
+            page.note(f"Fingerprint of {eff} does not match the positions; skipped.")
+            continue
+        n += 1
+        cx = _corr(fp[:, 0], P.residual[:, 0])
+        c3 = _corr(fp.ravel(), P.residual.ravel())
+        cj = cand_by.get(eff, {}).get("residual_correlation")
+        nr = _symnorm(P.residual[:, 0])
+        nf = _symnorm(fp[:, 0])
+        fig, axs = plt.subplots(2, len(hsel), figsize=(3.3 * len(hsel) + 1.3, 6.8),
+                                squeeze=False, sharex=True, sharey=True,
+                                constrained_layout=True)
+        for j, hi in enumerate(hsel):
+            idx = P.height_index[hi]
+            y, z = P.ref[idx, 1], P.ref[idx, 2]
+            m0 = _map(axs[0, j], y, z, fp[idx, 0], nf)
+            axs[0, j].set_title(f"fingerprint x, {P.heights[hi]:g} mm", fontsize=9)
+            m1 = _map(axs[1, j], y, z, P.residual[idx, 0], nr)
+            axs[1, j].set_title(f"current residual x, {P.heights[hi]:g} mm", fontsize=9)
+        fig.colorbar(m0, ax=axs[0, :], label="x shift by the effect (mm)", shrink=0.9)
+        fig.colorbar(m1, ax=axs[1, :], label="x residual (mm)", shrink=0.9)
+        for ax in axs.ravel():
+            ax.label_outer()
+        title = f"{eff}: corr(x) = {fmt_g(cx, 3)}, corr(x,y,z) = {fmt_g(c3, 3)}"
+        if _finite(cj):
+            title += f", reported correlation = {fmt_g(cj, 3)}"
+        fig.suptitle(title)
+        safe = re.sub(r"[^A-Za-z0-9_.-]", "_", eff)
+        name = _save(fig, tmp, f"fingerprint_{n}_{safe}.png")
+        figs.append(name)
+        page.add(_img(name, f"fingerprint of {eff}",
+                      f"<b>{_e(eff)}</b>: top row, how the effect at its fitted size moves "
+                      f"the x estimate; bottom row, the current x residual (own colour "
+                      f"scales). The right effect has the same pattern (correlation near "
+                      f"±1 and similar size). Correlation over all positions: x "
+                      f"{fmt_g(cx, 3)}, all axes {fmt_g(c3, 3)}"
+                      + (f"; reported by the diagnosis {fmt_g(cj, 3)}" if _finite(cj) else "")
+                      + "."))
+    if n == 0:
+        page.add("<p>No usable fingerprints.</p>")
+
+
+def _finding_target(var):
+    """Map a finding's variable name to (panel kind, cable number or None)."""
+    v = str(var).lower()
+    m = re.search(r"([1-4])", v)
+    cable = int(m.group(1)) if m else None
+    if "angle" in v:
+        return "angle", cable
+    if "height" in v or v in ("x_ref", "h"):
+        return "height", None
+    if "dist" in v or "radi" in v or v in ("r", "rho"):
+        return "radius", None
+    if "len" in v or re.fullmatch(r"l[1-4]", v) or "cable" in v:
+        return "length", cable
+    return None, None
+
+
+def _binned(ax, x, y, color="k", bins=24, label="binned mean", width=None):
+    """Mean of y in bins of x (per value when x takes few values)."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    x, y = x[ok], y[ok]
+    if x.size < 2 or x.min() == x.max():
+        return
+    u = np.unique(x)
+    if len(u) <= bins and width is None:
+        k = np.searchsorted(u, x)
+        ax.plot(u, np.bincount(k, weights=y) / np.bincount(k), "-", color=color, lw=2,
+                marker="o", ms=4, label=label)
+        return
+    if width is not None and width > 0:
+        bins = int(min(400, max(bins, math.ceil((x.max() - x.min()) / width))))
+    nb = bins
+    e = np.linspace(x.min(), x.max(), nb + 1)
+    k = np.clip(np.digitize(x, e) - 1, 0, nb - 1)
+    cnt = np.bincount(k, minlength=nb)
+    s = np.bincount(k, weights=y, minlength=nb)
+    c = (e[:-1] + e[1:]) / 2
+    good = cnt > 0
+    ax.plot(c[good], s[good] / cnt[good], "-", color=color, lw=2, label=label)
+
+
+def _annot(ax, texts):
+    if texts:
+        ax.text(0.02, 0.98, "\n".join(texts), transform=ax.transAxes, va="top",
+                fontsize=7.5, color="darkred",
+                bbox=dict(boxstyle="round", fc="white", ec="darkred", alpha=0.85))
+
+
+def _finding_text(f):
+    t = f.get("text")
+    if isinstance(t, str) and t:
+        return t if len(t) <= 70 else t[:67] + "..."
+    s = f"{f.get('kind', '?')} in {f.get('axis', '?')}"
+    if _finite(f.get("period_mm")):
+        s += f", period {fmt_g(f['period_mm'], 4)} mm"
+    if _finite(f.get("amplitude_mm")):
+        s += f", amplitude {fmt_g(f['amplitude_mm'], 3)} mm"
+    return s
+
+
+def section_variables(diag, page, tmp, figs, P):
+    page.add("<h2>5. Residual versus physical variables</h2>")
+    us = _dict(diag, "unexplained_structure")
+    findings = []
+    if us is None:
+        page.note("\"unexplained_structure\" is not in the diagnosis.")
+    else:
+        if isinstance(us.get("summary"), str):
+            page.add(f"<p>{_e(us['summary'])}</p>")
+        findings = [f for f in (_list(us, "findings") or []) if isinstance(f, dict)]
+        if findings:
+            rows = [[_e(f.get("variable", "?")), _e(f.get("kind", "?")), _e(f.get("axis", "?")),
+                     fmt_g(f.get("period_mm"), 4), fmt_g(f.get("amplitude_mm"), 4),
+                     fmt_g(f.get("p_value"), 3), _e(f.get("text", ""))] for f in findings]
+            page.add(_table(["variable", "kind", "axis", "period (mm)", "amplitude (mm)",
+                             "p-value", "finding"], rows, "cands"))
+        else:
+            page.add("<p>No trend or periodicity found in the residual.</p>")
+    by_target = {}
+    periods = []  # (cable or None, period) of periodic findings in cable length
+    for f in findings:
+        tgt = _finding_target(f.get("variable"))
+        by_target.setdefault(tgt, []).append(_finding_text(f))
+        p = _num(f.get("period_mm"))
+        if tgt[0] == "length" and math.isfinite(p) and p > 0:
+            periods.append((tgt[1], p))
+    if not P.ok:
+        page.add("<p>Plots not available: no per-position data.</p>")
+        return
+    pal = plt.get_cmap("tab10")
+
+    # Length residual per cable vs that cable's length.
+    if P.lengths is not None and P.length_residual is not None:
+        fig, axs = plt.subplots(2, 2, figsize=(10, 7.5), constrained_layout=True)
+        for i, ax in enumerate(axs.ravel()):
+            x, y = P.lengths[:, i], P.length_residual[:, i]
+            ax.scatter(x, y, s=6, alpha=0.35, color=pal(i), edgecolors="none",
+                       label="positions")
+            # bins narrow enough to show a periodicity the diagnosis found here
+            per = [p for c, p in periods if c in (i + 1, None)]
+            _binned(ax, x, y, width=min(per) / 5 if per else None)
+            ax.axhline(0, color="0.6", lw=0.8)
+            ax.set_xlabel(f"cable {i + 1} mean measured length (mm)")
+            ax.set_ylabel(f"cable {i + 1} length residual (mm)")
+            ax.set_title(f"Cable {i + 1}: measured - predicted reading")
+            ax.grid(alpha=0.3)
+            _annot(ax, by_target.get(("length", i + 1), []) +
+                   (by_target.get(("length", None), []) if i == 0 else []))
+        axs[0, 0].legend(fontsize=8, loc="lower right")
+        name = _save(fig, tmp, "vs_cable_length.png")
+        figs.append(name)
+        page.add(_img(name, "length residual versus cable length",
+                      "Each cable's reading residual (measured minus what the model "
+                      "predicts at the reference position) against that cable's length, "
+                      "with the binned mean. A slope is a gain error, a curve a "
+                      "non-linearity, a ripple a periodic effect of the drum or pulley; "
+                      "red boxes are the diagnosis's own findings."))
+    else:
+        page.note("\"positions.lengths_mm\" or \"positions.length_residual_mm\" is missing: "
+                  "no length-residual plot.")
+
+    res = P.residual if P.residual is not None else P.nominal
+    if res is None:
+        return
+    which = "current model" if P.residual is not None else "nominal model"
+    radius = np.hypot(P.ref[:, 1], P.ref[:, 2])
+    cols = [("height", P.height, "height x (mm)"),
+            ("radius", radius, "distance from the centre √(y²+z²) (mm)")]
+    if P.angle is not None:
+        cols.append(("angle", P.angle, "cable angle out of the cable plane (deg)"))
+    else:
+        page.note("\"positions.cable_angle_deg\" is missing: no residual-versus-angle plot.")
+    fig, axs = plt.subplots(3, len(cols), figsize=(4.4 * len(cols), 9.5),
+                            squeeze=False, constrained_layout=True)
+    for k in range(3):
+        for j, (kind, xv, xl) in enumerate(cols):
+            ax = axs[k, j]
+            r = res[:, k]
+            if kind == "angle":
+                for i in range(4):
+                    ax.scatter(xv[:, i], r, s=4, alpha=0.3, color=pal(i), edgecolors="none")
+                    _binned(ax, xv[:, i], r, color=pal(i), label=f"cable {i + 1}")
+                if k == 0:
+                    ax.legend(fontsize=7, loc="lower right")
+            else:
+                ax.scatter(xv, r, s=5, alpha=0.35, color="C0", edgecolors="none")
+                _binned(ax, xv, r)
+            ax.axhline(0, color="0.6", lw=0.8)
+            ax.set_xlabel(xl, fontsize=8.5)
+            ax.set_ylabel(f"{AXES[k]} residual (mm)")
+            ax.grid(alpha=0.3)
+            if k == 0:
+                ax.set_title(f"vs {kind}", fontsize=10)
+            texts = [t for (kk, c), ts in by_target.items() if kk == kind
+                     for t in ts] if k == 0 else []
+            _annot(ax, texts)
+    fig.suptitle(f"Position residual ({which}) versus physical variables")
+    name = _save(fig, tmp, "vs_variables.png")
+    figs.append(name)
+    page.add(_img(name, "residual versus variables",
+                  f"Per-position residual of the {which} (rows x, y, z) against the height, "
+                  f"the distance from the centre and each cable's angle out of the cable "
+                  f"plane (one colour per cable), with binned means. Flat lines at zero "
+                  f"mean nothing is left; a trend or bump says which variable the missing "
+                  f"effect depends on."))
+
+
+def section_comparison(runs, page, tmp, figs):
+    """runs: [(path, diag)] in display order (earliest first, the report's file last)."""
+    page.add("<h2>6. Error fell? Runs compared</h2>")
+    labels = [_label(d) for _, d in runs]
+    rows = []
+    rms = np.full((len(runs), 3), np.nan)
+    for i, (path, d) in enumerate(runs):
+        e = _dict(d, "error_mm")
+        if e is None:
+            page.note(f"{os.path.basename(path)}: no \"error_mm\"; its bars are missing.")
+        for k, a in enumerate(AXES):
+            rms[i, k] = _num((_dict(e, a) or {}).get("rms"))
+        ex = d.get("explained")
+        rows.append([_e(labels[i]), _e(os.path.basename(path)),
+                     *[fmt_mm(rms[i, k]) if np.isfinite(rms[i, k]) else "n/a" for k in range(3)],
+                     fmt_g(d.get("chi2_per_dof"), 4),
+                     "yes" if ex is True else "no" if ex is False else "n/a"])
+    page.add(_table(["model", "file", "x RMS (mm)", "y RMS (mm)", "z RMS (mm)", "chi²/dof",
+                     "explained"], rows, "stats"))
+    fig, ax = plt.subplots(figsize=(max(7.0, 1.2 * len(runs) + 5), 4.4), constrained_layout=True)
+    w = 0.8 / len(runs)
+    cmap = plt.get_cmap("viridis")
+    for i in range(len(runs)):
+        xs = np.arange(3) + (i - (len(runs) - 1) / 2) * w
+        lab = labels[i] if len(labels[i]) <= 40 else labels[i][:37] + "..."
+        bars = ax.bar(xs, np.nan_to_num(rms[i]), w, label=lab,
+                      color=cmap(i / max(1, len(runs) - 1)))
+        for b, v in zip(bars, rms[i]):
+            ax.text(b.get_x() + b.get_width() / 2, b.get_height(),
+                    fmt_g(v, 3) if np.isfinite(v) else "n/a",
+                    ha="center", va="bottom", fontsize=7)
+    nf = _dict(runs[-1][1], "noise_floor_mm")
+    if nf is not None:
+        for k, a in enumerate(AXES):
+            v = _num((_dict(nf, a) or {}).get("rms"))
+            if np.isfinite(v):
+                ax.hlines(v, k - 0.45, k + 0.45, colors="k", linestyles="--", lw=1,
+                          label="noise floor" if k == 0 else None)
+    ax.set_xticks(range(3), [f"{a} error" for a in AXES])
+    ax.set_ylabel("RMS position error (mm)")
+    ax.set_title("Position error RMS per run")
+    ax.legend(fontsize=8)
+    ax.grid(axis="y", alpha=0.3)
+    name = _save(fig, tmp, "comparison.png")
+    figs.append(name)
+    page.add(_img(name, "error per run", "RMS position error per axis for each run, "
+                  "labelled by the effects in its model, earliest first; the dashed line is "
+                  "the noise floor of the report's run. Adding the right effect makes the "
+                  "bars fall to the floor; an effect that only fits noise barely moves them "
+                  "(check the validation table)."))
+
+
+CSS = """
+body{font-family:system-ui,sans-serif;max-width:1200px;margin:1em auto;padding:0 1em;color:#222}
+h1{font-size:1.5em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:1.6em}
+table{border-collapse:collapse;margin:.6em 0;font-size:.88em}
+th,td{border:1px solid #ccc;padding:.25em .5em;text-align:right}
+th{background:#f2f2f2}td:first-child,th:first-child{text-align:left}
+table.facts td{text-align:left}
+figure{margin:1em 0}figure img{max-width:100%;border:1px solid #ddd}
+figcaption{font-size:.88em;color:#444;max-width:60em}
+.verdict{font-size:1.05em;background:#f7f7f2;padding:.5em .8em;border-left:4px solid #888}
+.ok{color:#176117;font-weight:bold}.bad{color:#a11;font-weight:bold}.na{color:#777}
+.notes{background:#fff7e0;border:1px solid #e0c060;padding:.4em 1em;font-size:.9em}
+"""
+
+
+# ----------------------------------------------------------------------- driver
+
+def _render(runs, tmp):
+    """Draw everything for runs[0] (+ comparison) into tmp; return (html, figs)."""
+    path, diag = runs[0]
+    page = Page()
+    figs = []
+    P = Positions(diag, page)
+    sections = [lambda: section_summary(diag, page, tmp, figs),
+                lambda: section_maps(diag, page, tmp, figs, P),
+                lambda: section_candidates(diag, page, tmp, figs),
+                lambda: section_fingerprints(diag, page, tmp, figs, P),
+                lambda: section_variables(diag, page, tmp, figs, P)]
+    if len(runs) > 1:
+        ordered = runs[1:] + runs[:1]
+        sections.append(lambda: section_comparison(ordered, page, tmp, figs))
+    for s in sections:
+        try:
+            s()
+        except Exception as e:  # a broken section must not lose the rest of the report
+            plt.close("all")
+            msg = f"A section could not be drawn ({type(e).__name__}: {e})."
+            page.note(msg)
+            page.add(f"<p class=\"bad\">{_e(msg)}</p>")
+            print(f"cdm.report: warning: {path}: {msg}", file=sys.stderr)
+    title = f"cdm calibration diagnosis: {_label(diag)}"
+    notes = ""
+    if page.notes:
+        notes = ('<div class="notes"><b>Notes</b> (parts of the diagnosis that were missing '
+                 'or unusable):<ul>' + "".join(f"<li>{_e(n)}</li>" for n in page.notes)
+                 + "</ul></div>")
+    files = ", ".join(_e(os.path.basename(p)) for p, _ in runs)
+    doc = (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+           f"<title>{_e(title)}</title><style>{CSS}</style></head><body>"
+           f"<h1>{_e(title)}</h1><p>From {files}.</p>{notes}"
+           + "\n".join(page.parts) + "</body></html>\n")
+    return doc, figs
+
+
+def write_report(paths, out):
+    """Load the diagnoses (DiagnosisError if one is unusable) and write the report."""
+    runs = [(p, load_diagnosis(p)) for p in paths]
+    os.makedirs(out, exist_ok=True)
+    tmp = tempfile.mkdtemp(prefix="tmp-report-", dir=out)
+    try:
+        doc, figs = _render(runs, tmp)
+        with open(os.path.join(tmp, "index.html"), "w", encoding="utf-8") as f:
+            f.write(doc)
+        # Move into place: figures first, the page last; remove stale figures.
+        keep = set(figs)
+        for name in os.listdir(out):
+            if (name.endswith(".png") and name.startswith(FIGURE_PREFIXES)
+                    and name not in keep and os.path.isfile(os.path.join(out, name))):
+                os.remove(os.path.join(out, name))
+        for name in figs + ["index.html"]:
+            os.replace(os.path.join(tmp, name), os.path.join(out, name))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        plt.close("all")
+    return [os.path.join(out, n) for n in figs + ["index.html"]]
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(
+        prog="python3 -m cdm.report",
+        description="Figures and index.html for `cdm calib diagnose --json` output. The first "
+                    "file is the diagnosis reported on; further files are earlier runs for the "
+                    "error-fell comparison.")
+    ap.add_argument("diagnosis", nargs="+", metavar="DIAG.json")
+    ap.add_argument("--out", required=True, metavar="DIR", help="report directory")
+    args = ap.parse_args(argv)
+    try:
+        written = write_report(args.diagnosis, args.out)
+    except DiagnosisError as e:
+        print(f"cdm.report: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        print(f"cdm.report: error: cannot write the report to {args.out}: {e}", file=sys.stderr)
+        return 1
+    print(f"cdm.report: wrote {len(written) - 1} figures and "
+          f"{os.path.join(args.out, 'index.html')}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,206 @@
+#include "calib/dataset.h"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <unordered_map>
+
+namespace cdm {
+
+namespace {
+std::string at(const std::string &src, size_t line, size_t col) {
+    return src + ":" + std::to_string(line) + ":" + std::to_string(col) + ": ";
+}
+
+// Splits one CSV line (no quoting in this format; fields are numbers).
+void split(const char *b, const char *e, std::vector<std::pair<const char *, const char *>> &f) {
+    f.clear();
+    const char *s = b;
+    for (const char *p = b;; ++p) {
+        if (p == e || *p == ',') {
+            f.emplace_back(s, p);
+            if (p == e) break;
+            s = p + 1;
+        }
+    }
+}
+
+std::string trim(const char *b, const char *e) {
+    while (b < e && (*b == ' ' || *b == '\t' || *b == '"')) ++b;
+    while (e > b && (e[-1] == ' ' || e[-1] == '\t' || e[-1] == '\r' || e[-1] == '"')) --e;
+    return std::string(b, e);
+}
+
+bool to_double(const char *b, const char *e, double &v) {
+    while (b < e && (*b == ' ' || *b == '\t')) ++b;
+    while (e > b && (e[-1] == ' ' || e[-1] == '\t' || e[-1] == '\r')) --e;
+    if (b < e && *b == '+') ++b;
+    auto r = std::from_chars(b, e, v);
+    return r.ec == std::errc() && r.ptr == e && b != e;
+}
+} // namespace
+
+bool parse_dataset(const std::string &text, const std::string &src, Dataset &out, std::string &err) {
+    static const char *required[] = {"point", "x_ref", "y_ref", "z_ref", "l1", "l2", "l3", "l4"};
+    Dataset d;
+    d.path = src;
+    const char *p = text.data(), *end = p + text.size();
+    size_t line = 0;
+    std::vector<std::pair<const char *, const char *>> f;
+    int colidx[8];
+    size_t ncols = 0;
+    bool header = false;
+    std::unordered_map<long, size_t> index;
+    std::vector<std::vector<std::array<double, 4>>> groups;
+    std::vector<size_t> first_line;
+    while (p < end) {
+        const char *nl = static_cast<const char *>(memchr(p, '\n', size_t(end - p)));
+        const char *le = nl ? nl : end;
+        ++line;
+        const char *b = p;
+        p = nl ? nl + 1 : end;
+        if (le > b && le[-1] == '\r') --le;
+        if (le == b || *b == '#') continue; // blank lines and comments
+        split(b, le, f);
+        if (!header) {
+            header = true;
+            ncols = f.size();
+            std::vector<std::string> names;
+            for (auto &x : f) names.push_back(trim(x.first, x.second));
+            for (int k = 0; k < 8; ++k) {
+                auto it = std::find(names.begin(), names.end(), required[k]);
+                if (it == names.end()) {
+                    err = at(src, line, 1) + "header lacks column \"" + required[k] +
+                          "\" (expected point,x_ref,y_ref,z_ref,l1,l2,l3,l4)";
+                    return false;
+                }
+                colidx[k] = int(it - names.begin());
+            }
+            for (size_t k = 0; k < names.size(); ++k)
+                if (std::find(std::begin(required), std::end(required), names[k]) == std::end(required))
+                    d.ignored_columns.push_back(names[k]);
+            continue;
+        }
+        if (f.size() != ncols) {
+            err = at(src, line, std::min(f.size(), ncols) + 1) + "expected " + std::to_string(ncols) +
+                  " fields as in the header, found " + std::to_string(f.size());
+            return false;
+        }
+        double v[8];
+        for (int k = 0; k < 8; ++k) {
+            auto &x = f[size_t(colidx[k])];
+            if (!to_double(x.first, x.second, v[k]) || !std::isfinite(v[k])) {
+                err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " is not a finite number: '" +
+                      trim(x.first, x.second) + "'";
+                return false;
+            }
+        }
+        if (v[0] != std::floor(v[0]) || std::fabs(v[0]) > 9e15) {
+            err = at(src, line, size_t(colidx[0]) + 1) + "point must be an integer id, got " +
+                  trim(f[size_t(colidx[0])].first, f[size_t(colidx[0])].second);
+            return false;
+        }
+        for (int k = 4; k < 8; ++k)
+            if (!(v[k] > 0)) {
+                err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " must be a positive length in mm";
+                return false;
+            }
+        long id = long(v[0]);
+        auto it = index.find(id);
+        size_t g;
+        if (it == index.end()) {
+            g = groups.size();
+            index.emplace(id, g);
+            groups.emplace_back();
+            first_line.push_back(line);
+            JigPosition jp;
+            jp.point = id;
+            for (int k = 0; k < 3; ++k) jp.ref[k] = v[1 + k];
+            d.pos.push_back(jp);
+        } else {
+            g = it->second;
+            for (int k = 0; k < 3; ++k)
+                if (d.pos[g].ref[k] != v[1 + k]) {
+                    err = at(src, line, size_t(colidx[1 + k]) + 1) + "point " + std::to_string(id) + " has " +
+                          required[1 + k] + " " + trim(f[size_t(colidx[1 + k])].first, f[size_t(colidx[1 + k])].second) +
+                          " but line " + std::to_string(first_line[g]) + " gave " + std::to_string(d.pos[g].ref[k]);
+                    return false;
+                }
+        }
+        groups[g].push_back({v[4], v[5], v[6], v[7]});
+        ++d.rows;
+    }
+    if (!header) {
+        err = src + ":1:1: empty file (expected the header point,x_ref,y_ref,z_ref,l1,l2,l3,l4)";
+        return false;
+    }
+    if (d.rows == 0) {
+        err = src + ":" + std::to_string(line) + ":1: no data rows after the header";
+        return false;
+    }
+    d.samples.reserve(d.rows);
+    for (size_t g = 0; g < groups.size(); ++g) {
+        auto &jp = d.pos[g];
+        jp.first = d.samples.size();
+        jp.n = int(groups[g].size());
+        for (auto &s : groups[g]) {
+            d.samples.push_back(s);
+            for (int c = 0; c < 4; ++c) jp.mean[c] += s[c];
+        }
+        for (int c = 0; c < 4; ++c) jp.mean[c] /= jp.n;
+        if (jp.n > 1) {
+            for (auto &s : groups[g])
+                for (int a = 0; a < 4; ++a)
+                    for (int b = 0; b < 4; ++b) jp.cov[a][b] += (s[a] - jp.mean[a]) * (s[b] - jp.mean[b]);
+            for (int a = 0; a < 4; ++a)
+                for (int b = 0; b < 4; ++b) jp.cov[a][b] /= (jp.n - 1);
+        }
+        d.heights.push_back(jp.ref[0]);
+    }
+    std::sort(d.heights.begin(), d.heights.end());
+    d.heights.erase(std::unique(d.heights.begin(), d.heights.end(),
+                                [](double a, double b) { return std::fabs(a - b) < 1e-6; }),
+                    d.heights.end());
+    out = std::move(d);
+    return true;
+}
+
+bool load_dataset(const std::string &path, Dataset &out, std::string &err) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) {
+        err = path + ": cannot open the dataset";
+        return false;
+    }
+    std::ostringstream ss;
+    ss << in.rdbuf();
+    return parse_dataset(ss.str(), path, out, err);
+}
+
+bool write_dataset_csv(const std::string &path, const std::vector<long> &point,
+                       const std::vector<std::array<double, 3>> &ref,
+                       const std::vector<std::array<double, 4>> &len, std::string &err) {
+    const std::string tmp = path + ".tmp";
+    FILE *f = std::fopen(tmp.c_str(), "w");
+    if (!f) {
+        err = tmp + ": cannot open for writing";
+        return false;
+    }
+    std::fputs("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n", f);
+    for (size_t k = 0; k < point.size(); ++k)
+        std::fprintf(f, "%ld,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f\n", point[k], ref[k][0], ref[k][1], ref[k][2],
+                     len[k][0], len[k][1], len[k][2], len[k][3]);
+    bool ok = std::ferror(f) == 0;
+    ok = (std::fclose(f) == 0) && ok;
+    if (!ok || std::rename(tmp.c_str(), path.c_str()) != 0) {
+        std::remove(tmp.c_str());
+        err = path + ": write failed";
+        return false;
+    }
+    return true;
+}
+
+} // namespace cdm

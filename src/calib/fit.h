@@ -1,0 +1,69 @@
+// Fitting a model's effect parameters to jig data with NLopt.
+//
+// The fit works on per-position means of the four readings (100 samples at a
+// position average to one mean; the model is evaluated at the jig position,
+// so nothing is lost), each weighted by the variance of that mean: the
+// repeatability measured from the samples plus the jig's own tolerance mapped
+// onto the cable direction. Residuals are in reading space (mm of cable),
+// where the noise is simple; position errors are computed afterwards.
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "calib/dataset.h"
+#include "model/model.h"
+
+namespace cdm {
+
+struct PreparedPos {
+    Eigen::Vector3d ref;
+    Eigen::Vector4d mean;
+    Eigen::Vector4d var_mean; // variance of the mean reading from the repeatability alone
+    Eigen::Matrix4d cov;      // sample covariance of the readings
+    int n = 0;
+    size_t first = 0;
+};
+
+std::vector<PreparedPos> prepare(const Dataset &d);
+
+struct FitOptions {
+    Eigen::Vector3d jig_sigma{0.03, 0.03, 0.03}; // mm, per axis, std of each position's own error
+    std::vector<char> use;                       // positions that take part (empty: all)
+    int max_evals = 400;
+    std::function<bool(double)> progress;        // fraction done; false cancels
+};
+
+struct FitReport {
+    bool converged = false;
+    int evals = 0;
+    double seconds = 0;
+    double chi2 = 0;   // weighted reading-space sum of squares (data part)
+    int n_obs = 0;     // readings used (4 per position)
+    int n_free = 0;    // free parameters after the gauge
+    std::string algorithm;
+    // per effect (model order), per parameter
+    std::vector<std::vector<double>> std;
+    std::string message;
+};
+
+// Fits every parameter of every effect in `m` except the ellipsoid's, from
+// their current values. Gauge freedoms are fixed explicitly (see fit.cpp).
+bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt, FitReport &rep);
+
+// Reading-space weighted chi-square of a model (no fitting).
+double model_chi2(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt, int *n_obs = nullptr);
+
+// The seed's ellipsoid (eq. 4-5): fitted to per-position x errors over the
+// estimated (y, z), least squares weighted by sample count. Returns L, M, N.
+struct Ellipsoid {
+    double L = 0, M = 1e6, N = 1e6;
+    double xc(double y, double z) const;
+};
+Ellipsoid fit_ellipsoid(const std::vector<double> &ye, const std::vector<double> &ze,
+                        const std::vector<double> &xerr, const std::vector<double> &w);
+
+} // namespace cdm

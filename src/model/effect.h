@@ -1,0 +1,83 @@
+// The effect catalogue: what a physical effect is to the model (its
+// parameters, units, typical magnitude, where it acts), and the registry that
+// lists the built-in ones (effects/*.h, one file per effect) and the ones a
+// user registers at run time (C callback, plugin, Python).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cdm/cdm.h"
+
+namespace cdm {
+
+// Where an effect acts. The order of the stages is the order of evaluation.
+enum class Stage {
+    Jig,      // maps the jig's reference positions into the device frame
+    Geometry, // moves anchors or holder attachment points
+    Path,     // how the cable runs from its exit to the holder
+    Transfer, // pot transfer curve: pulled-out length -> reading
+    User,     // user-defined, on the readings (cdm_effect_def)
+    Position  // corrects the estimated position (the seed's ellipsoid)
+};
+
+struct ParamDesc {
+    std::string name;
+    std::string unit;
+    double scale;       // typical magnitude: conditioning and the weak prior
+    double lower, upper;
+    double init;        // value when the effect is switched on
+    double rand_lo, rand_hi; // |value| drawn in [lo, hi] with a random sign (simulator)
+    bool signed_random = true;
+};
+
+struct EffectDesc {
+    std::string name;
+    std::string doc;       // the physics in one paragraph, with the typical magnitude
+    Stage stage;
+    int builtin_id;        // BuiltinEffect, or -1 for a user effect
+    std::vector<ParamDesc> params;
+    // user effects only
+    cdm_effect_apply_fn apply = nullptr;
+    void *user = nullptr;
+};
+
+using EffectDescPtr = std::shared_ptr<const EffectDesc>;
+
+enum BuiltinEffect {
+    E_JIG = 0,
+    E_ANCHOR,
+    E_HOLDER,
+    E_OFFSET,
+    E_GAIN,
+    E_NONLIN,
+    E_PULLEY,
+    E_STRETCH,
+    E_ELLIPSOID,
+    E_BUILTIN_COUNT
+};
+
+// The registry. Built-ins first (in catalogue order), then user effects in
+// registration order. Thread-safe.
+EffectDescPtr find_effect(const std::string &name);
+std::vector<EffectDescPtr> all_effects();
+// The catalogue the diagnosis ranks: every physical built-in (not the
+// ellipsoid) plus every user effect.
+std::vector<EffectDescPtr> candidate_effects();
+int register_user_effect(const cdm_effect_def *def, std::string &err);
+int unregister_user_effect(const std::string &name, std::string &err);
+
+// Descriptors of the built-ins, one per file in effects/.
+EffectDesc make_jig_misalignment();
+EffectDesc make_anchor_position();
+EffectDesc make_holder_geometry();
+EffectDesc make_cable_offset();
+EffectDesc make_cable_gain();
+EffectDesc make_pot_nonlinearity();
+EffectDesc make_exit_pulley();
+EffectDesc make_cable_stretch();
+EffectDesc make_ellipsoid();
+
+} // namespace cdm

@@ -1,0 +1,19 @@
+#include "model/effect.h"
+
+namespace cdm {
+// The jig (hole plate + height fixture) is bolted to the frame by hand; its
+// frame differs from the device frame by a small rigid motion. Reference
+// positions map as p_dev = R(r) p_ref + t, with R the rotation vector r
+// (rad) about the device origin. Typical: a few tenths of a degree, < 1 mm.
+EffectDesc make_jig_misalignment() {
+    EffectDesc d{"jig_misalignment",
+                 "Rigid transform between the jig's frame and the device frame: p_dev = R(rx,ry,rz) p_ref + t. "
+                 "Rotation vector in rad about the device origin, translation in mm. Typical: 0.1-0.5 deg, 0.2-1 mm.",
+                 Stage::Jig, E_JIG, {}};
+    for (const char *n : {"rx", "ry", "rz"})
+        d.params.push_back({n, "rad", 5e-3, -0.2, 0.2, 0.0, 1.5e-3, 8e-3});
+    for (const char *n : {"tx", "ty", "tz"})
+        d.params.push_back({n, "mm", 0.5, -20, 20, 0.0, 0.2, 1.0});
+    return d;
+}
+} // namespace cdm

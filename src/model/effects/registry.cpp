@@ -1,0 +1,135 @@
+// The one list of effects: adding a built-in is a file in effects/ and a
+// line here.
+#include <algorithm>
+#include <cmath>
+#include <mutex>
+#include <regex>
+
+#include "model/effect.h"
+
+namespace cdm {
+namespace {
+
+std::vector<EffectDescPtr> make_builtins() {
+    std::vector<EffectDescPtr> v;
+    for (auto f : {make_jig_misalignment, make_anchor_position, make_holder_geometry, make_cable_offset,
+                   make_cable_gain, make_pot_nonlinearity, make_exit_pulley, make_cable_stretch,
+                   make_ellipsoid})
+        v.push_back(std::make_shared<const EffectDesc>(f()));
+    return v;
+}
+
+struct Registry {
+    std::mutex mu;
+    std::vector<EffectDescPtr> builtins = make_builtins();
+    std::vector<EffectDescPtr> user;
+};
+
+Registry &registry() {
+    static Registry r;
+    return r;
+}
+
+} // namespace
+
+EffectDescPtr find_effect(const std::string &name) {
+    auto &r = registry();
+    std::lock_guard<std::mutex> lk(r.mu);
+    for (auto &e : r.builtins)
+        if (e->name == name) return e;
+    for (auto &e : r.user)
+        if (e->name == name) return e;
+    return nullptr;
+}
+
+std::vector<EffectDescPtr> all_effects() {
+    auto &r = registry();
+    std::lock_guard<std::mutex> lk(r.mu);
+    auto v = r.builtins;
+    v.insert(v.end(), r.user.begin(), r.user.end());
+    return v;
+}
+
+std::vector<EffectDescPtr> candidate_effects() {
+    std::vector<EffectDescPtr> v;
+    for (auto &e : all_effects())
+        if (e->stage != Stage::Position) v.push_back(e);
+    return v;
+}
+
+int register_user_effect(const cdm_effect_def *def, std::string &err) {
+    if (!def || def->struct_size < sizeof(cdm_effect_def)) {
+        err = "cdm_effect_register: NULL definition or struct_size smaller than the 1.0 cdm_effect_def";
+        return CDM_ERR_INVALID_ARG;
+    }
+    if (!def->name || !std::regex_match(def->name, std::regex("[a-z0-9_]+"))) {
+        err = std::string("cdm_effect_register: name must match [a-z0-9_]+, got \"") +
+              (def->name ? def->name : "(null)") + "\"";
+        return CDM_ERR_INVALID_ARG;
+    }
+    if (!def->apply) {
+        err = std::string("cdm_effect_register: effect \"") + def->name + "\" has no apply function";
+        return CDM_ERR_INVALID_ARG;
+    }
+    if (def->n_params > 64 || (def->n_params > 0 && (!def->param_names || !def->param_scale))) {
+        err = std::string("cdm_effect_register: effect \"") + def->name +
+              "\" needs param_names and param_scale for its n_params (at most 64)";
+        return CDM_ERR_INVALID_ARG;
+    }
+    auto d = std::make_shared<EffectDesc>();
+    d->name = def->name;
+    d->doc = def->doc ? def->doc : "";
+    d->stage = Stage::User;
+    d->builtin_id = -1;
+    d->apply = def->apply;
+    d->user = def->user;
+    for (uint32_t k = 0; k < def->n_params; ++k) {
+        ParamDesc p;
+        p.name = def->param_names[k] ? def->param_names[k] : ("p" + std::to_string(k));
+        p.unit = "";
+        p.scale = def->param_scale[k];
+        if (!(p.scale > 0) || !std::isfinite(p.scale)) {
+            err = "cdm_effect_register: effect \"" + d->name + "\" parameter \"" + p.name +
+                  "\" needs a positive finite param_scale";
+            return CDM_ERR_INVALID_ARG;
+        }
+        p.lower = def->lower ? def->lower[k] : -1e3 * p.scale;
+        p.upper = def->upper ? def->upper[k] : 1e3 * p.scale;
+        if (!(p.lower <= 0 && 0 <= p.upper) && !(p.lower < p.upper)) {
+            err = "cdm_effect_register: effect \"" + d->name + "\" parameter \"" + p.name + "\" has lower > upper";
+            return CDM_ERR_INVALID_ARG;
+        }
+        p.init = std::min(std::max(0.0, p.lower), p.upper);
+        p.rand_lo = 0.5 * p.scale;
+        p.rand_hi = 2 * p.scale;
+        d->params.push_back(p);
+    }
+    auto &r = registry();
+    std::lock_guard<std::mutex> lk(r.mu);
+    for (auto &e : r.builtins)
+        if (e->name == d->name) {
+            err = "cdm_effect_register: \"" + d->name + "\" is a built-in effect's name";
+            return CDM_ERR_INVALID_ARG;
+        }
+    for (auto &e : r.user)
+        if (e->name == d->name) {
+            e = d; // re-registration replaces (a reloaded plugin, a re-run notebook cell)
+            return CDM_OK;
+        }
+    r.user.push_back(d);
+    return CDM_OK;
+}
+
+int unregister_user_effect(const std::string &name, std::string &err) {
+    auto &r = registry();
+    std::lock_guard<std::mutex> lk(r.mu);
+    auto it = std::find_if(r.user.begin(), r.user.end(), [&](auto &e) { return e->name == name; });
+    if (it == r.user.end()) {
+        err = "cdm_effect_unregister: no user effect named \"" + name + "\"";
+        return CDM_ERR_INVALID_ARG;
+    }
+    r.user.erase(it);
+    return CDM_OK;
+}
+
+} // namespace cdm

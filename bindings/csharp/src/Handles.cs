@@ -1,0 +1,49 @@
+// One SafeHandle per opaque C type: the runtime frees the native object even
+// when the owner forgets Dispose, and never while a P/Invoke call uses it.
+using System;
+using System.Runtime.InteropServices;
+
+namespace Cdm
+{
+    internal sealed class DeviceHandle : SafeHandle
+    {
+        // The sample delegate handed to cdm_open_ex: native code calls it from
+        // the reader thread until cdm_close returns, so it lives exactly as long
+        // as this handle.
+        internal SampleFn SampleCallback;
+
+        public DeviceHandle() : base(IntPtr.Zero, true) { }
+        public override bool IsInvalid { get { return handle == IntPtr.Zero; } }
+
+        protected override bool ReleaseHandle()
+        {
+            NativeMethods.cdm_close(handle); // joins the reader thread: no callback after this
+            SampleCallback = null;
+            return true;
+        }
+    }
+
+    internal sealed class CalibrationHandle : SafeHandle
+    {
+        public CalibrationHandle() : base(IntPtr.Zero, true) { }
+        public override bool IsInvalid { get { return handle == IntPtr.Zero; } }
+
+        protected override bool ReleaseHandle()
+        {
+            NativeMethods.cdm_calibration_free(handle);
+            return true;
+        }
+    }
+
+    internal sealed class DeviceListHandle : SafeHandle
+    {
+        public DeviceListHandle() : base(IntPtr.Zero, true) { }
+        public override bool IsInvalid { get { return handle == IntPtr.Zero; } }
+
+        protected override bool ReleaseHandle()
+        {
+            NativeMethods.cdm_device_list_free(handle);
+            return true;
+        }
+    }
+}

@@ -1,0 +1,41 @@
+"""cdm: Python binding of libcdm, the cable-driven haptic master driver.
+
+    import cdm
+    with cdm.open("sim:") as dev:
+        pose = dev.wait_pose(1.0)
+        print(pose.position, pose.orientation, pose.grip)
+
+Pure ctypes: libcdm is found through $CDM_LIBRARY, then beside this package,
+then $CDM_BUILD_DIR/src, then the system (see docs/bindings.md). It is loaded
+on first use, so `import cdm` works without it. Every failing call raises
+cdm.CdmError(code, message).
+"""
+from . import _native
+from .calibration import Calibration
+from .constants import *  # noqa: F401,F403 - the header's constants
+from .constants import Button, Error, PoseFlag
+from .device import Device, DeviceInfo, Pose, Raw, Sample, Stats, enumerate_devices, open  # noqa: A004
+from .diagnosis import diagnose
+from .effects import effect_names, load_plugin, register_effect, unregister_effect
+from .errors import CdmError, LibraryNotFoundError
+
+__version__ = "1.0.0"
+
+# cdm.enumerate() mirrors cdm_enumerate; enumerate_devices is the same without
+# shadowing the builtin in `from cdm import *`.
+enumerate = enumerate_devices  # noqa: A001
+
+
+def version():
+    """Version text of the libcdm actually loaded ("1.0.0")."""
+    return _native.lib().cdm_version().decode("ascii")
+
+
+def version_number():
+    """CDM_VERSION_NUMBER of the libcdm actually loaded."""
+    return _native.lib().cdm_version_number()
+
+
+def library_path():
+    """Path (or name) of the libcdm actually loaded."""
+    return _native.lib().path

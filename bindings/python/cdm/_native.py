@@ -1,0 +1,298 @@
+"""ctypes mirror of include/cdm/cdm.h: structures, prototypes, library loading.
+
+Every function of the header, the CDM_EXPERIMENTAL ones included, has its
+argtypes and restype here (tests/python/test_prototypes.py checks the list
+against the header). Nothing else in the package touches ctypes prototypes.
+"""
+import ctypes
+import ctypes.util
+import os
+import sys
+import threading
+
+from .constants import CDM_VERSION_MAJOR, Error
+from .errors import CdmError, LibraryNotFoundError
+
+c_double_p = ctypes.POINTER(ctypes.c_double)
+
+
+class _Sized(ctypes.Structure):
+    """A public struct: struct_size is set to sizeof() on construction."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.struct_size = ctypes.sizeof(self)
+
+
+class cdm_pose(_Sized):
+    _fields_ = [
+        ("struct_size", ctypes.c_uint32),
+        ("flags", ctypes.c_uint32),
+        ("position", ctypes.c_double * 3),
+        ("orientation", ctypes.c_double * 4),
+        ("grip", ctypes.c_double),
+        ("buttons", ctypes.c_uint32),
+        ("sequence", ctypes.c_uint32),
+        ("device_time_us", ctypes.c_uint64),
+        ("host_time_ns", ctypes.c_uint64),
+        ("dropped", ctypes.c_uint32),
+        ("reserved0", ctypes.c_uint32),
+    ]
+
+
+class cdm_raw(_Sized):
+    _fields_ = [
+        ("struct_size", ctypes.c_uint32),
+        ("status", ctypes.c_uint32),
+        ("pot_adc", ctypes.c_uint16 * 4),
+        ("hall_adc", ctypes.c_uint16),
+        ("buttons", ctypes.c_uint16),
+        ("quat_q14", ctypes.c_int16 * 4),
+        ("sequence", ctypes.c_uint32),
+        ("lengths_mm", ctypes.c_double * 4),
+        ("device_time_us", ctypes.c_uint64),
+        ("host_time_ns", ctypes.c_uint64),
+    ]
+
+
+class cdm_device_info(_Sized):
+    _fields_ = [
+        ("struct_size", ctypes.c_uint32),
+        ("vendor_id", ctypes.c_uint16),
+        ("product_id", ctypes.c_uint16),
+        ("uri", ctypes.c_char * 256),
+        ("serial", ctypes.c_char * 32),
+        ("firmware", ctypes.c_char * 16),
+        ("transport", ctypes.c_char * 16),
+        ("protocol_version", ctypes.c_uint32),
+        ("adc_bits", ctypes.c_uint32),
+        ("pot_scale_mm", ctypes.c_double * 4),
+        ("pot_offset_mm", ctypes.c_double * 4),
+        ("a_mm", ctypes.c_double),
+        ("b_mm", ctypes.c_double),
+        ("m_mm", ctypes.c_double),
+        ("report_rate_hz", ctypes.c_double),
+        ("hall_closed", ctypes.c_double),
+        ("hall_open", ctypes.c_double),
+        ("grip_open_rad", ctypes.c_double),
+    ]
+
+
+class cdm_stats(_Sized):
+    _fields_ = [
+        ("struct_size", ctypes.c_uint32),
+        ("reserved0", ctypes.c_uint32),
+        ("reports", ctypes.c_uint64),
+        ("malformed", ctypes.c_uint64),
+        ("dropped", ctypes.c_uint64),
+        ("out_of_workspace", ctypes.c_uint64),
+        ("reconnects", ctypes.c_uint64),
+    ]
+
+
+class cdm_sample(_Sized):
+    _fields_ = [
+        ("struct_size", ctypes.c_uint32),
+        ("report_len", ctypes.c_uint32),
+        ("report", ctypes.POINTER(ctypes.c_uint8)),
+        ("raw", ctypes.POINTER(cdm_raw)),
+        ("pose", ctypes.POINTER(cdm_pose)),
+    ]
+
+
+cdm_sample_fn = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(cdm_sample))
+
+
+class cdm_open_options(_Sized):
+    _fields_ = [
+        ("struct_size", ctypes.c_uint32),
+        ("stale_timeout_us", ctypes.c_uint32),
+        ("on_sample", cdm_sample_fn),
+        ("user", ctypes.c_void_p),
+    ]
+
+
+cdm_effect_apply_fn = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, c_double_p, c_double_p, c_double_p)
+
+
+class cdm_effect_def(_Sized):
+    _fields_ = [
+        ("struct_size", ctypes.c_uint32),
+        ("n_params", ctypes.c_uint32),
+        ("name", ctypes.c_char_p),
+        ("doc", ctypes.c_char_p),
+        ("param_names", ctypes.POINTER(ctypes.c_char_p)),
+        ("param_scale", c_double_p),
+        ("lower", c_double_p),
+        ("upper", c_double_p),
+        ("apply", cdm_effect_apply_fn),
+        ("user", ctypes.c_void_p),
+    ]
+
+
+cdm_progress_fn = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_char_p, ctypes.c_double)
+
+STRUCTS = {cls.__name__: cls for cls in
+           (cdm_pose, cdm_raw, cdm_device_info, cdm_stats, cdm_sample, cdm_open_options, cdm_effect_def)}
+
+# Opaque handles travel as void pointers.
+_handle = ctypes.c_void_p
+_handle_p = ctypes.POINTER(ctypes.c_void_p)
+_int, _size, _str = ctypes.c_int, ctypes.c_size_t, ctypes.c_char_p
+
+# name: (restype, argtypes), in the header's order.
+PROTOTYPES = {
+    "cdm_version": (_str, []),
+    "cdm_version_number": (_int, []),
+    "cdm_strerror": (_str, [_int]),
+    "cdm_thread_error": (_str, []),
+    "cdm_enumerate": (_int, [_handle_p]),
+    "cdm_device_list_count": (_size, [_handle]),
+    "cdm_device_list_get": (_int, [_handle, _size, ctypes.POINTER(cdm_device_info)]),
+    "cdm_device_list_free": (None, [_handle]),
+    "cdm_open": (_int, [_str, _handle_p]),
+    "cdm_open_ex": (_int, [_str, ctypes.POINTER(cdm_open_options), _handle_p]),
+    "cdm_close": (None, [_handle]),
+    "cdm_get_pose": (_int, [_handle, ctypes.POINTER(cdm_pose)]),
+    "cdm_wait_pose": (_int, [_handle, _int, ctypes.POINTER(cdm_pose)]),
+    "cdm_get_raw": (_int, [_handle, ctypes.POINTER(cdm_raw)]),
+    "cdm_get_info": (_int, [_handle, ctypes.POINTER(cdm_device_info)]),
+    "cdm_set_stale_timeout": (_int, [_handle, ctypes.c_uint32]),
+    "cdm_get_stats": (_int, [_handle, ctypes.POINTER(cdm_stats)]),
+    "cdm_device_error": (_int, [_handle, ctypes.c_char_p, _size]),
+    "cdm_calibration_load": (_int, [_str, _handle_p]),
+    "cdm_calibration_parse": (_int, [_str, _size, _handle_p]),
+    "cdm_calibration_free": (None, [_handle]),
+    "cdm_calibration_position": (_int, [_handle, c_double_p, c_double_p]),
+    "cdm_calibration_lengths": (_int, [_handle, c_double_p, c_double_p]),
+    "cdm_calibration_effect_count": (_size, [_handle]),
+    "cdm_calibration_effect_name": (_str, [_handle, _size]),
+    "cdm_set_calibration": (_int, [_handle, _handle]),
+    "cdm_device_calibration_read": (_int, [_handle, ctypes.c_char_p, _size, ctypes.POINTER(ctypes.c_size_t)]),
+    "cdm_device_calibration_write": (_int, [_handle, ctypes.c_char_p, _size]),
+    # CDM_EXPERIMENTAL
+    "cdm_effect_register": (_int, [ctypes.POINTER(cdm_effect_def)]),
+    "cdm_effect_unregister": (_int, [_str]),
+    "cdm_effect_load_plugin": (_int, [_str]),
+    "cdm_effect_count": (_size, []),
+    "cdm_effect_name": (_str, [_size]),
+    # result_json is a char** the library allocates: received as a void pointer
+    # so that ctypes does not copy it away before cdm_free_string gets it.
+    "cdm_diagnose": (_int, [_str, _str, _str, cdm_progress_fn, ctypes.c_void_p, _handle_p]),
+    "cdm_free_string": (None, [ctypes.c_void_p]),
+}
+
+
+def _library_names():
+    if sys.platform == "darwin":
+        return ["libcdm.1.dylib", "libcdm.dylib"]
+    if sys.platform == "win32":
+        return ["cdm.dll", "libcdm.dll"]
+    return ["libcdm.so.1", "libcdm.so"]
+
+
+def candidates(environ=None):
+    """Where the library is looked for, in order: [(path or name, origin), ...]."""
+    env = os.environ if environ is None else environ
+    out = []
+    if env.get("CDM_LIBRARY"):
+        out.append((env["CDM_LIBRARY"], "$CDM_LIBRARY"))
+    here = os.path.dirname(os.path.abspath(__file__))
+    out += [(os.path.join(here, n), "beside the package") for n in _library_names()]
+    if env.get("CDM_BUILD_DIR"):
+        out += [(os.path.join(env["CDM_BUILD_DIR"], "src", n), "$CDM_BUILD_DIR") for n in _library_names()]
+    found = ctypes.util.find_library("cdm")
+    if found:
+        out.append((found, "system (ctypes.util.find_library)"))
+    out.append((_library_names()[0], "system (dynamic linker search path)"))
+    return out
+
+
+class _Missing:
+    """Stands in for a function the loaded library does not export (an older
+    or foreign build): calling it raises a CdmError naming the function."""
+
+    def __init__(self, name, path):
+        self.__name__ = name
+        self._path = path
+
+    def __call__(self, *args):
+        raise CdmError(Error.CDM_ERR_UNSUPPORTED, "%s is not exported by %s" % (self.__name__, self._path),
+                       function=self.__name__)
+
+
+class Library:
+    """The loaded libcdm with its prototypes applied."""
+
+    def __init__(self, cdll, path):
+        self.cdll = cdll
+        self.path = path
+        self.missing = []
+        for name, (restype, argtypes) in PROTOTYPES.items():
+            try:
+                fn = getattr(cdll, name)
+            except AttributeError:
+                self.missing.append(name)
+                setattr(self, name, _Missing(name, path))
+                continue
+            fn.restype = restype
+            fn.argtypes = argtypes
+            setattr(self, name, fn)
+
+
+def load(cands=None):
+    """Loads libcdm from the first candidate that works; LibraryNotFoundError lists them all."""
+    tried = []
+    for path, origin in (candidates() if cands is None else cands):
+        label = "%s (%s)" % (path, origin)
+        if os.sep in path and not os.path.exists(path):
+            tried.append((label, "no such file"))
+            continue
+        try:
+            cdll = ctypes.CDLL(path)
+        except OSError as e:
+            tried.append((label, str(e)))
+            continue
+        try:
+            fn = cdll.cdm_version_number
+        except AttributeError:
+            tried.append((label, "not libcdm (no cdm_version_number)"))
+            continue
+        fn.restype, fn.argtypes = ctypes.c_int, []
+        major = fn() // 10000
+        if major != CDM_VERSION_MAJOR:
+            tried.append((label, "major version %d, this binding needs %d" % (major, CDM_VERSION_MAJOR)))
+            continue
+        return Library(cdll, getattr(cdll, "_name", path))
+    raise LibraryNotFoundError(tried)
+
+
+_lib = None
+_lib_lock = threading.Lock()
+
+
+def lib():
+    """The process's libcdm, loaded on first use (so that `import cdm` works without it)."""
+    global _lib
+    if _lib is None:
+        with _lib_lock:
+            if _lib is None:
+                _lib = load()
+    return _lib
+
+
+def fail(code, function, detail=""):
+    """The CdmError for a failed call. Call it right after the call: the thread's
+    detail text is valid only until this thread's next cdm_* call."""
+    L = lib()
+    if not detail:
+        detail = (L.cdm_thread_error() or b"").decode("utf-8", "replace")
+    text = (L.cdm_strerror(code) or b"").decode("utf-8", "replace")
+    return CdmError(code, "%s: %s" % (text, detail) if detail else text, detail, function)
+
+
+def check(code, function):
+    """Raises the CdmError for a negative code; returns the code otherwise."""
+    if code < 0:
+        raise fail(code, function)
+    return code

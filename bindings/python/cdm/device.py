@@ -1,0 +1,366 @@
+"""Devices: open, poses, raw values, information, counters, stored calibration."""
+import ctypes
+import math
+from dataclasses import dataclass
+from typing import Callable, Optional, Tuple
+
+from . import _native
+from .constants import Button, Error, PoseFlag
+from .errors import CdmError
+
+# Return codes of cdm_get_pose / cdm_wait_pose / cdm_get_raw that come with a
+# filled record: the pose is the last one, and its flags say why it is old.
+_FILLED = (Error.CDM_ERR_STALE, Error.CDM_ERR_DISCONNECTED, Error.CDM_ERR_END_OF_STREAM)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """cdm_pose as Python values. position in mm (device frame: x out of the
+    cable plane), orientation a unit quaternion (w, x, y, z), grip in rad.
+
+    status is what the call returned: CDM_OK, or CDM_ERR_STALE /
+    CDM_ERR_DISCONNECTED / CDM_ERR_END_OF_STREAM for a pose that is still the
+    last one the device gave (see flags)."""
+    position: Tuple[float, float, float]
+    orientation: Tuple[float, float, float, float]
+    grip: float
+    buttons: int
+    sequence: int
+    dropped: int
+    flags: int
+    device_time_us: int
+    host_time_ns: int
+    status: int = 0
+
+    @classmethod
+    def _from_c(cls, p, status=0):
+        return cls(tuple(p.position), tuple(p.orientation), p.grip, p.buttons, p.sequence, p.dropped,
+                   p.flags, p.device_time_us, p.host_time_ns, int(status))
+
+    @property
+    def is_stale(self):
+        return bool(self.flags & PoseFlag.CDM_POSE_STALE)
+
+    @property
+    def is_disconnected(self):
+        return bool(self.flags & PoseFlag.CDM_POSE_DISCONNECTED)
+
+    @property
+    def is_compensated(self):
+        return bool(self.flags & PoseFlag.CDM_POSE_COMPENSATED)
+
+    @property
+    def is_out_of_workspace(self):
+        return bool(self.flags & PoseFlag.CDM_POSE_OUT_OF_WORKSPACE)
+
+    @property
+    def is_end_of_stream(self):
+        return bool(self.flags & PoseFlag.CDM_POSE_END_OF_STREAM or self.status == Error.CDM_ERR_END_OF_STREAM)
+
+    @property
+    def is_fresh(self):
+        """A current pose: returned with CDM_OK."""
+        return self.status == Error.CDM_OK
+
+    def pressed(self, button):
+        """pose.pressed(cdm.CDM_BUTTON_CLUTCH)"""
+        return bool(self.buttons & int(button))
+
+    @property
+    def clutch(self):
+        return self.pressed(Button.CDM_BUTTON_CLUTCH)
+
+
+@dataclass(frozen=True)
+class Raw:
+    """cdm_raw: the newest report's sensor values."""
+    status: int
+    pot_adc: Tuple[int, int, int, int]
+    hall_adc: int
+    buttons: int
+    quat_q14: Tuple[int, int, int, int]
+    sequence: int
+    lengths_mm: Tuple[float, float, float, float]
+    device_time_us: int
+    host_time_ns: int
+    return_code: int = 0
+
+    @classmethod
+    def _from_c(cls, r, code=0):
+        return cls(r.status, tuple(r.pot_adc), r.hall_adc, r.buttons, tuple(r.quat_q14), r.sequence,
+                   tuple(r.lengths_mm), r.device_time_us, r.host_time_ns, int(code))
+
+    @property
+    def quaternion(self):
+        """quat_q14 scaled to (w, x, y, z)."""
+        return tuple(q / 16384.0 for q in self.quat_q14)
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    vendor_id: int
+    product_id: int
+    uri: str
+    serial: str
+    firmware: str
+    transport: str
+    protocol_version: int
+    adc_bits: int
+    pot_scale_mm: Tuple[float, float, float, float]
+    pot_offset_mm: Tuple[float, float, float, float]
+    a_mm: float
+    b_mm: float
+    m_mm: float
+    report_rate_hz: float
+    hall_closed: float
+    hall_open: float
+    grip_open_rad: float
+
+    @classmethod
+    def _from_c(cls, i):
+        def s(b):
+            return b.decode("utf-8", "replace")
+        return cls(i.vendor_id, i.product_id, s(i.uri), s(i.serial), s(i.firmware), s(i.transport),
+                   i.protocol_version, i.adc_bits, tuple(i.pot_scale_mm), tuple(i.pot_offset_mm), i.a_mm,
+                   i.b_mm, i.m_mm, i.report_rate_hz, i.hall_closed, i.hall_open, i.grip_open_rad)
+
+
+@dataclass(frozen=True)
+class Stats:
+    reports: int
+    malformed: int
+    dropped: int
+    out_of_workspace: int
+    reconnects: int
+
+
+@dataclass(frozen=True)
+class Sample:
+    """What an on_sample callback receives: one report as it arrived."""
+    report: bytes
+    raw: Raw
+    pose: Pose
+
+
+def _make_sample_callback(fn):
+    def trampoline(_user, sample_p):
+        s = sample_p.contents
+        report = ctypes.string_at(s.report, s.report_len) if s.report else b""
+        raw = Raw._from_c(s.raw.contents) if s.raw else None
+        pose = Pose._from_c(s.pose.contents) if s.pose else None
+        fn(Sample(report, raw, pose))
+    return _native.cdm_sample_fn(trampoline)
+
+
+class Device:
+    """An open master. Use as a context manager, or call close() (idempotent).
+
+    Methods other than close() may be called from any thread; close() must not
+    run while another thread is inside a call on this device (the C rule)."""
+
+    def __init__(self, handle, uri, callback=None):
+        self._h = handle
+        self.uri = uri
+        # The ctypes callback object must outlive the native handle: the reader
+        # thread calls it until cdm_close returns.
+        self._callback = callback
+
+    # -- lifetime
+    def close(self):
+        h, self._h = self._h, None
+        if h:
+            _native.lib().cdm_close(h)
+        self._callback = None
+
+    @property
+    def closed(self):
+        return self._h is None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    def __repr__(self):
+        return "<cdm.Device %r%s>" % (self.uri, " closed" if self.closed else "")
+
+    def _handle(self, function):
+        if self._h is None:
+            raise CdmError(Error.CDM_ERR_INVALID_ARG, "device %r is closed" % (self.uri,), function=function)
+        return self._h
+
+    def _fail(self, code, function):
+        L = _native.lib()
+        detail = (L.cdm_thread_error() or b"").decode("utf-8", "replace")
+        if not detail and self._h:
+            detail = self.error_detail()
+        return _native.fail(code, function, detail)
+
+    # -- poses
+    def get_pose(self):
+        """The newest pose, without blocking.
+
+        Raises CdmError(CDM_ERR_NO_DATA) before the first report (use
+        wait_pose first). A stale, disconnected or ended stream is *not* an
+        exception: the last pose is returned with its flags and .status set, as
+        a control loop wants to hold the last command and look at the flags."""
+        h = self._handle("cdm_get_pose")
+        p = _native.cdm_pose()
+        rc = _native.lib().cdm_get_pose(h, ctypes.byref(p))
+        if rc < 0 and rc not in _FILLED:
+            raise self._fail(rc, "cdm_get_pose")
+        return Pose._from_c(p, rc)
+
+    def wait_pose(self, timeout=1.0):
+        """Blocks until a pose newer than the current one arrives; timeout in
+        seconds (None: no limit). Raises CdmError(CDM_ERR_TIMEOUT) when none
+        came in time; otherwise returns like get_pose."""
+        h = self._handle("cdm_wait_pose")
+        if timeout is None:
+            ms = -1
+        else:
+            if timeout < 0 or math.isnan(timeout):
+                raise ValueError("wait_pose: timeout must be >= 0 seconds or None, got %r" % (timeout,))
+            ms = min(int(math.ceil(timeout * 1000.0)), 2**31 - 1)
+        p = _native.cdm_pose()
+        rc = _native.lib().cdm_wait_pose(h, ms, ctypes.byref(p))
+        if rc < 0 and rc not in _FILLED:
+            raise self._fail(rc, "cdm_wait_pose")
+        return Pose._from_c(p, rc)
+
+    def get_raw(self):
+        """Raw values of the newest report (same returns as get_pose)."""
+        h = self._handle("cdm_get_raw")
+        r = _native.cdm_raw()
+        rc = _native.lib().cdm_get_raw(h, ctypes.byref(r))
+        if rc < 0 and rc not in _FILLED:
+            raise self._fail(rc, "cdm_get_raw")
+        return Raw._from_c(r, rc)
+
+    # -- information
+    def info(self):
+        h = self._handle("cdm_get_info")
+        i = _native.cdm_device_info()
+        rc = _native.lib().cdm_get_info(h, ctypes.byref(i))
+        if rc < 0:
+            raise self._fail(rc, "cdm_get_info")
+        return DeviceInfo._from_c(i)
+
+    def stats(self):
+        h = self._handle("cdm_get_stats")
+        s = _native.cdm_stats()
+        rc = _native.lib().cdm_get_stats(h, ctypes.byref(s))
+        if rc < 0:
+            raise self._fail(rc, "cdm_get_stats")
+        return Stats(s.reports, s.malformed, s.dropped, s.out_of_workspace, s.reconnects)
+
+    def error_detail(self):
+        """The handle's last asynchronous problem (cdm_device_error), "" if none."""
+        h = self._handle("cdm_device_error")
+        buf = ctypes.create_string_buffer(1024)
+        rc = _native.lib().cdm_device_error(h, buf, len(buf))
+        if rc < 0:
+            return ""
+        return buf.value.decode("utf-8", "replace")
+
+    def set_stale_timeout(self, seconds):
+        """Poses older than this are flagged stale; 0 restores the default (50 ms)."""
+        us = int(round(seconds * 1e6))
+        if not 0 <= us < 2**32:
+            raise ValueError("set_stale_timeout: %r s is outside 0..4294 s" % (seconds,))
+        h = self._handle("cdm_set_stale_timeout")
+        rc = _native.lib().cdm_set_stale_timeout(h, us)
+        if rc < 0:
+            raise self._fail(rc, "cdm_set_stale_timeout")
+
+    # -- calibration
+    def set_calibration(self, calibration):
+        """Applies a cdm.Calibration to the poses from the next report on (the
+        library copies it); None returns to the nominal model."""
+        h = self._handle("cdm_set_calibration")
+        ch = None if calibration is None else calibration._handle("cdm_set_calibration")
+        rc = _native.lib().cdm_set_calibration(h, ch)
+        if rc < 0:
+            raise self._fail(rc, "cdm_set_calibration")
+
+    def read_stored_calibration(self):
+        """The calibration bytes stored in the device (CdmError CDM_ERR_CRC when corrupt)."""
+        h = self._handle("cdm_device_calibration_read")
+        L = _native.lib()
+        n = ctypes.c_size_t(0)
+        cap = 4096
+        for _ in range(3):
+            buf = ctypes.create_string_buffer(cap)
+            rc = L.cdm_device_calibration_read(h, buf, cap, ctypes.byref(n))
+            if rc == Error.CDM_ERR_NO_MEM and n.value > cap:
+                cap = n.value
+                continue
+            if rc < 0:
+                raise self._fail(rc, "cdm_device_calibration_read")
+            return buf.raw[:n.value]
+        raise CdmError(Error.CDM_ERR_INTERNAL, "cdm_device_calibration_read kept asking for a bigger buffer",
+                       function="cdm_device_calibration_read")
+
+    def write_stored_calibration(self, data):
+        """Stores bytes (typically a calibration JSON) in the device."""
+        if isinstance(data, str):
+            data = data.encode("utf-8")
+        data = bytes(data)
+        h = self._handle("cdm_device_calibration_write")
+        rc = _native.lib().cdm_device_calibration_write(h, data, len(data))
+        if rc < 0:
+            raise self._fail(rc, "cdm_device_calibration_write")
+
+
+def open(uri=None, stale_timeout_us=0, on_sample=None):  # noqa: A001 - cdm.open mirrors cdm_open
+    """Opens a master (cdm_open_ex). uri: None or "" ($CDM_DEVICE, else the
+    first device), "sim:?...", "replay:FILE", "hid:/dev/hidrawN", "serial:SN".
+
+    on_sample, if given, is called as on_sample(cdm.Sample) on the device's
+    reader thread for every report; it must return quickly."""
+    L = _native.lib()
+    opts = _native.cdm_open_options()
+    if not 0 <= int(stale_timeout_us) < 2**32:
+        raise ValueError("open: stale_timeout_us %r is outside 0..2^32-1" % (stale_timeout_us,))
+    opts.stale_timeout_us = int(stale_timeout_us)
+    callback = None
+    if on_sample is not None:
+        if not callable(on_sample):
+            raise TypeError("open: on_sample must be callable, got %r" % (on_sample,))
+        callback = _make_sample_callback(on_sample)
+        opts.on_sample = callback
+    h = ctypes.c_void_p()
+    raw_uri = None if uri is None else uri.encode("utf-8")
+    rc = L.cdm_open_ex(raw_uri, ctypes.byref(opts), ctypes.byref(h))
+    if rc < 0:
+        raise _native.fail(rc, "cdm_open")
+    if not h.value:
+        raise CdmError(Error.CDM_ERR_INTERNAL, "cdm_open returned CDM_OK and no handle", function="cdm_open")
+    return Device(h, uri, callback)
+
+
+def enumerate_devices():
+    """Information about every connected master (an empty list is not an error)."""
+    L = _native.lib()
+    lst = ctypes.c_void_p()
+    rc = L.cdm_enumerate(ctypes.byref(lst))
+    if rc < 0:
+        raise _native.fail(rc, "cdm_enumerate")
+    try:
+        out = []
+        for i in range(L.cdm_device_list_count(lst)):
+            info = _native.cdm_device_info()
+            rc = L.cdm_device_list_get(lst, i, ctypes.byref(info))
+            if rc < 0:
+                raise _native.fail(rc, "cdm_device_list_get")
+            out.append(DeviceInfo._from_c(info))
+        return out
+    finally:
+        L.cdm_device_list_free(lst)

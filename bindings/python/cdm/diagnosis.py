@@ -1,0 +1,90 @@
+"""The model-debugging diagnosis (`cdm calib diagnose`) from Python."""
+import ctypes
+import json
+import numbers
+import os
+
+from . import _native
+from .constants import Error
+from . import effects as _effects
+
+try:
+    import numpy as _np
+except ImportError:  # numpy is optional: per-position data stay lists
+    _np = None
+
+
+def _is_number(v):
+    return isinstance(v, numbers.Real) and not isinstance(v, bool)
+
+
+def _arrays(obj):
+    """Lists of numbers (or rectangular lists of such lists) -> numpy arrays, recursively."""
+    if isinstance(obj, dict):
+        return {k: _arrays(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        if obj and all(_is_number(v) for v in obj):
+            return _np.asarray(obj, dtype=float)
+        if (obj and all(isinstance(v, list) and v and all(_is_number(x) for x in v) for v in obj)
+                and len({len(v) for v in obj}) == 1):
+            return _np.asarray(obj, dtype=float)
+        return [_arrays(v) for v in obj]
+    return obj
+
+
+def diagnose(data_csv, device_json, effects=None, jig_tolerance_mm=None, progress=None, **options):
+    """Runs cdm_diagnose and returns its result (docs/calibration.md gives the
+    schema) as a dict. Under result["positions"], lists of numbers become numpy
+    arrays when numpy is installed.
+
+    effects           effect names to fit on top of the nominal model
+    jig_tolerance_mm  the jig's positioning tolerance
+    progress          progress(stage: str, fraction: float) -> truthy to cancel
+    **options         any other option of cdm_diagnose (candidates=True,
+                      per_position=True, calibration_out="calib.json", ...)"""
+    if effects is not None:
+        if isinstance(effects, str):
+            effects = [effects]
+        options["effects"] = list(effects)
+    if jig_tolerance_mm is not None:
+        options["jig_tolerance_mm"] = float(jig_tolerance_mm)
+    options_json = json.dumps(options).encode("utf-8") if options else None
+
+    raised = []
+    cb = _native.cdm_progress_fn()  # NULL
+    if progress is not None:
+        def trampoline(_user, stage, fraction):
+            try:
+                return 1 if progress((stage or b"").decode("utf-8", "replace"), fraction) else 0
+            except BaseException as e:  # cancel, and re-raise once back in Python
+                raised.append(e)
+                return 1
+        cb = _native.cdm_progress_fn(trampoline)
+
+    L = _native.lib()
+    out = ctypes.c_void_p()
+    _effects._take_errors()
+    rc = L.cdm_diagnose(os.fspath(data_csv).encode("utf-8"), os.fspath(device_json).encode("utf-8"),
+                        options_json, cb, None, ctypes.byref(out))
+    if rc < 0:
+        err = _native.fail(rc, "cdm_diagnose")
+        L.cdm_free_string(out)
+        if raised:
+            raise raised[0]
+        effect_errors = _effects._take_errors()
+        if effect_errors:
+            raise err from effect_errors[0]
+        raise err
+    try:
+        if not out.value:
+            raise _native.CdmError(Error.CDM_ERR_INTERNAL, "cdm_diagnose returned CDM_OK and no result",
+                                   function="cdm_diagnose")
+        text = ctypes.string_at(out.value).decode("utf-8")
+    finally:
+        L.cdm_free_string(out)
+    if raised:
+        raise raised[0]
+    result = json.loads(text)
+    if _np is not None and isinstance(result, dict) and "positions" in result:
+        result["positions"] = _arrays(result["positions"])
+    return result

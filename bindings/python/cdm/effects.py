@@ -1,0 +1,138 @@
+"""User-defined physical effects (CDM_EXPERIMENTAL): register Python code as an
+effect that every later fit, diagnosis and calibration load can use."""
+import ctypes
+import math
+import re
+import threading
+
+from . import _native
+from .constants import Error
+
+try:
+    import numpy as _np
+except ImportError:  # numpy is optional
+    _np = None
+
+# name -> _Registration. Holds every object native code may still reach
+# (the apply trampoline, the parameter arrays) until unregister_effect.
+_registry = {}
+_registry_lock = threading.Lock()
+
+
+class _Registration:
+    def __init__(self, name, n, apply):
+        self.name = name
+        self.n = n
+        self.apply = apply
+        self.errors = []  # exceptions raised by apply, newest last (capped)
+        self.keep = []    # ctypes objects native code points into
+
+    def trampoline(self, _user, params_p, position_p, readings_p):
+        try:
+            if _np is not None:
+                params = _np.ctypeslib.as_array(params_p, shape=(self.n,)).copy() if self.n else _np.zeros(0)
+                position = _np.ctypeslib.as_array(position_p, shape=(3,)).copy()
+                readings = _np.ctypeslib.as_array(readings_p, shape=(4,))  # a view: changed in place
+            else:
+                params = tuple(params_p[i] for i in range(self.n))
+                position = tuple(position_p[i] for i in range(3))
+                readings = ctypes.cast(readings_p, ctypes.POINTER(ctypes.c_double * 4)).contents
+            self.apply(params, position, readings)
+            return 0
+        except ArithmeticError as e:
+            self._record(e)
+            return int(Error.CDM_ERR_NUMERIC)
+        except BaseException as e:  # never let an exception unwind into C
+            self._record(e)
+            return int(Error.CDM_ERR_INTERNAL)
+
+    def _record(self, e):
+        self.errors.append(e)
+        del self.errors[:-10]
+
+
+def _doubles(values, n, what, name):
+    if values is None:
+        return None
+    vals = [float(v) for v in values]
+    if len(vals) != n:
+        raise ValueError("register_effect(%r): %s has %d values for %d parameters" % (name, what, len(vals), n))
+    if not all(math.isfinite(v) for v in vals):
+        raise ValueError("register_effect(%r): %s must be finite, got %r" % (name, what, vals))
+    return (ctypes.c_double * n)(*vals)
+
+
+def register_effect(name, param_names, param_scale, apply, doc="", lower=None, upper=None):
+    """Registers apply(params, position, readings) as the effect `name`.
+
+    The model calls apply with the readings (4 values, mm) predicted by the
+    nominal geometry and every effect before it; apply changes `readings` in
+    place (a numpy view when numpy is installed, a ctypes array otherwise).
+    params and position (mm, device frame) are read-only copies. apply must be
+    smooth in params and position: derivatives are central differences. An
+    exception in apply fails the fit or diagnosis that called it."""
+    if not isinstance(name, str) or not re.fullmatch(r"[a-z0-9_]+", name):
+        raise ValueError("register_effect: name must match [a-z0-9_]+, got %r" % (name,))
+    if not callable(apply):
+        raise TypeError("register_effect(%r): apply must be callable" % name)
+    param_names = [str(p) for p in param_names]
+    n = len(param_names)
+    reg = _Registration(name, n, apply)
+    scale = _doubles(param_scale, n, "param_scale", name)
+    if scale is not None and any(s <= 0 for s in scale):
+        raise ValueError("register_effect(%r): param_scale must be > 0, got %r" % (name, list(scale)))
+    lo = _doubles(lower, n, "lower", name)
+    hi = _doubles(upper, n, "upper", name)
+    names_c = (ctypes.c_char_p * max(n, 1))(*[p.encode("utf-8") for p in param_names])
+    fn = _native.cdm_effect_apply_fn(reg.trampoline)
+    d = _native.cdm_effect_def()
+    d.n_params = n
+    d.name = name.encode("utf-8")
+    d.doc = doc.encode("utf-8")
+    d.param_names = names_c
+    d.param_scale = scale if scale is not None else (ctypes.c_double * max(n, 1))(*([1.0] * n))
+    d.lower = lo
+    d.upper = hi
+    d.apply = fn
+    d.user = None
+    reg.keep = [fn, names_c, d.param_scale, lo, hi, d]
+    with _registry_lock:
+        if name in _registry:
+            raise ValueError("register_effect: %r is already registered from Python; unregister it first" % name)
+        rc = _native.lib().cdm_effect_register(ctypes.byref(d))
+        if rc < 0:
+            raise _native.fail(rc, "cdm_effect_register")
+        _registry[name] = reg
+
+
+def unregister_effect(name):
+    """Removes a user effect registered with register_effect (or by a plugin)."""
+    with _registry_lock:
+        rc = _native.lib().cdm_effect_unregister(name.encode("utf-8"))
+        if rc < 0:
+            raise _native.fail(rc, "cdm_effect_unregister")
+        _registry.pop(name, None)
+
+
+def load_plugin(path):
+    """Loads a shared object exporting cdm_plugin_init and registers its effects."""
+    import os
+    rc = _native.lib().cdm_effect_load_plugin(os.fspath(path).encode("utf-8"))
+    if rc < 0:
+        raise _native.fail(rc, "cdm_effect_load_plugin")
+
+
+def effect_names():
+    """Every effect known to the library: built-in first, then user ones."""
+    L = _native.lib()
+    return [L.cdm_effect_name(i).decode("utf-8") for i in range(L.cdm_effect_count())]
+
+
+def _take_errors():
+    """Exceptions raised by Python effects since the last call (for diagnose)."""
+    out = []
+    with _registry_lock:
+        for reg in _registry.values():
+            out += reg.errors
+            reg.errors = []
+    return out

@@ -1,0 +1,263 @@
+// Tests of Cdm.dll under Mono. Exit code = number of failed checks.
+//   mono CdmTests.exe ROOT layout      struct layouts against tests/data/abi_layout.json
+//   mono CdmTests.exe ROOT constants   enums against include/cdm/cdm.h
+//   mono CdmTests.exe ROOT device      the simulated master through the binding
+using System;
+using System.Collections.Generic;
+using System.IO;
+using System.Linq;
+using System.Reflection;
+using System.Runtime.InteropServices;
+using System.Text.RegularExpressions;
+using System.Threading;
+using Cdm;
+
+static class CdmTests
+{
+    static int failures;
+    static int checks;
+
+    static void Expect(bool ok, string what)
+    {
+        checks++;
+        if (!ok) { failures++; Console.WriteLine("FAIL: " + what); }
+    }
+
+    static void Run(string name, Action test)
+    {
+        try { test(); Console.WriteLine("ran  " + name); }
+        catch (Exception e) { failures++; Console.WriteLine("FAIL: " + name + " threw " + e); }
+    }
+
+    static int Main(string[] args)
+    {
+        if (args.Length < 2) { Console.Error.WriteLine("usage: CdmTests.exe SOURCE_ROOT layout|constants|device..."); return 100; }
+        string root = args[0];
+        foreach (var group in args.Skip(1))
+        {
+            switch (group)
+            {
+                case "layout": Run("layout", () => Layout(Path.Combine(root, "tests", "data", "abi_layout.json"))); break;
+                case "constants": Run("constants", () => Constants(Path.Combine(root, "include", "cdm", "cdm.h"))); break;
+                case "device":
+                    Run("open_and_read", OpenAndRead);
+                    Run("dispose_is_idempotent", DisposeIsIdempotent);
+                    Run("bad_uri", BadUri);
+                    Run("sample_callback", SampleCallback);
+                    Run("calibration_errors", CalibrationErrors);
+                    break;
+                default: Console.Error.WriteLine("unknown group " + group); return 100;
+            }
+        }
+        Console.WriteLine("{0} checks, {1} failed", checks, failures);
+        return Math.Min(failures, 99);
+    }
+
+    // ------------------------------------------------------------ layouts
+    static void Layout(string jsonPath)
+    {
+        var table = (Dictionary<string, object>)((Dictionary<string, object>)Json.Parse(File.ReadAllText(jsonPath)))["structs"];
+        var mirrors = new Dictionary<string, Type>();
+        foreach (var t in typeof(Device).Assembly.GetTypes())
+        {
+            foreach (var a in t.GetCustomAttributes(false))
+                if (a.GetType().Name == "CStructAttribute")
+                    mirrors[(string)a.GetType().GetField("Name").GetValue(a)] = t;
+        }
+        Expect(mirrors.Count == table.Count, "C# mirrors " + mirrors.Count + " structs, the table has " + table.Count);
+        foreach (var kv in table)
+        {
+            Type t;
+            if (!mirrors.TryGetValue(kv.Key, out t)) { Expect(false, kv.Key + " has no C# mirror"); continue; }
+            var entry = (Dictionary<string, object>)kv.Value;
+            int size = Marshal.SizeOf(t);
+            Expect(size == Convert.ToInt32(entry["size"]), kv.Key + ": Marshal.SizeOf " + size + ", table " + entry["size"]);
+            var fields = (Dictionary<string, object>)entry["fields"];
+            var csFields = t.GetFields(BindingFlags.Public | BindingFlags.Instance).Select(f => f.Name).ToList();
+            foreach (var f in fields)
+            {
+                string name = csFields.Contains(f.Key) ? f.Key : f.Key + "_0";
+                if (!csFields.Contains(name)) { Expect(false, kv.Key + "." + f.Key + " has no C# field"); continue; }
+                long off = Marshal.OffsetOf(t, name).ToInt64();
+                Expect(off == Convert.ToInt64(f.Value), kv.Key + "." + f.Key + ": OffsetOf " + off + ", table " + f.Value);
+            }
+            // Every C# field is one of the table's (or an element of one of its arrays).
+            foreach (var n in csFields)
+                Expect(fields.ContainsKey(Regex.Replace(n, "_[0-9]+$", "")) || fields.ContainsKey(n),
+                       kv.Key + ": C# field " + n + " is not in the table");
+        }
+    }
+
+    // ---------------------------------------------------------- constants
+    static void Constants(string headerPath)
+    {
+        var src = File.ReadAllText(headerPath);
+        var found = 0;
+        foreach (Match m in Regex.Matches(src, @"\b(CDM_(ERR|POSE|BUTTON)_(\w+)|CDM_OK)\s*=\s*([^,\n/]+)"))
+        {
+            string expr = m.Groups[4].Value.Trim().Replace("u", "");
+            var shift = Regex.Match(expr, @"^(\d+)\s*<<\s*(\d+)$");
+            long value = shift.Success ? long.Parse(shift.Groups[1].Value) << int.Parse(shift.Groups[2].Value) : long.Parse(expr);
+            string kind = m.Groups[2].Success ? m.Groups[2].Value : "ERR";
+            string pascal = m.Groups[3].Success
+                ? string.Concat(m.Groups[3].Value.Split('_').Select(w => w.Substring(0, 1) + w.Substring(1).ToLowerInvariant()))
+                : "Ok";
+            Type e = kind == "ERR" ? typeof(ErrorCode) : kind == "POSE" ? typeof(PoseFlags) : typeof(Buttons);
+            string match = Enum.GetNames(e).FirstOrDefault(n => string.Equals(n, pascal, StringComparison.OrdinalIgnoreCase));
+            if (match == null) { Expect(false, m.Groups[1].Value + " has no member in " + e.Name); continue; }
+            long cs = Convert.ToInt64(Enum.Parse(e, match));
+            Expect(cs == value, m.Groups[1].Value + ": header " + value + ", C# " + e.Name + "." + match + " = " + cs);
+            found++;
+        }
+        Expect(found == 16 + 5 + 3, "parsed " + found + " constants from the header, expected 24");
+        Expect(Enum.GetValues(typeof(ErrorCode)).Length == 16, "ErrorCode has a member the header lacks");
+        Expect(Device.LibraryVersion == "1.0.0" || Device.LibraryVersion.StartsWith("1."), "library version " + Device.LibraryVersion);
+    }
+
+    // ------------------------------------------------------------- device
+    static void OpenAndRead()
+    {
+        using (var dev = Device.Open("sim:?motion=still"))
+        {
+            var p = dev.WaitPose(1000);
+            Expect(p.Status == ErrorCode.Ok, "first pose status " + p.Status);
+            // motion=still holds the holder at (50, 0, 0) mm, grip level.
+            Expect(Math.Abs(p.Position.X - 50) < 1 && Math.Abs(p.Position.Y) < 1 && Math.Abs(p.Position.Z) < 1,
+                   "still pose at " + p.Position);
+            Expect(Math.Abs(p.Orientation.Norm - 1) < 1e-3, "quaternion norm " + p.Orientation.Norm);
+            Expect(p.Orientation.W > 0.999, "level grip, got " + p.Orientation);
+            var q = dev.WaitPose(1000);
+            Expect(q.Sequence != p.Sequence && q.HostTimeNs > p.HostTimeNs, "WaitPose returns a newer pose");
+            var g = dev.GetPose();
+            Expect(g.Sequence - q.Sequence < 1000, "GetPose sequence " + g.Sequence + " after " + q.Sequence);
+            var info = dev.GetInfo();
+            Expect(info.Transport == "sim", "transport " + info.Transport);
+            Expect(info.ReportRateHz > 0 && info.PotScaleMm.Length == 4, "info rate " + info.ReportRateHz);
+            var raw = dev.GetRaw();
+            Expect(raw.LengthsMm.All(l => l > 0), "raw lengths " + string.Join(",", raw.LengthsMm));
+            var stats = dev.GetStats();
+            Expect(stats.Reports >= 2, "stats.Reports " + stats.Reports);
+        }
+    }
+
+    static void DisposeIsIdempotent()
+    {
+        var dev = Device.Open("sim:");
+        dev.Dispose();
+        dev.Dispose();
+        Expect(dev.IsDisposed, "IsDisposed after Dispose");
+        try { dev.GetPose(); Expect(false, "GetPose after Dispose did not throw"); }
+        catch (ObjectDisposedException) { }
+    }
+
+    static void BadUri()
+    {
+        try
+        {
+            Device.Open("nosuchscheme:xyz").Dispose();
+            Expect(false, "Open(nosuchscheme:xyz) did not throw");
+        }
+        catch (CdmException e)
+        {
+            Expect(e.Code == ErrorCode.NoDevice || e.Code == ErrorCode.InvalidArg, "code " + e.Code);
+            Expect(e.Message.Contains("nosuchscheme"), "message names the URI: " + e.Message);
+            Expect(e.Function == "cdm_open", "function " + e.Function);
+        }
+    }
+
+    static void SampleCallback()
+    {
+        int n = 0;
+        long lastSequence = -1, outOfOrder = 0;
+        using (var dev = Device.Open("sim:", 0, p =>
+        {
+            if (p.Sequence <= lastSequence) outOfOrder++;
+            lastSequence = p.Sequence;
+            Interlocked.Increment(ref n);
+        }))
+        {
+            // Collect garbage while the reader thread calls back: the delegate must survive.
+            for (int i = 0; i < 5; i++) { GC.Collect(); GC.WaitForPendingFinalizers(); dev.WaitPose(1000); }
+        }
+        int after = n;
+        Thread.Sleep(50);
+        Expect(after >= 5, "callback ran " + after + " times");
+        Expect(n == after, "callback ran after Dispose");
+        Expect(outOfOrder == 0, outOfOrder + " samples out of order");
+    }
+
+    static void CalibrationErrors()
+    {
+        var path = Path.Combine(Path.GetTempPath(), "cdm-cs-bad-" + Guid.NewGuid().ToString("N") + ".json");
+        File.WriteAllText(path, "{\n  \"geometry\": [1, 2,\n");
+        try
+        {
+            Calibration.Load(path).Dispose();
+            Expect(false, "Load of a truncated file did not throw");
+        }
+        catch (CdmException e)
+        {
+            Expect(e.Code == ErrorCode.Parse, "code " + e.Code);
+            Expect(e.Message.Contains(path), "message names the file: " + e.Message);
+        }
+        finally { File.Delete(path); }
+    }
+}
+
+/// <summary>Just enough JSON for the layout table: objects, arrays, strings, numbers.</summary>
+static class Json
+{
+    public static object Parse(string s) { int i = 0; var v = Value(s, ref i); return v; }
+
+    static void Ws(string s, ref int i) { while (i < s.Length && char.IsWhiteSpace(s[i])) i++; }
+
+    static object Value(string s, ref int i)
+    {
+        Ws(s, ref i);
+        char c = s[i];
+        if (c == '{')
+        {
+            var d = new Dictionary<string, object>();
+            i++; Ws(s, ref i);
+            if (s[i] == '}') { i++; return d; }
+            while (true)
+            {
+                Ws(s, ref i);
+                var k = (string)Value(s, ref i);
+                Ws(s, ref i);
+                if (s[i++] != ':') throw new FormatException("':' expected at " + i);
+                d[k] = Value(s, ref i);
+                Ws(s, ref i);
+                if (s[i] == ',') { i++; continue; }
+                if (s[i++] == '}') return d;
+                throw new FormatException("',' or '}' expected at " + i);
+            }
+        }
+        if (c == '[')
+        {
+            var l = new List<object>();
+            i++; Ws(s, ref i);
+            if (s[i] == ']') { i++; return l; }
+            while (true)
+            {
+                l.Add(Value(s, ref i));
+                Ws(s, ref i);
+                if (s[i] == ',') { i++; continue; }
+                if (s[i++] == ']') return l;
+                throw new FormatException("',' or ']' expected at " + i);
+            }
+        }
+        if (c == '"')
+        {
+            var sb = new System.Text.StringBuilder();
+            i++;
+            while (s[i] != '"') { if (s[i] == '\\') i++; sb.Append(s[i++]); }
+            i++;
+            return sb.ToString();
+        }
+        int start = i;
+        while (i < s.Length && "+-0123456789.eE".IndexOf(s[i]) >= 0) i++;
+        if (i == start) throw new FormatException("unexpected '" + c + "' at " + i);
+        return double.Parse(s.Substring(start, i - start), System.Globalization.CultureInfo.InvariantCulture);
+    }
+}

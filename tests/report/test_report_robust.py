@@ -1,0 +1,145 @@
+"""Missing sections, NaN / null values, odd grids: notes in the page, never a crash."""
+import json
+import math
+
+from conftest import check_page, check_png, run_report
+import _synth
+
+
+def _run(tmp_path, d, name="d.json", allow_nan=False):
+    p = tmp_path / name
+    p.write_text(json.dumps(d, allow_nan=allow_nan), encoding="utf-8")
+    out = tmp_path / "r"
+    r = run_report(p, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr, r.stderr
+    html = check_page(out)
+    for png in out.glob("*.png"):
+        check_png(png)
+    return out, html, r
+
+
+def test_minimal_diagnosis(tmp_path):
+    d = {"tool": "cdm calib diagnose", "model": []}
+    out, html, _ = _run(tmp_path, d)
+    assert "Notes" in html
+    for section in ("positions", "candidates", "fingerprints", "unexplained_structure",
+                    "error_mm", "structure", "verdict", "explained"):
+        assert f"&quot;{section}&quot;" in html, section
+    assert "n/a ± n/a" in html
+    assert not list(out.glob("*.png"))
+
+
+def test_older_file_without_tool_field(tmp_path):
+    d = _synth.make_diag(n=5, heights=(40,))
+    del d["tool"], d["version"]
+    _run(tmp_path, d)
+
+
+def test_missing_optional_sections(tmp_path):
+    d = _synth.make_diag(n=9, heights=(30, 50, 70))
+    for k in ("fingerprints", "validation", "ellipsoid_error_mm", "structure", "fit", "params"):
+        del d[k]
+    del d["positions"]["cable_angle_deg"], d["positions"]["length_residual_mm"]
+    out, html, _ = _run(tmp_path, d)
+    for k in ("fingerprints", "ellipsoid_error_mm", "structure", "positions.cable_angle_deg",
+              "positions.length_residual_mm"):
+        assert f"&quot;{k}&quot;" in html, k
+    names = {p.name for p in out.glob("*.png")}
+    assert "vs_variables.png" in names and "residual_map_h50.png" in names
+    assert "vs_cable_length.png" not in names
+    assert not any(n.startswith("fingerprint_") for n in names)
+
+
+def test_nan_and_null_values(tmp_path):
+    d = _synth.make_diag(n=9, heights=(30, 50))
+    pos = d["positions"]
+    pos["residual_mm"][0] = [None, None, None]
+    pos["residual_mm"][1][0] = float("nan")
+    pos["nominal_residual_mm"][2] = None
+    pos["lengths_mm"][3][1] = None
+    pos["failing"][4] = None
+    pos["height"][5] = None
+    d["error_mm"]["x"]["rms"] = None
+    d["error_mm"]["y"]["mean"] = float("nan")
+    d["chi2_per_dof"] = None
+    d["candidates"][0]["bic_change"] = None
+    d["fingerprints"]["anchor_position"][0] = [None, 1.0, float("inf")]
+    out, html, r = _run(tmp_path, d, allow_nan=True)
+    assert "n/a" in html
+    assert "warning" not in r.stderr.lower(), r.stderr
+
+
+def test_mismatched_lengths(tmp_path):
+    d = _synth.make_diag(n=5, heights=(30, 60))
+    d["positions"]["residual_mm"] = d["positions"]["residual_mm"][:-3]
+    d["positions"]["sigma_mm"] = "oops"
+    d["fingerprints"]["anchor_position"] = d["fingerprints"]["anchor_position"][:2]
+    d["candidates"].append("not an object")
+    out, html, _ = _run(tmp_path, d)
+    assert "&quot;positions.residual_mm&quot; has 47 entries" in html
+    assert "&quot;positions.sigma_mm&quot; has an unusable shape" in html
+    # without a current residual, maps show the nominal one and fingerprints say why not
+    assert (out / "residual_map_h30.png").exists()
+    assert "no per-position residual" in html
+
+
+def test_mismatched_fingerprint(tmp_path):
+    d = _synth.make_diag(n=5, heights=(30, 60))
+    d["fingerprints"]["anchor_position"] = d["fingerprints"]["anchor_position"][:2]
+    d["fingerprints"]["jig_misalignment"] = {"not": "a list"}
+    out, html, _ = _run(tmp_path, d)
+    assert "Fingerprint of anchor_position does not match" in html
+    assert "Fingerprint of jig_misalignment does not match" in html
+    assert [p.name for p in out.glob("fingerprint_*.png")] == ["fingerprint_1_pot_nonlinearity.png"]
+
+
+def test_single_height(tmp_path):
+    out, html, _ = _run(tmp_path, _synth.make_diag(n=11, heights=(50,)))
+    assert sorted(p.name for p in out.glob("residual_map_*.png")) == ["residual_map_h50.png"]
+    assert "Only one height" in html
+    assert (out / "residual_cut.png").exists()
+
+
+def test_irregular_grid(tmp_path):
+    out, html, _ = _run(tmp_path, _synth.make_diag(irregular=True, npos=60, heights=(35, 65)))
+    assert (out / "residual_map_h35.png").exists() and (out / "residual_map_h65.png").exists()
+    assert (out / "fingerprint_1_anchor_position.png").exists()
+
+
+def test_coarse_grid_with_holes(tmp_path):
+    d = _synth.make_diag(n=7, pitch=10.0, heights=(30, 40, 50, 60, 70, 80, 90))
+    keep = [i for i in range(len(d["positions"]["ref"])) if i % 5 != 2]
+    for k, v in list(d["positions"].items()):
+        d["positions"][k] = [v[i] for i in keep]
+    for k, v in list(d["fingerprints"].items()):
+        d["fingerprints"][k] = [v[i] for i in keep]
+    out, html, _ = _run(tmp_path, d)
+    assert len(list(out.glob("residual_map_*.png"))) == 7
+
+
+def test_single_position(tmp_path):
+    out, html, _ = _run(tmp_path, _synth.make_diag(npos=1, heights=(50,)))
+    assert (out / "residual_map_h50.png").exists()
+
+
+def test_unit_helpers():
+    import importlib.util
+    from conftest import SCRIPT
+    spec = importlib.util.spec_from_file_location("cdm_report_under_test", SCRIPT)
+    m = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(m)
+    assert m.fmt_mm(0.78331) == "0.7833" and m.fmt_mm(None) == "n/a"
+    assert m.fmt_mm(math.nan) == "n/a" and m.fmt_mm(True) == "n/a"
+    import numpy as np
+    c = (np.arange(25) - 12) * 5.0
+    y, z = np.meshgrid(c, c)
+    g = m._regular_grid(y.ravel(), z.ravel())
+    assert g is not None and len(g[0]) == 25 and len(g[1]) == 25
+    rng = np.random.default_rng(0)
+    assert m._regular_grid(rng.uniform(-60, 60, 50), rng.uniform(-60, 60, 50)) is None
+    assert m._finding_target("length_3") == ("length", 3)
+    assert m._finding_target("l2") == ("length", 2)
+    assert m._finding_target("cable_angle_4") == ("angle", 4)
+    assert m._finding_target("distance_from_centre") == ("radius", None)
+    assert m._finding_target("height") == ("height", None)

@@ -1,2 +1,4 @@
 list(APPEND CDM_SOURCES
   api/version_error.cpp)
+list(APPEND CDM_SOURCES
+  api/device_api.cpp)

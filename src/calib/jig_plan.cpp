@@ -1,1 +1,81 @@
 #include "calib/jig_plan.h"
+
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+
+namespace cdm {
+
+bool check_jig_options(const JigPlanOptions &o, std::string &err) {
+    if (o.n < 1 || o.n > 1000) {
+        err = "jig_n must be 1..1000, got " + std::to_string(o.n);
+        return false;
+    }
+    if (!(o.pitch_mm > 0) || !std::isfinite(o.pitch_mm)) {
+        err = "jig_pitch must be a positive number of mm";
+        return false;
+    }
+    if (o.heights_mm.empty()) {
+        err = "jig_heights must list at least one height";
+        return false;
+    }
+    for (double h : o.heights_mm) {
+        if (!(h > 0) || !std::isfinite(h)) {
+            err = "jig_heights must be positive (mm from the cable plane)";
+            return false;
+        }
+    }
+    if (o.samples < 1) {
+        err = "jig_samples must be at least 1, got " + std::to_string(o.samples);
+        return false;
+    }
+    return true;
+}
+
+std::vector<JigPosition> make_jig_plan(const JigPlanOptions &o) {
+    std::vector<JigPosition> plan;
+    plan.reserve(size_t(o.n) * o.n * o.heights_mm.size());
+    // Centred: (n-1)/2 is a half-integer for even n, so an even plate has no
+    // hole at the centre, as a real even plate would not.
+    const double c = (o.n - 1) / 2.0;
+    int id = 0;
+    for (size_t h = 0; h < o.heights_mm.size(); ++h) {
+        for (int r = 0; r < o.n; ++r) {
+            for (int k = 0; k < o.n; ++k) {
+                JigPosition p;
+                p.point = id++;
+                p.height_index = int(h);
+                p.row = r;
+                p.col = k;
+                p.ref[0] = o.heights_mm[h];
+                p.ref[1] = (r - c) * o.pitch_mm;
+                p.ref[2] = (k - c) * o.pitch_mm;
+                plan.push_back(p);
+            }
+        }
+    }
+    return plan;
+}
+
+bool parse_heights(const std::string &text, std::vector<double> &out, std::string &err) {
+    std::vector<double> v;
+    size_t start = 0;
+    while (start <= text.size()) {
+        size_t end = text.find(',', start);
+        if (end == std::string::npos) end = text.size();
+        const std::string item = text.substr(start, end - start);
+        char *stop = nullptr;
+        errno = 0;
+        const double h = item.empty() ? 0.0 : std::strtod(item.c_str(), &stop);
+        if (item.empty() || errno != 0 || *stop != '\0' || !(h > 0) || !std::isfinite(h)) {
+            err = "jig heights: \"" + item + "\" in \"" + text + "\" is not a positive number of mm";
+            return false;
+        }
+        v.push_back(h);
+        start = end + 1;
+    }
+    out = v;
+    return true;
+}
+
+} // namespace cdm

@@ -1,2 +1,12 @@
 # Owned by the device layer: protocol, transports, reader thread.
-list(APPEND CDM_SOURCES)
+list(APPEND CDM_SOURCES
+  device/protocol.cpp
+  device/transport_registry.cpp
+  device/transport_hidapi.cpp
+  device/transport_sim.cpp
+  device/transport_replay.cpp
+  device/replay_format.cpp
+  device/device.cpp
+  device/sim/firmware.cpp
+  device/sim/motion.cpp
+  device/sim/simulator.cpp)

@@ -1,0 +1,222 @@
+// extern "C" device functions: argument checks, struct_size handling and
+// exception fences around the device layer (src/device/). No logic of their
+// own.
+#include <algorithm>
+#include <cstring>
+#include <new>
+#include <string>
+#include <vector>
+
+#include "api/calibration_handle.h"
+#include "api/errors.h"
+#include "cdm/cdm.h"
+#include "device/device.h"
+#include "device/transport_hidapi.h"
+
+// The 1.0 sizes are part of the ABI: a caller passing less is refused, a
+// newer caller passing more gets the 1.0 fields and the rest untouched.
+static_assert(sizeof(cdm_pose) == 104, "cdm_pose 1.0 is 104 bytes");
+static_assert(sizeof(cdm_raw) == 80, "cdm_raw 1.0 is 80 bytes");
+static_assert(sizeof(cdm_device_info) == 456, "cdm_device_info 1.0 is 456 bytes");
+static_assert(sizeof(cdm_stats) == 48, "cdm_stats 1.0 is 48 bytes");
+static_assert(sizeof(cdm_open_options) == 24, "cdm_open_options 1.0 is 24 bytes");
+static_assert(sizeof(cdm_sample) == 32, "cdm_sample 1.0 is 32 bytes");
+
+struct cdm_device_list {
+    std::vector<cdm_device_info> items;
+};
+
+namespace {
+
+constexpr uint32_t kPoseSize10 = 104, kRawSize10 = 80, kInfoSize10 = 456, kStatsSize10 = 48,
+                   kOptionsSize10 = 24;
+
+// Writes the fields of `src` that fit in the caller's struct_size. Does not
+// allocate (cdm_get_pose relies on it).
+template <class T>
+void copy_out(T src, T *dst) {
+    const uint32_t cs = dst->struct_size;
+    src.struct_size = cs;
+    std::memcpy(static_cast<void *>(dst), &src, std::min<size_t>(cs, sizeof(T)));
+}
+
+template <class F>
+int guarded(F &&f) {
+    try {
+        return f();
+    } catch (const std::bad_alloc &) {
+        return cdm::fail(CDM_ERR_NO_MEM, "out of memory");
+    } catch (const std::exception &e) {
+        return cdm::fail(CDM_ERR_INTERNAL, std::string("internal error: ") + e.what());
+    } catch (...) {
+        return cdm::fail(CDM_ERR_INTERNAL, "internal error: unknown exception");
+    }
+}
+
+int bad_size(const char *fn, const char *type, uint32_t got, uint32_t need) {
+    return cdm::fail(CDM_ERR_INVALID_ARG, std::string(fn) + ": " + type + ".struct_size is " + std::to_string(got) +
+                                              ", at least " + std::to_string(need) + " (sizeof in cdm.h 1.0) needed");
+}
+
+} // namespace
+
+extern "C" {
+
+int cdm_enumerate(cdm_device_list **out) {
+    return guarded([&] {
+        cdm::clear_thread_error();
+        if (!out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_enumerate: out is NULL");
+        *out = nullptr;
+        auto list = std::make_unique<cdm_device_list>();
+        std::string err;
+        cdm::hid_list_masters(list->items, err);
+        if (!err.empty()) cdm::fail(CDM_OK, err); // informative: why the list may be empty
+        *out = list.release();
+        return int(CDM_OK);
+    });
+}
+
+size_t cdm_device_list_count(const cdm_device_list *list) { return list ? list->items.size() : 0; }
+
+int cdm_device_list_get(const cdm_device_list *list, size_t i, cdm_device_info *info) {
+    if (!list || !info) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_device_list_get: NULL argument");
+    if (info->struct_size < kInfoSize10)
+        return bad_size("cdm_device_list_get", "cdm_device_info", info->struct_size, kInfoSize10);
+    if (i >= list->items.size())
+        return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_device_list_get: index " + std::to_string(i) + " of a list of " +
+                                                  std::to_string(list->items.size()));
+    copy_out(list->items[i], info);
+    return CDM_OK;
+}
+
+void cdm_device_list_free(cdm_device_list *list) { delete list; }
+
+int cdm_open_ex(const char *uri, const cdm_open_options *options, cdm_device **out) {
+    return guarded([&] {
+        cdm::clear_thread_error();
+        if (!out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_open: out is NULL");
+        *out = nullptr;
+        cdm_open_options opts{};
+        if (options) {
+            if (options->struct_size < kOptionsSize10)
+                return bad_size("cdm_open_ex", "cdm_open_options", options->struct_size, kOptionsSize10);
+            std::memcpy(&opts, options, sizeof opts); // the 1.0 fields; newer ones are not known here
+            opts.struct_size = sizeof opts;
+        }
+        std::string err;
+        const int rc = cdm::open_device(uri, options ? &opts : nullptr, out, err);
+        if (rc != CDM_OK) return cdm::fail(rc, err);
+        return int(CDM_OK);
+    });
+}
+
+int cdm_open(const char *uri, cdm_device **out) { return cdm_open_ex(uri, nullptr, out); }
+
+void cdm_close(cdm_device *dev) {
+    try {
+        delete dev;
+    } catch (...) {
+        // A destructor that throws has nowhere to report to: swallow, the
+        // handle is gone either way.
+    }
+}
+
+// No allocation, no lock, no thread error on the success and state paths:
+// this is the 1 kHz call.
+int cdm_get_pose(cdm_device *dev, cdm_pose *out) {
+    if (!dev || !out || out->struct_size < kPoseSize10) return CDM_ERR_INVALID_ARG;
+    cdm_pose p;
+    const int rc = dev->get_pose(p);
+    copy_out(p, out);
+    return rc;
+}
+
+int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out) {
+    return guarded([&] {
+        if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_wait_pose: NULL argument");
+        if (out->struct_size < kPoseSize10) return bad_size("cdm_wait_pose", "cdm_pose", out->struct_size, kPoseSize10);
+        cdm_pose p;
+        const int rc = dev->wait_pose(timeout_ms, p);
+        copy_out(p, out);
+        return rc;
+    });
+}
+
+int cdm_get_raw(cdm_device *dev, cdm_raw *out) {
+    if (!dev || !out || out->struct_size < kRawSize10) return CDM_ERR_INVALID_ARG;
+    cdm_raw r;
+    const int rc = dev->get_raw(r);
+    copy_out(r, out);
+    return rc;
+}
+
+int cdm_get_info(cdm_device *dev, cdm_device_info *out) {
+    if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_get_info: NULL argument");
+    if (out->struct_size < kInfoSize10) return bad_size("cdm_get_info", "cdm_device_info", out->struct_size, kInfoSize10);
+    cdm_device_info i;
+    dev->get_info(i);
+    copy_out(i, out);
+    return CDM_OK;
+}
+
+int cdm_set_stale_timeout(cdm_device *dev, uint32_t timeout_us) {
+    if (!dev) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_set_stale_timeout: dev is NULL");
+    dev->set_stale_timeout(timeout_us);
+    return CDM_OK;
+}
+
+int cdm_get_stats(cdm_device *dev, cdm_stats *out) {
+    if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_get_stats: NULL argument");
+    if (out->struct_size < kStatsSize10) return bad_size("cdm_get_stats", "cdm_stats", out->struct_size, kStatsSize10);
+    cdm_stats s;
+    dev->get_stats(s);
+    copy_out(s, out);
+    return CDM_OK;
+}
+
+int cdm_device_error(cdm_device *dev, char *buf, size_t len) {
+    if (!dev || !buf || len == 0) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_device_error: NULL or empty buffer");
+    dev->error_text(buf, len);
+    return CDM_OK;
+}
+
+int cdm_set_calibration(cdm_device *dev, const cdm_calibration *cal) {
+    return guarded([&] {
+        if (!dev) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_set_calibration: dev is NULL");
+        if (cal && !cal->model) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_set_calibration: empty calibration");
+        // The model is immutable and shared: the device keeps its own
+        // reference, so the caller may free cal right away.
+        dev->set_model(cal ? cal->model : cdm::ModelPtr());
+        return int(CDM_OK);
+    });
+}
+
+int cdm_device_calibration_read(cdm_device *dev, char *buf, size_t cap, size_t *len) {
+    return guarded([&] {
+        if (!dev || !len || (!buf && cap > 0))
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_device_calibration_read: NULL argument");
+        const int rc = dev->calibration_read(buf, cap, len);
+        if (rc != CDM_OK) {
+            char text[512];
+            dev->error_text(text, sizeof text);
+            return cdm::fail(rc, text);
+        }
+        return rc;
+    });
+}
+
+int cdm_device_calibration_write(cdm_device *dev, const char *data, size_t len) {
+    return guarded([&] {
+        if (!dev || (!data && len > 0))
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_device_calibration_write: NULL argument");
+        const int rc = dev->calibration_write(data, len);
+        if (rc != CDM_OK) {
+            char text[512];
+            dev->error_text(text, sizeof text);
+            return cdm::fail(rc, text);
+        }
+        return rc;
+    });
+}
+
+} // extern "C"

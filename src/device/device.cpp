@@ -1,0 +1,547 @@
+#include "device/device.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <ctime>
+#include <vector>
+
+#include "device/transport_hidapi.h"
+
+namespace cdm {
+
+uint64_t monotonic_ns() {
+    timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts); // vDSO: no system call, no lock
+    return uint64_t(ts.tv_sec) * 1000000000ull + uint64_t(ts.tv_nsec);
+}
+
+namespace {
+void copy_str(char *dst, size_t cap, const std::string &s) {
+    const size_t n = std::min(cap - 1, s.size());
+    std::memcpy(dst, s.data(), n);
+    dst[n] = 0;
+}
+
+ModelPtr nominal_model(const proto::DeviceInfoReport &r) {
+    DeviceGeometry g;
+    g.a_mm = r.a_mm;
+    g.b_mm = r.b_mm;
+    g.m_mm = r.m_mm;
+    return std::make_shared<const Model>(g);
+}
+} // namespace
+
+void device_info_from_report(const proto::DeviceInfoReport &r, const char *transport, const std::string &uri,
+                             cdm_device_info &out) {
+    cdm_device_info i{};
+    i.struct_size = sizeof(cdm_device_info);
+    i.vendor_id = proto::kVendorId;
+    i.product_id = proto::kProductId;
+    copy_str(i.uri, sizeof i.uri, uri);
+    copy_str(i.serial, sizeof i.serial, r.serial);
+    copy_str(i.firmware, sizeof i.firmware,
+             std::to_string(r.fw_major) + "." + std::to_string(r.fw_minor) + "." + std::to_string(r.fw_patch));
+    copy_str(i.transport, sizeof i.transport, transport);
+    i.protocol_version = r.protocol_version;
+    i.adc_bits = r.adc_bits;
+    for (int k = 0; k < 4; ++k) {
+        i.pot_scale_mm[k] = r.pot_scale_mm[k];
+        i.pot_offset_mm[k] = r.pot_offset_mm[k];
+    }
+    i.a_mm = r.a_mm;
+    i.b_mm = r.b_mm;
+    i.m_mm = r.m_mm;
+    i.report_rate_hz = r.report_rate_hz;
+    i.hall_closed = r.hall_closed;
+    i.hall_open = r.hall_open;
+    i.grip_open_rad = r.grip_open_rad;
+    out = i;
+}
+
+static int read_device_info(Transport &t, proto::DeviceInfoReport &info, std::string &err) {
+    uint8_t buf[proto::kDeviceInfoReportSize] = {proto::kDeviceInfoReportId};
+    std::string terr;
+    const int n = t.get_feature(buf, sizeof buf, terr);
+    if (n < 0) {
+        err = "reading the device info (feature report 0x02): " + terr;
+        return n;
+    }
+    std::string detail;
+    const proto::Reject rej = proto::parse_device_info(buf, size_t(n), info, &detail);
+    if (rej != proto::Reject::None) {
+        err = std::string("device info (feature report 0x02, ") + std::to_string(n) +
+              " bytes) rejected: " + proto::reject_text(rej) + (detail.empty() ? "" : ": " + detail);
+        return CDM_ERR_PROTOCOL;
+    }
+    return CDM_OK;
+}
+
+int open_device(const char *uri_c, const cdm_open_options *opts, cdm_device **out, std::string &err) {
+    std::string text = uri_c ? uri_c : "";
+    if (text.empty()) {
+        const char *env = std::getenv("CDM_DEVICE");
+        if (env && *env) {
+            text = env;
+        } else {
+            std::vector<cdm_device_info> found;
+            std::string enum_err;
+            hid_list_masters(found, enum_err);
+            if (found.empty()) {
+                err = "no URI given, $CDM_DEVICE is not set and no master (USB 1209:cd01) is connected" +
+                      (enum_err.empty() ? std::string() : " (" + enum_err + ")") +
+                      "; to try the simulated master, open \"sim:\"";
+                return CDM_ERR_NO_DEVICE;
+            }
+            text = found[0].uri;
+        }
+    }
+    Uri u;
+    int rc = parse_uri(text, u, err);
+    if (rc != CDM_OK) return rc;
+    const TransportEntry *entry = find_transport(u.scheme);
+    if (!entry) {
+        std::string known;
+        for (const auto &t : transports()) known += std::string(known.empty() ? "" : ", ") + t.scheme;
+        err = "URI \"" + text + "\": unknown scheme \"" + u.scheme + "\" (known: " + known + ")";
+        return CDM_ERR_NO_DEVICE;
+    }
+    TransportPtr t;
+    rc = entry->open(u, t, err);
+    if (rc != CDM_OK) return rc;
+    proto::DeviceInfoReport info;
+    rc = read_device_info(*t, info, err);
+    if (rc != CDM_OK) {
+        err = "URI \"" + text + "\": " + err;
+        return rc;
+    }
+    const uint32_t stale = opts && opts->stale_timeout_us ? opts->stale_timeout_us : kDefaultStaleTimeoutUs;
+    auto *dev = new cdm_device(std::move(t), info, stale, opts ? opts->on_sample : nullptr,
+                               opts ? opts->user : nullptr);
+    dev->start();
+    *out = dev;
+    return CDM_OK;
+}
+
+} // namespace cdm
+
+using namespace cdm;
+
+cdm_device::cdm_device(TransportPtr t, const proto::DeviceInfoReport &info, uint32_t stale_timeout_us,
+                       cdm_sample_fn on_sample, void *user)
+    : transport_(std::move(t)), on_sample_(on_sample), user_(user), stale_timeout_us_(stale_timeout_us) {
+    device_info_from_report(info, transport_->name(), transport_->uri(), info_);
+    conv_ = conversion_from(info);
+    nominal_ = nominal_model(info);
+    model_ = nominal_;
+}
+
+cdm_device::~cdm_device() {
+    stop_.store(true);
+    notify_waiters();
+    if (thread_.joinable()) thread_.join();
+}
+
+void cdm_device::start() { thread_ = std::thread([this] { run(); }); }
+
+cdm_device::Conversion cdm_device::conversion_from(const proto::DeviceInfoReport &r) {
+    Conversion c{};
+    for (int i = 0; i < 4; ++i) {
+        c.scale[i] = r.pot_scale_mm[i];
+        c.offset[i] = r.pot_offset_mm[i];
+    }
+    c.hall_closed = r.hall_closed;
+    c.hall_open = r.hall_open;
+    c.grip_open_rad = r.grip_open_rad;
+    c.rate_hz = r.report_rate_hz;
+    return c;
+}
+
+void cdm_device::set_error(const std::string &text) {
+    std::lock_guard<std::mutex> lock(err_mu_);
+    error_ = text;
+}
+
+void cdm_device::error_text(char *buf, size_t len) const {
+    if (!buf || len == 0) return;
+    std::lock_guard<std::mutex> lock(err_mu_);
+    copy_str(buf, len, error_);
+}
+
+void cdm_device::notify_waiters() {
+    events_.fetch_add(1);
+    // Seq-cst pairs with the waiter's increment: either the waiter sees the
+    // new event count in its predicate, or this load sees the waiter.
+    if (waiters_.load() > 0) {
+        { std::lock_guard<std::mutex> lock(wait_mu_); }
+        wait_cv_.notify_all();
+    }
+}
+
+void cdm_device::set_state_flag(uint32_t flag, bool on) {
+    if (on)
+        state_flags_.fetch_or(flag, std::memory_order_release);
+    else
+        state_flags_.fetch_and(~flag, std::memory_order_release);
+}
+
+void cdm_device::set_model(const ModelPtr &model) {
+    std::lock_guard<std::mutex> lock(model_mu_);
+    pending_model_ = model;
+    pending_compensated_ = model != nullptr;
+    model_changed_.store(true, std::memory_order_release);
+}
+
+void cdm_device::run() {
+    uint8_t buf[512];
+    while (!stop_.load(std::memory_order_relaxed)) {
+        try {
+            if (state_flags_.load(std::memory_order_relaxed) & CDM_POSE_DISCONNECTED) {
+                if (!try_reconnect()) {
+                    for (int waited = 0; waited < kReconnectIntervalMs && !stop_.load(); waited += 10)
+                        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+                }
+                continue;
+            }
+            std::string err;
+            const int n = transport_->read(buf, sizeof buf, kReaderPollMs, err);
+            if (n > 0) {
+                handle_report(buf, size_t(n));
+            } else if (n == kReadEnd) {
+                set_state_flag(CDM_POSE_END_OF_STREAM, true);
+                notify_waiters();
+                return;
+            } else if (n != kReadTimeout) {
+                set_error(std::string(transport_->name()) + " " + transport_->uri() + ": " +
+                          (err.empty() ? std::string("device disconnected") : err) +
+                          "; retrying every " + std::to_string(kReconnectIntervalMs) + " ms");
+                set_state_flag(CDM_POSE_DISCONNECTED, true);
+                notify_waiters();
+            }
+        } catch (const std::exception &e) {
+            // Never let one bad report or a model bug take the process down.
+            set_error(std::string("reader thread: internal error: ") + e.what());
+        }
+    }
+}
+
+bool cdm_device::try_reconnect() {
+    std::string err;
+    if (transport_->reopen(err) != CDM_OK) {
+        set_error(std::string(transport_->name()) + " " + transport_->uri() + ": disconnected; reconnect failed: " +
+                  err);
+        return false;
+    }
+    proto::DeviceInfoReport info;
+    if (read_device_info(*transport_, info, err) == CDM_OK) {
+        // The same serial number came back, but its info may have changed
+        // (a firmware update while unplugged): use what it says now.
+        conv_ = conversion_from(info);
+        {
+            std::lock_guard<std::mutex> lock(info_mu_);
+            device_info_from_report(info, transport_->name(), transport_->uri(), info_);
+        }
+        std::lock_guard<std::mutex> lock(model_mu_);
+        const bool was_nominal = model_ == nominal_;
+        nominal_ = nominal_model(info);
+        if (was_nominal) model_ = nominal_;
+    } else {
+        set_error("reconnected, but kept the old device info: " + err);
+    }
+    after_reconnect_ = true;
+    n_reconnects_.fetch_add(1, std::memory_order_relaxed);
+    set_state_flag(CDM_POSE_DISCONNECTED, false);
+    notify_waiters();
+    return true;
+}
+
+void cdm_device::handle_report(const uint8_t *buf, size_t len) {
+    proto::InputReport r;
+    const proto::Reject rej = proto::parse_input(buf, len, r);
+    if (rej != proto::Reject::None) {
+        n_malformed_.fetch_add(1, std::memory_order_relaxed);
+        ++malformed_by_kind_[size_t(rej) % 8];
+        char text[200];
+        std::snprintf(text, sizeof text,
+                      "input report rejected (reason %d: %s): %zu bytes, report ID 0x%02x; %llu rejected so far",
+                      int(rej), proto::reject_text(rej), len, len ? buf[0] : 0u,
+                      (unsigned long long)n_malformed_.load(std::memory_order_relaxed));
+        set_error(text);
+        return;
+    }
+    const uint64_t host_ns = monotonic_ns();
+
+    if (have_last_) {
+        const uint32_t d = r.sequence - last_seq_; // wraps at 2^32 by design
+        uint64_t gap = 0;
+        if (d >= 1 && d < 0x80000000u) {
+            gap = d - 1;
+        } else if (after_reconnect_) {
+            // The device restarted its counter (it lost power while
+            // unplugged): estimate the reports missed from the host-side
+            // gap and the nominal rate.
+            const double est = double(host_ns - last_host_ns_) * 1e-9 * conv_.rate_hz - 1.0;
+            gap = est > 0 ? uint64_t(std::llround(est)) : 0;
+        }
+        n_dropped_.fetch_add(gap, std::memory_order_relaxed);
+    }
+    after_reconnect_ = false;
+    have_last_ = true;
+    last_seq_ = r.sequence;
+    last_host_ns_ = host_ns;
+
+    if (model_changed_.load(std::memory_order_acquire)) {
+        std::lock_guard<std::mutex> lock(model_mu_);
+        model_ = pending_model_ ? pending_model_ : nominal_;
+        compensated_ = pending_compensated_;
+        model_changed_.store(false, std::memory_order_relaxed);
+    }
+
+    Snapshot s{};
+    cdm_raw &raw = s.raw;
+    raw.struct_size = sizeof(cdm_raw);
+    raw.status = r.status;
+    raw.hall_adc = r.hall_adc;
+    raw.buttons = r.buttons;
+    raw.sequence = r.sequence;
+    raw.device_time_us = r.device_time_us;
+    raw.host_time_ns = host_ns;
+    for (int i = 0; i < 4; ++i) {
+        raw.pot_adc[i] = r.pot_adc[i];
+        raw.quat_q14[i] = r.quat_q14[i];
+        raw.lengths_mm[i] = conv_.offset[i] + conv_.scale[i] * r.pot_adc[i];
+    }
+
+    cdm_pose &pose = s.pose;
+    pose.struct_size = sizeof(cdm_pose);
+    double p[3];
+    if (model_->position(raw.lengths_mm, p) == 0 && std::isfinite(p[0]) && std::isfinite(p[1]) &&
+        std::isfinite(p[2])) {
+        std::memcpy(last_good_p_, p, sizeof p);
+    } else {
+        pose.flags |= CDM_POSE_OUT_OF_WORKSPACE;
+        n_oow_.fetch_add(1, std::memory_order_relaxed);
+    }
+    std::memcpy(pose.position, last_good_p_, sizeof last_good_p_);
+    if (compensated_) pose.flags |= CDM_POSE_COMPENSATED;
+    double qn = 0;
+    for (int i = 0; i < 4; ++i) qn += double(r.quat_q14[i]) * r.quat_q14[i];
+    qn = std::sqrt(qn); // > 0: the parser rejects an all-zero quaternion
+    for (int i = 0; i < 4; ++i) pose.orientation[i] = r.quat_q14[i] / qn;
+    const double frac = (double(r.hall_adc) - conv_.hall_closed) / (conv_.hall_open - conv_.hall_closed);
+    pose.grip = std::clamp(frac, 0.0, 1.0) * conv_.grip_open_rad;
+    pose.buttons = r.buttons;
+    pose.sequence = r.sequence;
+    pose.device_time_us = r.device_time_us;
+    pose.host_time_ns = host_ns;
+    pose.dropped = uint32_t(n_dropped_.load(std::memory_order_relaxed));
+
+    snap_.store(s);
+    n_reports_.fetch_add(1, std::memory_order_relaxed);
+    notify_waiters();
+
+    if (on_sample_) {
+        cdm_pose cb_pose = pose;
+        cb_pose.flags |= state_flags_.load(std::memory_order_relaxed);
+        cdm_sample smp{};
+        smp.struct_size = sizeof smp;
+        smp.report_len = uint32_t(len);
+        smp.report = buf;
+        smp.raw = &raw;
+        smp.pose = &cb_pose;
+        on_sample_(user_, &smp);
+    }
+}
+
+int cdm_device::finish(cdm_pose &pose, bool have) const {
+    const uint32_t st = state_flags_.load(std::memory_order_acquire);
+    if (!have) {
+        pose = cdm_pose{};
+        pose.struct_size = sizeof(cdm_pose);
+        pose.flags = st;
+        if (st & CDM_POSE_DISCONNECTED) return CDM_ERR_DISCONNECTED;
+        if (st & CDM_POSE_END_OF_STREAM) return CDM_ERR_END_OF_STREAM;
+        return CDM_ERR_NO_DATA;
+    }
+    pose.flags |= st;
+    const uint64_t now = monotonic_ns();
+    const uint64_t limit = uint64_t(stale_timeout_us_.load(std::memory_order_relaxed)) * 1000u;
+    if (now > pose.host_time_ns && now - pose.host_time_ns > limit) pose.flags |= CDM_POSE_STALE;
+    if (st & CDM_POSE_DISCONNECTED) return CDM_ERR_DISCONNECTED;
+    if (st & CDM_POSE_END_OF_STREAM) return CDM_ERR_END_OF_STREAM;
+    if (pose.flags & CDM_POSE_STALE) return CDM_ERR_STALE;
+    return CDM_OK;
+}
+
+int cdm_device::get_pose(cdm_pose &out) const {
+    Snapshot s;
+    const bool have = snap_.load(s);
+    if (have) out = s.pose;
+    return finish(out, have);
+}
+
+int cdm_device::get_raw(cdm_raw &out) const {
+    Snapshot s;
+    const bool have = snap_.load(s);
+    cdm_pose p{};
+    if (have) p = s.pose;
+    const int rc = finish(p, have);
+    if (have) {
+        out = s.raw;
+    } else {
+        out = cdm_raw{};
+        out.struct_size = sizeof(cdm_raw);
+    }
+    return rc;
+}
+
+int cdm_device::wait_pose(int timeout_ms, cdm_pose &out) {
+    const uint64_t start = events_.load();
+    bool woke = true;
+    if (!(state_flags_.load() & CDM_POSE_END_OF_STREAM)) {
+        waiters_.fetch_add(1);
+        std::unique_lock<std::mutex> lock(wait_mu_);
+        auto pred = [&] { return events_.load() != start || stop_.load(); };
+        if (timeout_ms < 0)
+            wait_cv_.wait(lock, pred);
+        else
+            woke = wait_cv_.wait_for(lock, std::chrono::milliseconds(timeout_ms), pred);
+        lock.unlock();
+        waiters_.fetch_sub(1);
+    }
+    const int rc = get_pose(out);
+    if (!woke && rc != CDM_ERR_NO_DATA && rc != CDM_ERR_DISCONNECTED) return CDM_ERR_TIMEOUT;
+    return rc;
+}
+
+void cdm_device::get_info(cdm_device_info &out) const {
+    std::lock_guard<std::mutex> lock(info_mu_);
+    out = info_;
+}
+
+void cdm_device::get_stats(cdm_stats &out) const {
+    cdm_stats s{};
+    s.struct_size = sizeof s;
+    s.reports = n_reports_.load(std::memory_order_relaxed);
+    s.malformed = n_malformed_.load(std::memory_order_relaxed);
+    s.dropped = n_dropped_.load(std::memory_order_relaxed);
+    s.out_of_workspace = n_oow_.load(std::memory_order_relaxed);
+    s.reconnects = n_reconnects_.load(std::memory_order_relaxed);
+    out = s;
+}
+
+// ------------------------------------------------------------ calibration I/O
+
+namespace {
+int feature_get(Transport &t, uint8_t id, uint8_t *buf, size_t len, std::string &err) {
+    std::memset(buf, 0, len);
+    buf[0] = id;
+    const int n = t.get_feature(buf, len, err);
+    if (n >= 0 && size_t(n) < len) {
+        err = "feature report 0x0" + std::to_string(id) + ": device returned " + std::to_string(n) + " of " +
+              std::to_string(len) + " bytes";
+        return CDM_ERR_PROTOCOL;
+    }
+    return n < 0 ? n : CDM_OK;
+}
+} // namespace
+
+int cdm_device::calibration_read(char *out, size_t cap, size_t *len) {
+    using namespace cdm::proto;
+    std::lock_guard<std::mutex> lock(cal_mu_);
+    std::string err;
+    uint8_t buf[kCalChunkReportSize];
+    auto fail_with = [&](int code, const std::string &text) {
+        set_error("reading the stored calibration: " + text);
+        return code;
+    };
+    int rc = feature_get(*transport_, kCalHeaderReportId, buf, kCalHeaderReportSize, err);
+    if (rc != CDM_OK) return fail_with(rc, err);
+    CalHeader h;
+    if (parse_cal_header(buf, kCalHeaderReportSize, h) != Reject::None)
+        return fail_with(CDM_ERR_PROTOCOL, "malformed calibration header (feature report 0x03)");
+    *len = 0;
+    if (h.state == CalState::Empty) return fail_with(CDM_ERR_NO_DATA, "the device stores no calibration");
+    if (h.state == CalState::Writing)
+        return fail_with(CDM_ERR_NO_DATA, "a calibration write is in progress or was interrupted");
+    if (h.state == CalState::CommitFailed)
+        return fail_with(CDM_ERR_CRC, "the last calibration write failed the device's CRC check");
+    if (h.length > kCalMaxLength)
+        return fail_with(CDM_ERR_PROTOCOL, "device claims " + std::to_string(h.length) + " bytes (max 16384)");
+    *len = h.length;
+    if (h.length > cap)
+        return fail_with(CDM_ERR_NO_MEM, "buffer of " + std::to_string(cap) + " bytes, " +
+                                             std::to_string(h.length) + " needed");
+    CalChunk seek;
+    seek.op = CalChunkOp::SeekRead;
+    seek.offset = 0;
+    serialize_cal_chunk(seek, buf);
+    rc = transport_->send_feature(buf, kCalChunkReportSize, err);
+    if (rc != CDM_OK) return fail_with(rc, err);
+    std::vector<uint8_t> data;
+    data.reserve(h.length);
+    while (data.size() < h.length) {
+        rc = feature_get(*transport_, kCalChunkReportId, buf, kCalChunkReportSize, err);
+        if (rc != CDM_OK) return fail_with(rc, err);
+        CalChunk c;
+        if (parse_cal_chunk(buf, kCalChunkReportSize, c) != Reject::None || c.offset != data.size() ||
+            c.length == 0 || data.size() + c.length > h.length)
+            return fail_with(CDM_ERR_PROTOCOL, "unexpected calibration chunk at offset " + std::to_string(data.size()));
+        data.insert(data.end(), c.data.begin(), c.data.begin() + c.length);
+    }
+    if (h.length) std::memcpy(out, data.data(), h.length);
+    if (crc32(data.data(), data.size()) != h.crc32)
+        return fail_with(CDM_ERR_CRC, "stored calibration (" + std::to_string(h.length) +
+                                          " bytes) does not match its CRC-32");
+    return CDM_OK;
+}
+
+int cdm_device::calibration_write(const char *data, size_t len) {
+    using namespace cdm::proto;
+    std::lock_guard<std::mutex> lock(cal_mu_);
+    std::string err;
+    auto fail_with = [&](int code, const std::string &text) {
+        set_error("writing the calibration: " + text);
+        return code;
+    };
+    if (len > kCalMaxLength)
+        return fail_with(CDM_ERR_INVALID_ARG,
+                         std::to_string(len) + " bytes do not fit the device's 16384-byte store");
+    const uint8_t *bytes = reinterpret_cast<const uint8_t *>(data);
+    uint8_t buf[kCalChunkReportSize];
+    CalHeader h;
+    h.op = CalHeaderOp::BeginWrite;
+    h.length = uint32_t(len);
+    h.crc32 = crc32(bytes, len);
+    serialize_cal_header(h, buf);
+    int rc = transport_->send_feature(buf, kCalHeaderReportSize, err);
+    if (rc != CDM_OK) return fail_with(rc, err);
+    for (size_t off = 0; off < len; off += kCalChunkMaxData) {
+        CalChunk c;
+        c.op = CalChunkOp::WriteData;
+        c.offset = uint16_t(off);
+        c.length = uint8_t(std::min(kCalChunkMaxData, len - off));
+        std::memcpy(c.data.data(), bytes + off, c.length);
+        serialize_cal_chunk(c, buf);
+        rc = transport_->send_feature(buf, kCalChunkReportSize, err);
+        if (rc != CDM_OK) return fail_with(rc, "chunk at offset " + std::to_string(off) + ": " + err);
+    }
+    CalHeader commit;
+    commit.op = CalHeaderOp::Commit;
+    commit.length = uint32_t(len);
+    commit.crc32 = h.crc32;
+    serialize_cal_header(commit, buf);
+    rc = transport_->send_feature(buf, kCalHeaderReportSize, err);
+    if (rc != CDM_OK) return fail_with(rc, "commit: " + err);
+    rc = feature_get(*transport_, kCalHeaderReportId, buf, kCalHeaderReportSize, err);
+    if (rc != CDM_OK) return fail_with(rc, err);
+    CalHeader after;
+    if (parse_cal_header(buf, kCalHeaderReportSize, after) != Reject::None)
+        return fail_with(CDM_ERR_PROTOCOL, "malformed calibration header after commit");
+    if (after.state != CalState::Valid || after.length != len || after.crc32 != h.crc32)
+        return fail_with(CDM_ERR_CRC, "the device did not accept the data (state " +
+                                          std::to_string(int(after.state)) + ", CRC check failed)");
+    return CDM_OK;
+}

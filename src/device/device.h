@@ -1,0 +1,146 @@
+// The opaque cdm_device: a transport, the reader thread that turns its
+// reports into poses, and the publication that hands them to any thread.
+//
+// Threading model (docs/protocol.md, "Threading"):
+//  - The reader thread is the only one that reads the transport, parses,
+//    converts and publishes. It never waits for a consumer (except through a
+//    sample callback the user installed, which is the point of one).
+//  - cdm_get_pose / cdm_get_raw read the seqlock and a few atomics: no lock,
+//    no allocation, no system call but the vDSO clock.
+//  - cdm_wait_pose sleeps on a condition variable that the reader thread
+//    signals only when someone is waiting (an atomic waiter count).
+//  - cdm_set_calibration hands a new model over a mutex shared only with the
+//    reader thread, which looks at it only when an atomic flag says it
+//    changed.
+//  - Error text, device info and calibration I/O each have their own small
+//    mutex; none is ever taken by cdm_get_pose.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <thread>
+
+#include "cdm/cdm.h"
+#include "device/protocol.h"
+#include "device/seqlock.h"
+#include "device/transport.h"
+#include "model/model.h"
+
+namespace cdm {
+
+constexpr uint32_t kDefaultStaleTimeoutUs = 50000;
+// Read timeout of the reader thread: bounds how long cdm_close waits.
+constexpr int kReaderPollMs = 50;
+// Retry interval while disconnected.
+constexpr int kReconnectIntervalMs = 250;
+
+uint64_t monotonic_ns();
+
+// Fills a public cdm_device_info from the device-info feature report.
+void device_info_from_report(const proto::DeviceInfoReport &r, const char *transport, const std::string &uri,
+                             cdm_device_info &out);
+
+// Resolves NULL/"" ($CDM_DEVICE, else the first hid device) and opens.
+// Returns CDM_OK or a cdm_error with err naming the URI and what failed.
+int open_device(const char *uri, const cdm_open_options *opts, cdm_device **out, std::string &err);
+
+} // namespace cdm
+
+struct cdm_device {
+public:
+    cdm_device(cdm::TransportPtr t, const cdm::proto::DeviceInfoReport &info, uint32_t stale_timeout_us,
+               cdm_sample_fn on_sample, void *user);
+    ~cdm_device(); // stops and joins the reader thread
+    cdm_device(const cdm_device &) = delete;
+    cdm_device &operator=(const cdm_device &) = delete;
+
+    void start();
+
+    // Full-size (current version) outputs; the API layer trims to the
+    // caller's struct_size.
+    int get_pose(cdm_pose &out) const;
+    int wait_pose(int timeout_ms, cdm_pose &out);
+    int get_raw(cdm_raw &out) const;
+    void get_info(cdm_device_info &out) const;
+    void get_stats(cdm_stats &out) const;
+    void set_stale_timeout(uint32_t us) {
+        stale_timeout_us_.store(us ? us : cdm::kDefaultStaleTimeoutUs, std::memory_order_relaxed);
+    }
+    void error_text(char *buf, size_t len) const;
+    void set_error(const std::string &text);
+
+    // NULL model: back to the nominal one built from the device info.
+    void set_model(const cdm::ModelPtr &model);
+
+    int calibration_read(char *buf, size_t cap, size_t *len);
+    int calibration_write(const char *data, size_t len);
+
+    cdm::Transport &transport() { return *transport_; }
+
+private:
+    struct Snapshot {
+        cdm_pose pose; // flags: only the per-report ones (COMPENSATED, OUT_OF_WORKSPACE)
+        cdm_raw raw;
+    };
+    // Conversion constants from the device info, owned by the reader thread.
+    struct Conversion {
+        double scale[4], offset[4];
+        double hall_closed, hall_open, grip_open_rad, rate_hz;
+    };
+
+    void run();
+    bool try_reconnect();
+    void handle_report(const uint8_t *buf, size_t len);
+    void set_state_flag(uint32_t flag, bool on);
+    void notify_waiters();
+    int finish(cdm_pose &pose, bool have) const;
+    static Conversion conversion_from(const cdm::proto::DeviceInfoReport &r);
+
+    cdm::TransportPtr transport_;
+    cdm_sample_fn on_sample_;
+    void *user_;
+
+    // Published state: read by any thread.
+    cdm::SeqLock<Snapshot> snap_;
+    std::atomic<uint32_t> state_flags_{0}; // DISCONNECTED, END_OF_STREAM
+    std::atomic<uint32_t> stale_timeout_us_;
+    std::atomic<uint64_t> events_{0}; // bumped on every publication and state change
+    std::atomic<uint64_t> n_reports_{0}, n_malformed_{0}, n_dropped_{0}, n_oow_{0}, n_reconnects_{0};
+
+    // Waiters of cdm_wait_pose.
+    std::atomic<int> waiters_{0};
+    std::mutex wait_mu_;
+    std::condition_variable wait_cv_;
+
+    // Model handed from cdm_set_calibration to the reader thread.
+    std::mutex model_mu_;
+    cdm::ModelPtr pending_model_;
+    bool pending_compensated_ = false;
+    std::atomic<bool> model_changed_{false};
+
+    mutable std::mutex info_mu_;
+    cdm_device_info info_{};
+    cdm::ModelPtr nominal_; // guarded by model_mu_ (replaced on reconnect)
+
+    mutable std::mutex err_mu_;
+    std::string error_;
+
+    std::mutex cal_mu_; // one calibration transfer at a time
+
+    // Reader thread's own state.
+    Conversion conv_{};
+    cdm::ModelPtr model_;
+    bool compensated_ = false;
+    bool have_last_ = false;
+    uint32_t last_seq_ = 0;
+    uint64_t last_host_ns_ = 0;
+    bool after_reconnect_ = false;
+    double last_good_p_[3] = {0, 0, 0};
+    uint64_t malformed_by_kind_[8] = {};
+
+    std::atomic<bool> stop_{false};
+    std::thread thread_;
+};

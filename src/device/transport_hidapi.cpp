@@ -1,0 +1,227 @@
+// `hid:` — the real master through hidapi's hidraw backend.
+//
+// Concurrency: the reader thread is the only caller of hid_read_timeout and
+// the only one that closes or reopens the hid_device; feature reports may
+// come from any thread. mu_ guards the handle pointer against a reopen under
+// a feature transfer; the reader does not take it to read, since nobody else
+// ever changes the pointer.
+#include <hidapi.h>
+
+#include <cstring>
+#include <cwchar>
+#include <mutex>
+
+#include "cdm/cdm.h"
+#include "device/device.h"
+#include "device/protocol.h"
+#include "device/transport.h"
+#include "device/transport_hidapi.h"
+
+namespace cdm {
+
+namespace {
+
+std::once_flag g_hid_init_once;
+int g_hid_init_rc = 0;
+
+int ensure_hid_init(std::string &err) {
+    // hid_init is not thread-safe and must run once per process; hid_exit is
+    // never called, other code in the process may use hidapi too.
+    std::call_once(g_hid_init_once, [] { g_hid_init_rc = hid_init(); });
+    if (g_hid_init_rc != 0) {
+        err = "hid_init failed";
+        return CDM_ERR_IO;
+    }
+    return CDM_OK;
+}
+
+std::string narrow(const wchar_t *w) {
+    std::string s;
+    for (; w && *w; ++w) s += (*w >= 0x20 && *w < 0x7F) ? char(*w) : '?';
+    return s;
+}
+
+std::string hid_err(hid_device *d) {
+    const wchar_t *w = hid_error(d);
+    return w ? narrow(w) : std::string("unknown hidapi error");
+}
+
+// Path of the connected master with this serial number, or "".
+std::string find_by_serial(const std::string &serial) {
+    std::string path;
+    hid_device_info *list = hid_enumerate(proto::kVendorId, proto::kProductId);
+    for (hid_device_info *d = list; d; d = d->next) {
+        if (d->path && narrow(d->serial_number) == serial) {
+            path = d->path;
+            break;
+        }
+    }
+    hid_free_enumeration(list);
+    return path;
+}
+
+class HidTransport final : public Transport {
+public:
+    HidTransport(hid_device *dev, std::string path, std::string serial)
+        : dev_(dev), path_(std::move(path)), serial_(std::move(serial)) {}
+    ~HidTransport() override {
+        if (dev_) hid_close(dev_);
+    }
+
+    int read(uint8_t *buf, size_t cap, int timeout_ms, std::string &err) override {
+        if (!dev_) return kReadDisconnected;
+        const int n = hid_read_timeout(dev_, buf, cap, timeout_ms);
+        if (n >= 0) return n; // 0: timeout
+        // hidraw: -1 means the node went away (unplug) or a read error; both
+        // leave the handle useless, so close it and let the reader reopen.
+        err = "hid_read_timeout: " + hid_err(dev_);
+        std::lock_guard<std::mutex> lock(mu_);
+        hid_close(dev_);
+        dev_ = nullptr;
+        return kReadDisconnected;
+    }
+
+    int get_feature(uint8_t *buf, size_t len, std::string &err) override {
+        std::lock_guard<std::mutex> lock(mu_);
+        if (!dev_) {
+            err = "device disconnected";
+            return CDM_ERR_DISCONNECTED;
+        }
+        const int n = hid_get_feature_report(dev_, buf, len);
+        if (n < 0) {
+            err = "hid_get_feature_report(0x" + hex(buf[0]) + "): " + hid_err(dev_);
+            return CDM_ERR_IO;
+        }
+        return n;
+    }
+
+    int send_feature(const uint8_t *buf, size_t len, std::string &err) override {
+        std::lock_guard<std::mutex> lock(mu_);
+        if (!dev_) {
+            err = "device disconnected";
+            return CDM_ERR_DISCONNECTED;
+        }
+        if (hid_send_feature_report(dev_, buf, len) < 0) {
+            err = "hid_send_feature_report(0x" + hex(buf[0]) + "): " + hid_err(dev_);
+            return CDM_ERR_IO;
+        }
+        return CDM_OK;
+    }
+
+    int reopen(std::string &err) override {
+        // By serial number: after a replug the kernel may give the device
+        // another hidraw node. Without a serial, only the old path is left.
+        const std::string path = serial_.empty() ? path_ : find_by_serial(serial_);
+        if (path.empty()) {
+            err = "no master with serial " + serial_ + " connected";
+            return CDM_ERR_NO_DEVICE;
+        }
+        hid_device *d = hid_open_path(path.c_str());
+        if (!d) {
+            err = "hid_open_path(" + path + "): " + hid_err(nullptr);
+            return CDM_ERR_NO_DEVICE;
+        }
+        std::lock_guard<std::mutex> lock(mu_);
+        if (dev_) hid_close(dev_);
+        dev_ = d;
+        path_ = path;
+        return CDM_OK;
+    }
+
+    const char *name() const override { return "hid"; }
+    std::string uri() const override { return serial_.empty() ? "hid:" + path_ : "serial:" + serial_; }
+
+private:
+    static std::string hex(uint8_t v) {
+        char b[4];
+        std::snprintf(b, sizeof b, "%02x", v);
+        return b;
+    }
+    std::mutex mu_;
+    hid_device *dev_;
+    std::string path_, serial_;
+};
+
+int open_path(const std::string &path, const std::string &uri_text, TransportPtr &out, std::string &err) {
+    hid_device *d = hid_open_path(path.c_str());
+    if (!d) {
+        err = "URI \"" + uri_text + "\": cannot open " + path + ": " + hid_err(nullptr) +
+              " (is it a master, and may this user open it? see udev/70-cdm.rules)";
+        return CDM_ERR_NO_DEVICE;
+    }
+    wchar_t wserial[64] = {0};
+    std::string serial;
+    if (hid_get_serial_number_string(d, wserial, 64) == 0) serial = narrow(wserial);
+    out = std::make_unique<HidTransport>(d, path, serial);
+    return CDM_OK;
+}
+
+} // namespace
+
+int open_hid(const Uri &u, TransportPtr &out, std::string &err) {
+    int rc = ensure_hid_init(err);
+    if (rc != CDM_OK) return rc;
+    if (!u.options.empty()) {
+        err = unknown_option(u, u.options[0].first, "none");
+        return CDM_ERR_INVALID_ARG;
+    }
+    std::string serial;
+    if (u.scheme == "serial") serial = u.path;
+    else if (u.path.rfind("serial=", 0) == 0) serial = u.path.substr(7);
+    if (u.scheme == "serial" || !serial.empty()) {
+        if (serial.empty()) {
+            err = "URI \"" + u.text + "\": empty serial number";
+            return CDM_ERR_INVALID_ARG;
+        }
+        const std::string path = find_by_serial(serial);
+        if (path.empty()) {
+            err = "URI \"" + u.text + "\": no master (USB 1209:cd01) with serial " + serial + " is connected";
+            return CDM_ERR_NO_DEVICE;
+        }
+        return open_path(path, u.text, out, err);
+    }
+    if (u.path.empty()) {
+        err = "URI \"" + u.text + "\": hid: needs a path (hid:/dev/hidrawN) or a serial (hid:serial=SN)";
+        return CDM_ERR_INVALID_ARG;
+    }
+    return open_path(u.path, u.text, out, err);
+}
+
+void hid_list_masters(std::vector<cdm_device_info> &out, std::string &err) {
+    out.clear();
+    if (ensure_hid_init(err) != CDM_OK) return;
+    hid_device_info *list = hid_enumerate(proto::kVendorId, proto::kProductId);
+    for (hid_device_info *d = list; d; d = d->next) {
+        if (!d->path) continue;
+        const std::string serial = narrow(d->serial_number);
+        const std::string uri = std::string("hid:") + d->path;
+        cdm_device_info info{};
+        bool full = false;
+        if (hid_device *h = hid_open_path(d->path)) {
+            uint8_t buf[proto::kDeviceInfoReportSize] = {proto::kDeviceInfoReportId};
+            const int n = hid_get_feature_report(h, buf, sizeof buf);
+            proto::DeviceInfoReport r;
+            if (n > 0 && proto::parse_device_info(buf, size_t(n), r, nullptr) == proto::Reject::None) {
+                device_info_from_report(r, "hid", uri, info);
+                full = true;
+            }
+            hid_close(h);
+        }
+        if (!full) {
+            // Busy or not answering: what enumeration knows (bcdDevice is
+            // the firmware's major.minor).
+            info.struct_size = sizeof info;
+            std::snprintf(info.uri, sizeof info.uri, "%s", uri.c_str());
+            std::snprintf(info.serial, sizeof info.serial, "%s", serial.c_str());
+            std::snprintf(info.firmware, sizeof info.firmware, "%x.%x", d->release_number >> 8,
+                          d->release_number & 0xFF);
+            std::snprintf(info.transport, sizeof info.transport, "hid");
+        }
+        info.vendor_id = d->vendor_id;
+        info.product_id = d->product_id;
+        out.push_back(info);
+    }
+    hid_free_enumeration(list);
+}
+
+} // namespace cdm

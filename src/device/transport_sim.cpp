@@ -1,0 +1,327 @@
+// `sim:` — the in-process simulated master. It emulates the firmware (the
+// same byte-exact input and feature reports as the real device, through the
+// same serializer) on top of a physical model of the device, so everything
+// above the transport runs exactly as with the hardware.
+#include <chrono>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+#include <thread>
+#include <vector>
+
+#include "cdm/cdm.h"
+#include "device/device.h"
+#include "device/sim/firmware.h"
+#include "device/sim/sim_truth.h"
+#include "device/sim/simulator.h"
+#include "device/transport.h"
+
+namespace cdm {
+
+namespace {
+
+constexpr const char *kSimOptions =
+    "rate, noise, imu_noise, hall_noise, seed, motion, effects, effect_seed, device, truth, realtime, "
+    "stall_after, serial, jig_n, jig_pitch, jig_heights, jig_samples, jig_tolerance, jig_transit";
+
+// Reports the host has not read pile up in the kernel's hidraw queue (64
+// reports on Linux); beyond that the oldest are lost. A paced simulation
+// whose reader falls further behind than that skips, exactly like the device.
+constexpr uint64_t kHostQueueReports = 64;
+
+bool read_file(const std::string &path, std::string &text, std::string &err) {
+    std::ifstream f(path, std::ios::binary);
+    if (!f) {
+        err = "cannot open \"" + path + "\"";
+        return false;
+    }
+    std::ostringstream ss;
+    ss << f.rdbuf();
+    text = ss.str();
+    return true;
+}
+
+class SimTransport final : public Transport {
+public:
+    SimTransport(const std::string &uri, ModelPtr truth, const proto::DeviceInfoReport &info,
+                 std::unique_ptr<sim::Motion> motion, const sim::SensorOptions &so, bool realtime,
+                 uint64_t stall_after)
+        : uri_(uri), fw_(info), sim_(std::move(truth), fw_, std::move(motion), so), rate_hz_(so.rate_hz),
+          realtime_(realtime), stall_after_(stall_after), history_(kSimTruthHistory) {}
+
+    int read(uint8_t *buf, size_t cap, int timeout_ms, std::string &) override {
+        if (ended_) return kReadEnd;
+        if (cap < proto::kInputReportSize) return kReadError;
+        if (stall_after_ && produced_ >= stall_after_) {
+            // A hung device: connected, silent.
+            std::this_thread::sleep_for(std::chrono::milliseconds(timeout_ms));
+            return kReadTimeout;
+        }
+        if (realtime_) {
+            const uint64_t now = monotonic_ns();
+            if (!started_) {
+                start_ns_ = now;
+                started_ = true;
+            }
+            const double period_ns = 1e9 / rate_hz_;
+            const uint64_t due = start_ns_ + uint64_t(double(sim_.index()) * period_ns);
+            if (now < due) {
+                if (double(due - now) > timeout_ms * 1e6) {
+                    std::this_thread::sleep_for(std::chrono::milliseconds(timeout_ms));
+                    return kReadTimeout;
+                }
+                std::this_thread::sleep_for(std::chrono::nanoseconds(due - now));
+            } else {
+                const uint64_t behind = uint64_t(double(now - due) / period_ns);
+                if (behind > kHostQueueReports) sim_.skip(behind - kHostQueueReports);
+            }
+        }
+        SimTruth t;
+        if (!sim_.next(buf, t)) {
+            ended_ = true;
+            return kReadEnd;
+        }
+        ++produced_;
+        {
+            std::lock_guard<std::mutex> lock(history_mu_);
+            history_[t.sequence % kSimTruthHistory] = t;
+        }
+        return int(proto::kInputReportSize);
+    }
+
+    int get_feature(uint8_t *buf, size_t len, std::string &err) override {
+        const int n = fw_.get_feature(buf, len);
+        if (n < 0) {
+            err = "simulated firmware refused GET feature report 0x" + hex(buf[0]);
+            return CDM_ERR_IO;
+        }
+        return n;
+    }
+
+    int send_feature(const uint8_t *buf, size_t len, std::string &err) override {
+        if (fw_.send_feature(buf, len) < 0) {
+            err = "simulated firmware refused SET feature report 0x" + hex(len ? buf[0] : 0);
+            return CDM_ERR_IO;
+        }
+        return CDM_OK;
+    }
+
+    const char *name() const override { return "sim"; }
+    std::string uri() const override { return uri_; }
+
+    bool truth(uint32_t seq, SimTruth &out) {
+        std::lock_guard<std::mutex> lock(history_mu_);
+        const SimTruth &t = history_[seq % kSimTruthHistory];
+        if (t.sequence != seq || (seq == 0 && produced_ == 0)) return false;
+        out = t;
+        return true;
+    }
+
+private:
+    static std::string hex(uint8_t v) {
+        char b[4];
+        std::snprintf(b, sizeof b, "%02x", v);
+        return b;
+    }
+
+    std::string uri_;
+    sim::Firmware fw_;
+    sim::Simulator sim_;
+    double rate_hz_;
+    bool realtime_;
+    uint64_t stall_after_;
+    bool started_ = false, ended_ = false;
+    uint64_t start_ns_ = 0;
+    std::atomic<uint64_t> produced_{0};
+    std::mutex history_mu_; // reader thread writes, sim_truth readers read
+    std::vector<SimTruth> history_;
+};
+
+} // namespace
+
+int open_sim(const Uri &u, TransportPtr &out, std::string &err) {
+    if (!u.path.empty()) {
+        err = "URI \"" + u.text + "\": sim: takes options after '?', e.g. sim:?rate=500&noise=0.1";
+        return CDM_ERR_INVALID_ARG;
+    }
+    sim::SensorOptions so;
+    std::string motion = "random", effects, device_path, truth_path, serial = "CDMSIM0001";
+    bool realtime = true, have_effect_seed = false;
+    uint64_t effect_seed = 0, stall_after = 0;
+    sim::JigMotionOptions jig;
+    bool any_jig_option = false;
+    for (const auto &kv : u.options) {
+        const std::string &k = kv.first, &v = kv.second;
+        uint64_t n = 0;
+        bool ok = true;
+        if (k == "rate") ok = option_double(u, k, v, 1.0, 100000.0, so.rate_hz, err);
+        else if (k == "noise") ok = option_double(u, k, v, 0.0, 100.0, so.noise_mm, err);
+        else if (k == "imu_noise") ok = option_double(u, k, v, 0.0, 1.0, so.imu_noise_rad, err);
+        else if (k == "hall_noise") ok = option_double(u, k, v, 0.0, 4095.0, so.hall_noise, err);
+        else if (k == "seed") ok = option_u64(u, k, v, 0, UINT64_MAX, so.seed, err);
+        else if (k == "effect_seed") ok = have_effect_seed = option_u64(u, k, v, 0, UINT64_MAX, effect_seed, err);
+        else if (k == "stall_after") ok = option_u64(u, k, v, 1, UINT64_MAX, stall_after, err);
+        else if (k == "realtime") {
+            ok = v == "0" || v == "1";
+            realtime = v == "1";
+            if (!ok) err = "URI \"" + u.text + "\": option realtime=\"" + v + "\" must be 0 or 1";
+        } else if (k == "motion") {
+            ok = v == "random" || v == "still" || v == "circle" || v == "jig";
+            motion = v;
+            if (!ok) err = "URI \"" + u.text + "\": option motion=\"" + v + "\" must be random, still, circle or jig";
+        } else if (k == "effects") effects = v;
+        else if (k == "device") device_path = v;
+        else if (k == "truth") truth_path = v;
+        else if (k == "serial") {
+            ok = !v.empty() && v.size() <= 16 && v.find_first_not_of(
+                "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_.") == std::string::npos;
+            serial = v;
+            if (!ok) err = "URI \"" + u.text + "\": option serial=\"" + v + "\" must be 1..16 of [A-Za-z0-9-_.]";
+        } else if (k == "jig_n") {
+            ok = option_u64(u, k, v, 1, 1000, n, err);
+            jig.plan.n = int(n);
+            any_jig_option = true;
+        } else if (k == "jig_pitch") {
+            ok = option_double(u, k, v, 1e-3, 1000.0, jig.plan.pitch_mm, err);
+            any_jig_option = true;
+        } else if (k == "jig_heights") {
+            std::string herr;
+            ok = parse_heights(v, jig.plan.heights_mm, herr);
+            if (!ok) err = "URI \"" + u.text + "\": option " + herr;
+            any_jig_option = true;
+        } else if (k == "jig_samples") {
+            ok = option_u64(u, k, v, 1, 1000000, n, err);
+            jig.plan.samples = int(n);
+            any_jig_option = true;
+        } else if (k == "jig_tolerance") {
+            ok = option_double(u, k, v, 0.0, 10.0, jig.tolerance_mm, err);
+            any_jig_option = true;
+        } else if (k == "jig_transit") {
+            ok = option_u64(u, k, v, 1, 100000, n, err);
+            jig.transit = int(n);
+            any_jig_option = true;
+        } else {
+            err = unknown_option(u, k, kSimOptions);
+            return CDM_ERR_INVALID_ARG;
+        }
+        if (!ok) return CDM_ERR_INVALID_ARG;
+    }
+    if (any_jig_option && motion != "jig") {
+        err = "URI \"" + u.text + "\": jig_* options need motion=jig";
+        return CDM_ERR_INVALID_ARG;
+    }
+    if (!device_path.empty() && !truth_path.empty()) {
+        err = "URI \"" + u.text + "\": give device= or truth= (which carries its own geometry), not both";
+        return CDM_ERR_INVALID_ARG;
+    }
+
+    // The physical truth: nominal geometry, or a calibration's model, plus
+    // any hidden effects.
+    DeviceGeometry g;
+    std::shared_ptr<Model> model;
+    if (!device_path.empty()) {
+        std::string text;
+        if (!read_file(device_path, text, err)) {
+            err = "URI \"" + u.text + "\": option device: " + err;
+            return CDM_ERR_INVALID_ARG;
+        }
+        if (!parse_device_json(text, device_path, g, err)) {
+            err = "URI \"" + u.text + "\": option device: " + err;
+            return CDM_ERR_PARSE;
+        }
+        model = std::make_shared<Model>(g);
+    } else if (!truth_path.empty()) {
+        std::string text;
+        if (!read_file(truth_path, text, err)) {
+            err = "URI \"" + u.text + "\": option truth: " + err;
+            return CDM_ERR_INVALID_ARG;
+        }
+        nlohmann::json j;
+        try {
+            j = nlohmann::json::parse(text);
+        } catch (const std::exception &e) {
+            err = "URI \"" + u.text + "\": option truth: " + truth_path + ": " + e.what();
+            return CDM_ERR_PARSE;
+        }
+        model = std::make_shared<Model>(g);
+        if (!Model::from_json(j, truth_path, *model, err)) {
+            err = "URI \"" + u.text + "\": option truth: " + err;
+            return CDM_ERR_PARSE;
+        }
+    } else {
+        model = std::make_shared<Model>(g);
+    }
+    if (!effects.empty()) {
+        if (!have_effect_seed) effect_seed = so.seed;
+        size_t start = 0, index = 0;
+        while (start <= effects.size()) {
+            size_t end = effects.find(',', start);
+            if (end == std::string::npos) end = effects.size();
+            const std::string name = effects.substr(start, end - start);
+            std::string eerr;
+            if (name.empty() || !model->add_effect_random(name, effect_seed + index, eerr)) {
+                err = "URI \"" + u.text + "\": option effects: \"" + name + "\": " +
+                      (eerr.empty() ? "empty effect name" : eerr);
+                return CDM_ERR_INVALID_ARG;
+            }
+            ++index;
+            start = end + 1;
+        }
+    }
+    ModelPtr truth = model;
+
+    // What the firmware says about itself: the 16-bit ADC at 0.01 mm per
+    // count from 0 mm (0..655.35 mm covers every cable length of the
+    // default frame), a 12-bit Hall sensor whose field falls as the jaw
+    // opens, and the nominal geometry (hidden effects are, by definition,
+    // not in the device info).
+    proto::DeviceInfoReport info;
+    info.fw_major = 1;
+    info.fw_minor = 0;
+    info.fw_patch = 0;
+    info.adc_bits = 16;
+    std::snprintf(info.serial, sizeof info.serial, "%s", serial.c_str());
+    info.report_rate_hz = float(so.rate_hz);
+    for (int i = 0; i < 4; ++i) {
+        info.pot_scale_mm[i] = 0.01f;
+        info.pot_offset_mm[i] = 0.0f;
+    }
+    const DeviceGeometry &tg = truth->geometry();
+    info.a_mm = float(tg.a_mm);
+    info.b_mm = float(tg.b_mm);
+    info.m_mm = float(tg.m_mm);
+    info.hall_closed = 2600;
+    info.hall_open = 1400;
+    info.grip_open_rad = 0.6f;
+
+    std::unique_ptr<sim::Motion> m;
+    if (motion == "random") m = sim::make_random_motion(so.seed ^ 0x9E3779B97F4A7C15ull, info.grip_open_rad);
+    else if (motion == "still") m = sim::make_still_motion();
+    else if (motion == "circle") m = sim::make_circle_motion(info.grip_open_rad);
+    else {
+        std::string jerr;
+        if (!check_jig_options(jig.plan, jerr)) {
+            err = "URI \"" + u.text + "\": " + jerr;
+            return CDM_ERR_INVALID_ARG;
+        }
+        jig.seed = so.seed ^ 0x6A09E667F3BCC909ull;
+        m = sim::make_jig_motion(truth, jig);
+    }
+    out = std::make_unique<SimTransport>(u.text, truth, info, std::move(m), so, realtime, stall_after);
+    return CDM_OK;
+}
+
+bool sim_truth(cdm_device *dev, uint32_t seq, SimTruth &out) {
+    if (!dev) return false;
+    auto *s = dynamic_cast<SimTransport *>(&dev->transport());
+    return s && s->truth(seq, out);
+}
+
+bool sim_truth(cdm_device *dev, uint32_t seq, double position[3]) {
+    SimTruth t;
+    if (!sim_truth(dev, seq, t)) return false;
+    for (int i = 0; i < 3; ++i) position[i] = t.position[i];
+    return true;
+}
+
+} // namespace cdm

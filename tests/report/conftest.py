@@ -12,7 +12,8 @@ import pytest
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 PYROOT = ROOT / "bindings" / "python"
-SCRIPT = PYROOT / "cdm" / "report.py"
+# CDM_REPORT_SCRIPT: test another copy of the tool (e.g. a deliberately broken one).
+SCRIPT = Path(os.environ.get("CDM_REPORT_SCRIPT", PYROOT / "cdm" / "report.py"))
 sys.path.insert(0, str(HERE))
 
 

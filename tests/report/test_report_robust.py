@@ -1,6 +1,7 @@
 """Missing sections, NaN / null values, odd grids: notes in the page, never a crash."""
 import json
 import math
+import re
 
 from conftest import check_page, check_png, run_report
 import _synth
@@ -66,7 +67,8 @@ def test_nan_and_null_values(tmp_path):
     d["candidates"][0]["bic_change"] = None
     d["fingerprints"]["anchor_position"][0] = [None, 1.0, float("inf")]
     out, html, r = _run(tmp_path, d, allow_nan=True)
-    assert "n/a" in html
+    assert "n/a ± " in html and "<td>n/a</td>" in html
+    assert re.search(r"\b(nan|inf|None)\b", html, re.I) is None, "raw NaN/None in the page"
     assert "warning" not in r.stderr.lower(), r.stderr
 
 

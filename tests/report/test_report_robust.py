@@ -145,3 +145,11 @@ def test_unit_helpers():
     assert m._finding_target("cable_angle_4") == ("angle", 4)
     assert m._finding_target("distance_from_centre") == ("radius", None)
     assert m._finding_target("height") == ("height", None)
+
+
+def test_nominal_run_compares_with_ellipsoid(tmp_path):
+    """With the nominal model current, the maps' second column is the seed's ellipsoid."""
+    out, html, _ = _run(tmp_path, _synth.nominal_run(n=7, heights=(30, 70)))
+    assert "right the seed&#x27;s ellipsoid (the baseline to beat)" in html
+    assert "solid nominal (current), dashed seed&#x27;s ellipsoid" in html
+    assert "not explained" in html

@@ -466,11 +466,22 @@ def section_maps(diag, page, tmp, figs, P):
     if not P.ok or (P.residual is None and P.nominal is None):
         page.add("<p>Not available (see the notes).</p>")
         return
-    before, after = P.nominal, P.residual
-    norms = [_symnorm(None if before is None else before[:, k],
-                      None if after is None else after[:, k]) for k in range(3)]
-    cols = [(c, t) for c, t in ((before, "before: nominal model"),
-                                (after, f"after: {_label(diag)}")) if c is not None]
+    model = diag.get("model")
+    if isinstance(model, list) and not model:
+        # The nominal model is the current one: compare it with the seed's baseline.
+        cur = P.residual if P.residual is not None else P.nominal
+        cols = [(cur, "current: nominal model", True),
+                (P.ellipsoid, "seed's ellipsoid", False)]
+        how = ("left the nominal model (the current one), right the seed's ellipsoid "
+               "(the baseline to beat)")
+        cut = (cur, "nominal (current)", P.ellipsoid, "seed's ellipsoid")
+    else:
+        cols = [(P.nominal, "before: nominal model", False),
+                (P.residual, f"after: {_label(diag)}", True)]
+        how = "left before (nominal model), right after (current model)"
+        cut = (P.residual, "current model", P.nominal, "nominal")
+    cols = [c for c in cols if c[0] is not None]
+    norms = [_symnorm(*[c[0][:, k] for c in cols]) for k in range(3)]
     for h, idx in zip(P.heights, P.height_index):
         y, z = P.ref[idx, 1], P.ref[idx, 2]
         fig, axs = plt.subplots(3, len(cols), figsize=(4.3 * len(cols) + 1.2, 11),
@@ -478,9 +489,9 @@ def section_maps(diag, page, tmp, figs, P):
                                 constrained_layout=True)
         for k in range(3):
             m = None
-            for j, (arr, title) in enumerate(cols):
+            for j, (arr, title, current) in enumerate(cols):
                 ax = axs[k, j]
-                fail = P.failing[idx] if arr is after else None
+                fail = P.failing[idx] if current else None
                 m = _map(ax, y, z, arr[idx, k], norms[k], fail)
                 ax.set_title(f"{AXES[k]} residual, {title}", fontsize=9)
             fig.colorbar(m, ax=axs[k, :], label=f"{AXES[k]} residual (mm)", shrink=0.9)
@@ -488,19 +499,19 @@ def section_maps(diag, page, tmp, figs, P):
             ax.label_outer()
         nf = int(P.failing[idx].sum())
         fig.suptitle(f"Residual (estimate - reference) at height x = {h:g} mm"
-                     + (f"; {nf} failing positions (x)" if nf else ""))
+                     + (f"; {nf} failing positions marked ×" if nf else ""))
         name = _save(fig, tmp, f"residual_map_h{h:g}.png".replace("-", "m"))
         figs.append(name)
         page.add(_img(name, f"residual maps at {h:g} mm",
                       f"Height {h:g} mm: residual per jig position in the cable plane "
-                      f"(y right, z up), rows x, y, z; left before (nominal), right after "
-                      f"(current model). One symmetric colour scale per axis for all "
+                      f"(y right, z up), rows x, y, z; {_e(how)}. "
+                      f"One symmetric colour scale per axis for all "
                       f"heights; black crosses mark positions whose mean residual is beyond "
                       f"what noise and jig tolerance explain."))
     if len(P.heights) == 1:
         page.note("Only one height in the data: the x error cannot be separated from a "
                   "height-dependent effect.")
-    section_cut(diag, page, tmp, figs, P)
+    section_cut(page, tmp, figs, P, *cut)
 
 
 def _cut(P, idx, along):
@@ -517,7 +528,7 @@ def _cut(P, idx, along):
     return sel, c
 
 
-def section_cut(diag, page, tmp, figs, P):
+def section_cut(page, tmp, figs, P, solid, solid_name, dashed, dashed_name):
     fig, axs = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
     cmap = plt.get_cmap("viridis")
     drawn = False
@@ -529,10 +540,10 @@ def section_cut(diag, page, tmp, figs, P):
             sel, c = r
             col = cmap(i / max(1, len(P.heights) - 1))
             s = P.ref[sel, along]
-            if P.nominal is not None:
-                ax.plot(s, P.nominal[sel, 0], "--", color=col, marker=".", ms=3, lw=1)
-            if P.residual is not None:
-                ax.plot(s, P.residual[sel, 0], "-", color=col, marker="o", ms=3, lw=1.5,
+            if dashed is not None:
+                ax.plot(s, dashed[sel, 0], "--", color=col, marker=".", ms=3, lw=1)
+            if solid is not None:
+                ax.plot(s, solid[sel, 0], "-", color=col, marker="o", ms=3, lw=1.5,
                         label=f"x = {h:g} mm")
             drawn = True
         other = "z" if along == 1 else "y"
@@ -541,18 +552,22 @@ def section_cut(diag, page, tmp, figs, P):
         ax.set_ylabel("x residual (mm)")
         ax.set_title(f"x residual along {'y' if along == 1 else 'z'}")
         ax.grid(alpha=0.3)
-    if P.residual is not None:
-        axs[0].legend(fontsize=8, title="solid: current\ndashed: nominal", title_fontsize=8)
+    if solid is not None:
+        axs[0].legend(fontsize=8, title=f"solid: {solid_name}"
+                      + (f"\ndashed: {dashed_name}" if dashed is not None else ""),
+                      title_fontsize=8)
     if not drawn:
         plt.close(fig)
         page.note("No grid line through the centre: cut view skipped.")
         return
     name = _save(fig, tmp, "residual_cut.png")
     figs.append(name)
-    page.add(_img(name, "x residual cut", "The seed's cut view: x residual along the "
-                  "grid line through the centre, one colour per height; dashed nominal, "
-                  "solid current model. A barrel distortion is an arch (x falls short "
-                  "toward the edges) with the same curvature at every height."))
+    also = f", dashed {_e(dashed_name)}" if dashed is not None else ""
+    page.add(_img(name, "x residual cut",
+                  f"The seed's cut view: x residual along the grid line through the centre, "
+                  f"one colour per height; solid {_e(solid_name)}{also}. A barrel "
+                  f"distortion is an arch (x falls short toward the edges) with the same "
+                  f"curvature at every height."))
 
 
 def _fmt_list(v):

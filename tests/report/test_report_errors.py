@@ -52,14 +52,14 @@ def test_not_utf8(tmp_path):
 
 
 def test_bad_before_file_keeps_old_report(tmp_path):
-    """A bad second file is named; the report already in DIR stays untouched."""
+    """A bad earlier run is named; the report already in DIR stays untouched."""
     good = _synth.write(tmp_path / "d.json", _synth.make_diag(n=5, heights=(40, 60)))
     out = tmp_path / "r"
     assert run_report(good, "--out", out).returncode == 0
     before = {p.name: p.read_bytes() for p in out.iterdir()}
     bad = tmp_path / "before.json"
     bad.write_text("{\"tool\": \"cdm calib diagnose\", NaN", encoding="utf-8")
-    r = run_report(good, bad, "--out", out)
+    r = run_report(bad, good, "--out", out)
     _assert_rejected(r, bad, "not valid JSON")
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     check_page(out)

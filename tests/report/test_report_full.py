@@ -1,4 +1,6 @@
 """The full report of a synthetic 25 x 25 x 5 diagnosis with an earlier nominal run."""
+import json
+
 import html as htmlmod
 
 import pytest
@@ -21,7 +23,7 @@ def report(tmp_path_factory):
     a = _synth.write(d / "diag.json", diag)
     b = _synth.write(d / "nominal.json", before)
     out = d / "report"
-    r = run_report(a, b, "--out", out)
+    r = run_report(b, a, "--out", out)  # earliest first, the reported run last
     assert r.returncode == 0, r.stderr
     return out, diag, before, r
 
@@ -112,3 +114,40 @@ def test_module_invocation(tmp_path):
     r = run_report(a, "--out", tmp_path / "r", module=True)
     assert r.returncode == 0, r.stderr
     check_page(tmp_path / "r")
+
+
+def test_reported_run_is_the_last(report):
+    out, diag, _, r = report
+    html = (out / "index.html").read_text(encoding="utf-8")
+    assert "<h1>cdm calibration diagnosis: cable_gain</h1>" in html
+    assert "<p>From diag.json, compared with the earlier nominal.json.</p>" in html
+    assert "report on " in r.stdout and r.stdout.index("diag.json") < r.stdout.index("nominal.json")
+
+
+def test_before_option_and_python_api(tmp_path):
+    """--before B D == B D; write_report takes dicts with numpy arrays (cdm.diagnose's)."""
+    import importlib.util
+    import numpy as np
+    from conftest import SCRIPT
+    d = _synth.make_diag(n=5, heights=(40, 60))
+    b = _synth.nominal_run(n=5, heights=(40, 60))
+    pd, pb = _synth.write(tmp_path / "d.json", d), _synth.write(tmp_path / "b.json", b)
+    r = run_report(pd, "--before", pb, "--out", tmp_path / "r1")
+    assert r.returncode == 0, r.stderr
+    html1 = check_page(tmp_path / "r1")
+    assert "compared with the earlier b.json" in html1 and (tmp_path / "r1/comparison.png").exists()
+
+    spec = importlib.util.spec_from_file_location("cdm_report_api", SCRIPT)
+    m = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(m)
+    dn = json.loads(json.dumps(d))
+    dn["positions"] = {k: np.asarray(v) for k, v in dn["positions"].items()}
+    dn["explained"] = np.bool_(True)
+    dn["chi2_per_dof"] = np.float64(dn["chi2_per_dof"])
+    written = m.write_report([str(pb), dn], str(tmp_path / "r2"))
+    assert written[-1].endswith("index.html")
+    html2 = check_page(tmp_path / "r2")
+    for a in "xyz":
+        assert f"<td>{d['error_mm'][a]['rms']:.4f}</td>" in html2
+    assert sorted(p.name for p in (tmp_path / "r2").glob("*.png")) == \
+        sorted(p.name for p in (tmp_path / "r1").glob("*.png"))

@@ -3,12 +3,18 @@
 The numbers come from the C library (``cdm calib diagnose ... --json DIAG.json``);
 this module only draws them::
 
-    python3 -m cdm.report DIAG.json [DIAG_BEFORE.json ...] --out DIR
-    python3 bindings/python/cdm/report.py DIAG.json [...] --out DIR
+    python3 -m cdm.report [EARLIER.json ...] DIAG.json --out DIR
+    python3 -m cdm.report DIAG.json --before EARLIER.json [--before ...] --out DIR
+    python3 bindings/python/cdm/report.py ...        (same, without importing cdm)
 
-The first file is the diagnosis the report is about; further files are earlier
-runs (e.g. the nominal diagnosis before an effect was added) shown in an
-"error fell" comparison, in the order given, with the first file last.
+Files are in chronological order: the LAST positional file is the diagnosis the
+report is about; the others, and any --before files (which come first), are
+earlier runs (e.g. the nominal diagnosis before an effect was added), shown in
+an "error fell" comparison in that order. This is the order `cdm calib diagnose
+--before B.json ... --report DIR` passes them in.
+
+From Python: ``write_report([earlier, ..., current], "DIR")`` where each run is
+a path or an already loaded diagnosis dict (lists or numpy arrays).
 
 DIR receives PNG figures and ``index.html`` (relative image paths, inline CSS,
 no JavaScript, no external resources). Everything is written to a temporary
@@ -894,7 +900,7 @@ def section_variables(diag, page, tmp, figs, P):
 
 
 def section_comparison(runs, page, tmp, figs):
-    """runs: [(path, diag)] in display order (earliest first, the report's file last)."""
+    """runs: [(path, diag)], earliest first, the report's run last."""
     page.add("<h2>6. Error fell? Runs compared</h2>")
     labels = [_label(d) for _, d in runs]
     rows = []
@@ -963,8 +969,8 @@ figcaption{font-size:.88em;color:#444;max-width:60em}
 # ----------------------------------------------------------------------- driver
 
 def _render(runs, tmp):
-    """Draw everything for runs[0] (+ comparison) into tmp; return (html, figs)."""
-    path, diag = runs[0]
+    """Draw everything for runs[-1] (+ comparison) into tmp; return (html, figs)."""
+    path, diag = runs[-1]
     page = Page()
     figs = []
     P = Positions(diag, page)
@@ -974,8 +980,7 @@ def _render(runs, tmp):
                 lambda: section_fingerprints(diag, page, tmp, figs, P),
                 lambda: section_variables(diag, page, tmp, figs, P)]
     if len(runs) > 1:
-        ordered = runs[1:] + runs[:1]
-        sections.append(lambda: section_comparison(ordered, page, tmp, figs))
+        sections.append(lambda: section_comparison(runs, page, tmp, figs))
     for s in sections:
         try:
             s()
@@ -991,7 +996,10 @@ def _render(runs, tmp):
         notes = ('<div class="notes"><b>Notes</b> (parts of the diagnosis that were missing '
                  'or unusable):<ul>' + "".join(f"<li>{_e(n)}</li>" for n in page.notes)
                  + "</ul></div>")
-    files = ", ".join(_e(os.path.basename(p)) for p, _ in runs)
+    files = _e(os.path.basename(path))
+    if len(runs) > 1:
+        files += ", compared with the earlier " + ", ".join(
+            _e(os.path.basename(p)) for p, _ in runs[:-1])
     doc = (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
            f"<title>{_e(title)}</title><style>{CSS}</style></head><body>"
            f"<h1>{_e(title)}</h1><p>From {files}.</p>{notes}"
@@ -999,9 +1007,39 @@ def _render(runs, tmp):
     return doc, figs
 
 
-def write_report(paths, out):
-    """Load the diagnoses (DiagnosisError if one is unusable) and write the report."""
-    runs = [(p, load_diagnosis(p)) for p in paths]
+def _run(item, i):
+    if isinstance(item, dict):
+        return f"run {i + 1}", _plain(item)
+    return str(item), load_diagnosis(item)
+
+
+def _plain(obj):
+    """numpy arrays / scalars (as cdm.diagnose returns them) -> lists / floats."""
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def write_report(runs, out):
+    """Write the report on runs[-1], comparing it with the earlier runs[:-1].
+
+    Each run is a diagnosis JSON path or a loaded diagnosis dict. Raises
+    DiagnosisError (naming the file) before writing anything if one is unusable.
+    Returns the paths written (figures, then index.html).
+    """
+    if isinstance(runs, (str, os.PathLike, dict)):
+        runs = [runs]
+    runs = [_run(r, i) for i, r in enumerate(runs)]
+    if not runs:
+        raise DiagnosisError("no diagnosis given")
     os.makedirs(out, exist_ok=True)
     tmp = tempfile.mkdtemp(prefix="tmp-report-", dir=out)
     try:
@@ -1025,22 +1063,28 @@ def write_report(paths, out):
 def main(argv=None):
     ap = argparse.ArgumentParser(
         prog="python3 -m cdm.report",
-        description="Figures and index.html for `cdm calib diagnose --json` output. The first "
-                    "file is the diagnosis reported on; further files are earlier runs for the "
-                    "error-fell comparison.")
-    ap.add_argument("diagnosis", nargs="+", metavar="DIAG.json")
+        description="Figures and index.html for `cdm calib diagnose --json` output. Files are "
+                    "in chronological order: the last one is the diagnosis reported on, the "
+                    "earlier ones (and --before files) are compared with it.")
+    ap.add_argument("diagnosis", nargs="+", metavar="DIAG.json",
+                    help="diagnosis JSON files, earliest first; the last is reported on")
+    ap.add_argument("--before", action="append", default=[], metavar="EARLIER.json",
+                    help="an earlier run to compare with (repeatable; comes before the "
+                         "positional files)")
     ap.add_argument("--out", required=True, metavar="DIR", help="report directory")
     args = ap.parse_args(argv)
+    runs = args.before + args.diagnosis
     try:
-        written = write_report(args.diagnosis, args.out)
+        written = write_report(runs, args.out)
     except DiagnosisError as e:
         print(f"cdm.report: error: {e}", file=sys.stderr)
         return 2
     except OSError as e:
         print(f"cdm.report: error: cannot write the report to {args.out}: {e}", file=sys.stderr)
         return 1
-    print(f"cdm.report: wrote {len(written) - 1} figures and "
-          f"{os.path.join(args.out, 'index.html')}")
+    print(f"cdm.report: report on {runs[-1]}"
+          + (f", compared with {', '.join(runs[:-1])}" if len(runs) > 1 else "")
+          + f": wrote {len(written) - 1} figures and {os.path.join(args.out, 'index.html')}")
     return 0
 
 

@@ -117,7 +117,7 @@ bool parse_dataset(const std::string &text, const std::string &src, Dataset &out
             index.emplace(id, g);
             groups.emplace_back();
             first_line.push_back(line);
-            JigPosition jp;
+            JigHole jp;
             jp.point = id;
             for (int k = 0; k < 3; ++k) jp.ref[k] = v[1 + k];
             d.pos.push_back(jp);

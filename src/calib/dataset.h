@@ -8,7 +8,7 @@
 
 namespace cdm {
 
-struct JigPosition {
+struct JigHole {
     long point = 0;
     double ref[3] = {0, 0, 0};
     int n = 0;               // samples
@@ -21,7 +21,7 @@ struct Dataset {
     std::string path;
     size_t rows = 0;
     std::vector<std::string> ignored_columns;
-    std::vector<JigPosition> pos;                 // in order of first appearance
+    std::vector<JigHole> pos;                 // in order of first appearance
     std::vector<std::array<double, 4>> samples;   // grouped by position
     std::vector<double> heights;                  // distinct x_ref, sorted
 };

@@ -1,4 +1,6 @@
 list(APPEND CDM_SOURCES
   calib/jig_plan.cpp
   calib/dataset.cpp
-  calib/fit.cpp)
+  calib/fit.cpp
+  calib/simulate.cpp
+  calib/diagnose.cpp)

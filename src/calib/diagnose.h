@@ -1,0 +1,32 @@
+// The model-debugging workflow behind `cdm calib diagnose`: compare the model
+// with jig data, see where it fails, rank the catalogued effects that could
+// be missing, validate, and look beyond the catalogue. Produces the JSON of
+// docs/calibration.md; the Python report draws it.
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "calib/dataset.h"
+#include "model/model.h"
+
+namespace cdm {
+
+struct DiagnoseOptions {
+    std::vector<std::string> effects;  // the model to fit (none: nominal)
+    double jig_tolerance_mm = -1;      // < 0: estimated from the data
+    bool candidates = true;
+    bool validation = true;
+    bool per_position = true;
+    std::function<bool(const std::string &stage, double fraction)> progress;
+};
+
+// On success fills `out` (the diagnosis JSON) and `fitted` (the model with
+// the requested effects fitted). False + err (naming what is wrong) otherwise.
+bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOptions &opt, nlohmann::json &out,
+              Model &fitted, std::string &err);
+
+} // namespace cdm

@@ -1,0 +1,31 @@
+// Jig datasets from a known model: the seed's experiment in software
+// (hole plate, height fixture, repeated samples, pot noise and ADC
+// quantisation, the plate's own hole errors). Used by the tests, by
+// `cdm calib simulate`, and as the truth behind docs/calibration.md.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "calib/dataset.h"
+#include "model/model.h"
+
+namespace cdm {
+
+struct JigSimOptions {
+    int n = 25;                 // holes per side
+    double pitch_mm = 5.0;
+    std::vector<double> heights{30, 40, 50, 60, 70};
+    int samples = 100;
+    double noise_mm = 0.05;     // per-sample pot noise (std)
+    double quant_mm = 0.01;     // ADC step (mm per count)
+    double jig_tolerance_mm = 0.03; // std of each position's own error, per axis
+    uint64_t seed = 1;
+};
+
+// Writes the CSV text; false + err on I/O or model failure.
+bool simulate_jig_csv(const Model &truth, const JigSimOptions &o, const std::string &path, std::string &err);
+bool simulate_jig(const Model &truth, const JigSimOptions &o, Dataset &out, std::string &err);
+
+} // namespace cdm

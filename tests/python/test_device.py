@@ -65,7 +65,7 @@ def test_wait_pose_timeout_and_argument_checks():
         with pytest.raises(cdm.CdmError) as e:
             dev.wait_pose(0.05)
         assert e.value.code == cdm.CDM_ERR_TIMEOUT
-        assert 0.04 <= time.monotonic() - t0 < 0.4
+        assert 0.04 <= time.monotonic() - t0 < 1.0
         with pytest.raises(ValueError, match="timeout"):
             dev.wait_pose(-1)
 
@@ -135,7 +135,10 @@ def test_on_sample_callback_sees_every_report_in_order():
         with lock:
             got.append((s.pose.sequence, s.raw.sequence, len(s.report)))
 
-    with cdm.open("sim:?rate=1000", on_sample=on_sample) as dev:
+    # realtime=0: the callback paces the simulation, so nothing may be dropped
+    # however slow Python is (in real time, a loaded machine legitimately loses
+    # reports, as the kernel's hidraw queue would).
+    with cdm.open("sim:?realtime=0", on_sample=on_sample) as dev:
         for _ in range(5):
             gc.collect()  # the ctypes trampoline must survive collections
             dev.wait_pose(1.0)

@@ -87,6 +87,17 @@ def test_unexplained_and_validation(report):
     assert "period 12.5 mm (drum circumference?)" in html
     assert "A periodic ripple in cable 1" in html
     assert "leave-one-height-out" in html and "<td>0.0412</td>" in html
+    assert "in sample (fitted on all heights)</td><td>0.0401</td>" in html
+
+
+def test_fields_beyond_the_minimum_schema(report):
+    html = (report[0] / "index.html").read_text(encoding="utf-8")
+    assert "p-value 0.247" in html  # chi2_p_value
+    assert "per axis x 0.0000, y 0.0300, z 0.0300" in html
+    assert "4 free parameters; xtol reached" in html
+    assert "3 samples out of the workspace" in html
+    assert "cdm calib diagnose 1.0.0 in 1.25 s" in html
+    assert "<td>0.31</td><td>yes</td><td>jig_misalignment</td>" in html  # explained_after
 
 
 def test_comparison_lists_both_runs(report):

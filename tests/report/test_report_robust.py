@@ -126,11 +126,7 @@ def test_single_position(tmp_path):
 
 
 def test_unit_helpers():
-    import importlib.util
-    from conftest import SCRIPT
-    spec = importlib.util.spec_from_file_location("cdm_report_under_test", SCRIPT)
-    m = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(m)
+    m = _module()
     assert m.fmt_mm(0.78331) == "0.7833" and m.fmt_mm(None) == "n/a"
     assert m.fmt_mm(math.nan) == "n/a" and m.fmt_mm(True) == "n/a"
     import numpy as np
@@ -153,3 +149,39 @@ def test_nominal_run_compares_with_ellipsoid(tmp_path):
     assert "right the seed&#x27;s ellipsoid (the baseline to beat)" in html
     assert "solid nominal (current), dashed seed&#x27;s ellipsoid" in html
     assert "not explained" in html
+
+
+def _module():
+    import importlib.util
+    from conftest import SCRIPT
+    spec = importlib.util.spec_from_file_location("cdm_report_under_test", SCRIPT)
+    m = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(m)
+    return m
+
+
+def test_findings_routed_to_their_panels():
+    """Findings as `cdm calib diagnose` words them land on the right panel."""
+    m = _module()
+    f = [{"variable": "cable length", "kind": "periodic", "axis": "length", "period_mm": 12.5,
+          "text": "the cable-length residual repeats every 12.50 mm"},
+         {"variable": "l2", "kind": "trend", "axis": "x", "period_mm": None, "text": "x vs l2"},
+         {"variable": "angle of cable 3", "kind": "trend", "axis": "z", "text": "z vs angle 3"},
+         {"variable": "distance from centre", "kind": "trend", "axis": "y", "text": "y vs r"},
+         {"variable": "height", "kind": "trend", "axis": "x", "text": "x vs h"},
+         {"variable": "length_4", "kind": "periodic", "axis": "l4", "period_mm": 7.0,
+          "text": "ripple on cable 4"},
+         {"variable": "temperature", "kind": "trend", "axis": "x", "text": "unplaceable"}]
+    pos, length, periods = m._route_findings(f)
+    assert pos == {("length", 0): ["x vs l2"], ("angle", 2): ["z vs angle 3"],
+                   ("radius", 1): ["y vs r"], ("height", 0): ["x vs h"]}
+    assert length == {None: ["the cable-length residual repeats every 12.50 mm"],
+                      4: ["ripple on cable 4"]}
+    assert periods == [(None, 12.5), (4, 7.0)]
+
+
+def test_validation_null(tmp_path):
+    d = _synth.make_diag(n=5, heights=(40,))
+    d["validation"] = None  # what the tool writes for the nominal model or one height
+    out, html, _ = _run(tmp_path, d)
+    assert "No cross-validation in the diagnosis" in html

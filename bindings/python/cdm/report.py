@@ -370,7 +370,9 @@ def section_summary(diag, page, tmp, figs):
     # Scalar facts.
     facts = []
     facts.append(("chi²/dof", fmt_g(diag.get("chi2_per_dof"), 4)
-                  + (f" (dof {diag['dof']})" if _finite(diag.get("dof")) else "")))
+                  + (f" (dof {diag['dof']})" if _finite(diag.get("dof")) else "")
+                  + (f", p-value {fmt_g(diag['chi2_p_value'], 3)}"
+                     if _finite(diag.get("chi2_p_value")) else "")))
     st = _dict(diag, "structure")
     if st is not None:
         facts.append(("Spatial structure statistic", fmt_g(st.get("statistic"), 4)
@@ -382,7 +384,11 @@ def section_summary(diag, page, tmp, figs):
         facts.append(("Failing positions", str(int(diag["failing_positions"]))))
     jt = _dict(diag, "jig_tolerance_mm")
     if jt is not None:
-        facts.append(("Jig tolerance", f"{fmt_mm(jt.get('value'))} mm ({_e(jt.get('source', 'source not given'))})"))
+        pa = jt.get("per_axis")
+        pa = (" per axis " + ", ".join(f"{a} {fmt_mm(_num(v))}" for a, v in zip(AXES, pa))
+              if isinstance(pa, list) and len(pa) == 3 else "")
+        facts.append(("Jig tolerance", f"{fmt_mm(jt.get('value'))} mm "
+                      f"({_e(jt.get('source', 'source not given'))}){pa}"))
     fit = _dict(diag, "fit")
     if fit is not None:
         conv = fit.get("converged")
@@ -391,7 +397,11 @@ def section_summary(diag, page, tmp, figs):
                       f"{fmt_g(fit.get('seconds'), 3)} s, "
                       + ("converged" if conv is True else
                          "<span class=\"bad\">NOT converged</span>" if conv is False else
-                         "convergence not given")))
+                         "convergence not given")
+                      + (f"; {fmt_g(fit['free_parameters'])} free parameters"
+                         if _finite(fit.get("free_parameters")) else "")
+                      + (f"; {_e(fit['message'])}" if isinstance(fit.get("message"), str)
+                         and fit["message"] else "")))
     el = _dict(diag, "ellipsoid")
     if el is not None:
         facts.append(("Seed ellipsoid L, M, N (mm)",
@@ -404,13 +414,18 @@ def section_summary(diag, page, tmp, figs):
         facts.append(("Data", f"{_e(data.get('path', '?'))}: {fmt_g(data.get('rows'))} rows, "
                       f"{fmt_g(data.get('positions'))} positions, heights {hs} mm"
                       + (f"; ignored columns: {_e(', '.join(map(str, ign)))}"
-                         if isinstance(ign, list) and ign else "")))
+                         if isinstance(ign, list) and ign else "")
+                      + (f"; {int(data['out_of_workspace_samples'])} samples out of the "
+                         f"workspace" if _finite(data.get("out_of_workspace_samples"))
+                         and data["out_of_workspace_samples"] > 0 else "")))
     dev = _dict(diag, "device")
     if dev is not None:
         facts.append(("Device (mm)", ", ".join(
             f"{k[0]} = {fmt_g(dev.get(k), 6)}" for k in ("a_mm", "b_mm", "m_mm"))))
     if isinstance(diag.get("version"), str):
-        facts.append(("Produced by", _e(f"{diag.get('tool', '?')} {diag['version']}")))
+        facts.append(("Produced by", _e(f"{diag.get('tool', '?')} {diag['version']}")
+                      + (f" in {fmt_g(diag['seconds'], 3)} s" if _finite(diag.get("seconds"))
+                         else "")))
     page.add(_table(["", ""], [[f"<b>{_e(k)}</b>", v] for k, v in facts], "facts"))
 
     # Fitted parameters.
@@ -442,8 +457,16 @@ def section_summary(diag, page, tmp, figs):
             vrows.append([f"held out {fmt_g(fold.get('height'), 6)} mm"]
                          + [fmt_mm(r.get(a)) for a in AXES])
         r = _dict(val, "rms_mm") or {}
-        vrows.append(["<b>all folds</b>"] + [fmt_mm(r.get(a)) for a in AXES])
+        vrows.append(["<b>all held-out positions</b>"] + [fmt_mm(r.get(a)) for a in AXES])
+        r = _dict(val, "in_sample_rms_mm")
+        if r is not None:
+            vrows.append(["in sample (fitted on all heights)"] + [fmt_mm(r.get(a)) for a in AXES])
         page.add(_table(["fold", "x RMS (mm)", "y RMS (mm)", "z RMS (mm)"], vrows, "stats"))
+        page.add("<p>Held-out error well above the in-sample error means the added effect "
+                 "fits noise or one height's peculiarity rather than the device.</p>")
+    else:
+        page.add("<p>No cross-validation in the diagnosis (it needs fitted parameters and "
+                 "more than one height).</p>")
 
     # A bar chart of the four RMS rows.
     blocks = [(name, _dict(diag, key)) for key, name in STAT_ROWS]
@@ -645,10 +668,12 @@ def section_candidates(diag, page, tmp, figs):
                          fmt_g(c.get("n_params")),
                          *[fmt_mm((_dict(after, a) or {}).get("rms")) for a in AXES],
                          fmt_g(c.get("residual_correlation"), 3),
+                         {True: "yes", False: "no"}.get(c.get("explained_after"), "n/a"),
                          _e(_fmt_list(c.get("confused_with")))])
         page.add(_table(["effect", "score", "Δχ²", "BIC change", "params",
                          "x RMS after (mm)", "y RMS after (mm)", "z RMS after (mm)",
-                         "corr. with residual", "confused with"], rows, "cands"))
+                         "corr. with residual", "explained after", "confused with"],
+                        rows, "cands"))
     ins = _list(diag, "inseparable")
     if ins:
         page.add("<h3>Inseparable effects</h3><ul>")
@@ -792,6 +817,31 @@ def _finding_text(f):
     return s
 
 
+def _route_findings(findings):
+    """Route each finding to the panel it is about.
+
+    Returns (pos_notes, len_notes, periods): position-residual findings (axis x, y
+    or z) keyed by (variable kind, axis index) for vs_variables.png; cable-reading
+    findings keyed by cable (1..4, None = all cables) for vs_cable_length.png; and
+    (cable, period_mm) of periodic cable-length findings.
+    """
+    pos_notes, len_notes, periods = {}, {}, []
+    for f in findings:
+        kind, cable = _finding_target(f.get("variable"))
+        axis = str(f.get("axis", "")).strip().lower()
+        text = _finding_text(f)
+        if axis in AXES and kind is not None:
+            pos_notes.setdefault((kind, AXES.index(axis)), []).append(text)
+        elif kind == "length" or axis.startswith("l"):
+            m = re.fullmatch(r"l([1-4])", axis)
+            c = cable if cable is not None else (int(m.group(1)) if m else None)
+            len_notes.setdefault(c, []).append(text)
+            per = _num(f.get("period_mm"))
+            if math.isfinite(per) and per > 0:
+                periods.append((c, per))
+    return pos_notes, len_notes, periods
+
+
 def section_variables(diag, page, tmp, figs, P):
     page.add("<h2>5. Residual versus physical variables</h2>")
     us = _dict(diag, "unexplained_structure")
@@ -810,14 +860,7 @@ def section_variables(diag, page, tmp, figs, P):
                              "p-value", "finding"], rows, "cands"))
         else:
             page.add("<p>No trend or periodicity found in the residual.</p>")
-    by_target = {}
-    periods = []  # (cable or None, period) of periodic findings in cable length
-    for f in findings:
-        tgt = _finding_target(f.get("variable"))
-        by_target.setdefault(tgt, []).append(_finding_text(f))
-        p = _num(f.get("period_mm"))
-        if tgt[0] == "length" and math.isfinite(p) and p > 0:
-            periods.append((tgt[1], p))
+    pos_notes, len_notes, periods = _route_findings(findings)
     if not P.ok:
         page.add("<p>Plots not available: no per-position data.</p>")
         return
@@ -838,13 +881,12 @@ def section_variables(diag, page, tmp, figs, P):
             ax.set_ylabel(f"cable {i + 1} length residual (mm)")
             ax.set_title(f"Cable {i + 1}: measured - predicted reading")
             ax.grid(alpha=0.3)
-            _annot(ax, by_target.get(("length", i + 1), []) +
-                   (by_target.get(("length", None), []) if i == 0 else []))
+            _annot(ax, len_notes.get(i + 1, []) + (len_notes.get(None, []) if i == 0 else []))
         axs[0, 0].legend(fontsize=8, loc="lower right")
         name = _save(fig, tmp, "vs_cable_length.png")
         figs.append(name)
         page.add(_img(name, "length residual versus cable length",
-                      "Each cable's reading residual (measured minus what the model "
+                      "Each cable's reading residual (mean measured minus what the model "
                       "predicts at the reference position) against that cable's length, "
                       "with the binned mean. A slope is a gain error, a curve a "
                       "non-linearity, a ripple a periodic effect of the drum or pulley; "
@@ -860,19 +902,21 @@ def section_variables(diag, page, tmp, figs, P):
     radius = np.hypot(P.ref[:, 1], P.ref[:, 2])
     cols = [("height", P.height, "height x (mm)"),
             ("radius", radius, "distance from the centre √(y²+z²) (mm)")]
+    if P.lengths is not None:
+        cols.append(("length", P.lengths, "cable length (mm)"))
     if P.angle is not None:
         cols.append(("angle", P.angle, "cable angle out of the cable plane (deg)"))
     else:
         page.note("\"positions.cable_angle_deg\" is missing: no residual-versus-angle plot.")
-    fig, axs = plt.subplots(3, len(cols), figsize=(4.4 * len(cols), 9.5),
-                            squeeze=False, constrained_layout=True)
+    fig, axs = plt.subplots(3, len(cols), figsize=(4.2 * len(cols), 9.5),
+                            squeeze=False, sharey="row", constrained_layout=True)
     for k in range(3):
         for j, (kind, xv, xl) in enumerate(cols):
             ax = axs[k, j]
             r = res[:, k]
-            if kind == "angle":
+            if xv.ndim == 2:  # one series per cable
                 for i in range(4):
-                    ax.scatter(xv[:, i], r, s=4, alpha=0.3, color=pal(i), edgecolors="none")
+                    ax.scatter(xv[:, i], r, s=4, alpha=0.25, color=pal(i), edgecolors="none")
                     _binned(ax, xv[:, i], r, color=pal(i), label=f"cable {i + 1}")
                 if k == 0:
                     ax.legend(fontsize=7, loc="lower right")
@@ -881,22 +925,22 @@ def section_variables(diag, page, tmp, figs, P):
                 _binned(ax, xv, r)
             ax.axhline(0, color="0.6", lw=0.8)
             ax.set_xlabel(xl, fontsize=8.5)
-            ax.set_ylabel(f"{AXES[k]} residual (mm)")
+            if j == 0:
+                ax.set_ylabel(f"{AXES[k]} residual (mm)")
             ax.grid(alpha=0.3)
             if k == 0:
-                ax.set_title(f"vs {kind}", fontsize=10)
-            texts = [t for (kk, c), ts in by_target.items() if kk == kind
-                     for t in ts] if k == 0 else []
-            _annot(ax, texts)
+                ax.set_title(f"vs {xl.split(' (')[0]}", fontsize=10)
+            _annot(ax, pos_notes.get((kind, k), []))
     fig.suptitle(f"Position residual ({which}) versus physical variables")
     name = _save(fig, tmp, "vs_variables.png")
     figs.append(name)
     page.add(_img(name, "residual versus variables",
                   f"Per-position residual of the {which} (rows x, y, z) against the height, "
-                  f"the distance from the centre and each cable's angle out of the cable "
-                  f"plane (one colour per cable), with binned means. Flat lines at zero "
-                  f"mean nothing is left; a trend or bump says which variable the missing "
-                  f"effect depends on."))
+                  f"the distance from the centre, each cable's length and each cable's angle "
+                  f"out of the cable plane (one colour per cable), with binned means; red "
+                  f"boxes are the diagnosis's trend findings. Flat lines at zero mean "
+                  f"nothing is left; a trend or bump says which variable the missing effect "
+                  f"depends on."))
 
 
 def section_comparison(runs, page, tmp, figs):

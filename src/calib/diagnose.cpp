@@ -573,7 +573,14 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
             c.bic = -c.dchi2 + c.k * std::log(n_obs);
             c.score = -c.bic;
             c.E = evaluate(c.m, data, pos);
-            c.v = judge(c.E, G, jig, r2.n_free);
+            // Each explanation is judged with the white scatter its own
+            // residual shows: a large smooth residual biases the nugget.
+            V3 jc = jig;
+            if (!user_jig) {
+                V3 est = estimate_nugget(c.E, G);
+                for (int a = 0; a < 3; ++a) jc(a) = std::min(est(a), 0.05);
+            }
+            c.v = judge(c.E, G, jc, r2.n_free);
             c.fp.resize(P);
             double sxy = 0, sxx = 0, syy = 0;
             for (size_t j = 0; j < P; ++j) {
@@ -607,8 +614,11 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     for (size_t a = 0; a < cands.size(); ++a)
         for (size_t b = 0; b < cands.size(); ++b) {
             if (a == b || cands[a].bic >= 0 || cands[b].bic >= 0) continue;
-            const double r = std::min(cands[a].dchi2, cands[b].dchi2) / std::max(cands[a].dchi2, cands[b].dchi2);
-            if (fp_corr(cands[a], cands[b]) > 0.95 && r > 0.9) confused[a].push_back(cands[b].name);
+            // Equally good (BIC within 10: "very strong" evidence on
+            // Kass-Raftery's scale is needed to prefer one) and explaining
+            // the same pattern.
+            if (std::fabs(cands[a].bic - cands[b].bic) < 10 && fp_corr(cands[a], cands[b]) > 0.9)
+                confused[a].push_back(cands[b].name);
         }
 
     // --- leave-one-height-out validation
@@ -874,6 +884,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                       {"n_params", c.k},
                       {"error_mm_after", stats3(c.E.err)},
                       {"explained_after", c.v.explained},
+                      {"chi2_per_dof_after", c.v.chi2 / c.v.dof},
                       {"structure_after", c.v.moran_z},
                       {"confused_with", confused[a]},
                       {"residual_correlation", c.corr}});

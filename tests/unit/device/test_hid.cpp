@@ -1,0 +1,446 @@
+// The hidapi transport against a mock of hid_* (linked with
+// -Wl,--wrap=hid_...): open by path and by serial, reads, timeouts,
+// malformed reports, sequence gaps, feature reports (through the emulated
+// firmware, the same one the sim uses), out-of-workspace lengths, and an
+// unplug / replug with the same serial on another hidraw node.
+//
+// The mock keeps its own mutex-guarded state rather than cmocka's
+// will_return queues: hid_read_timeout runs on the driver's reader thread,
+// and cmocka's queues are not thread-safe.
+#include <hidapi.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <cwchar>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "cdm/cdm.h"
+#include "device/protocol.h"
+#include "device/sim/firmware.h"
+#include "model/model.h"
+#include "test_util.h"
+
+// cmocka last: its fail() macro must not meet the C++ headers.
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+extern "C" {
+#include <cmocka.h>
+}
+
+using namespace cdm::proto;
+
+namespace {
+
+struct Mock {
+    std::mutex mu;
+    std::condition_variable cv;
+    bool plugged = true;
+    std::string path = "/dev/hidraw7";
+    std::wstring serial = L"MOCK0001";
+    std::deque<std::vector<uint8_t>> reports;
+    std::unique_ptr<cdm::sim::Firmware> fw;
+    int opens = 0, closes = 0, open_handles = 0;
+    bool feature_fail = false;
+};
+Mock *g_mock = nullptr;
+int g_token; // the address is the fake hid_device*
+hid_device *fake_handle() { return reinterpret_cast<hid_device *>(&g_token); }
+
+DeviceInfoReport mock_info() {
+    DeviceInfoReport r;
+    r.fw_major = 2;
+    r.fw_minor = 1;
+    r.fw_patch = 7;
+    r.adc_bits = 16;
+    std::strcpy(r.serial, "MOCK0001");
+    r.report_rate_hz = 1000;
+    r.pot_scale_mm = {0.01f, 0.01f, 0.01f, 0.01f};
+    r.pot_offset_mm = {0, 0, 0, 0};
+    r.a_mm = 150;
+    r.b_mm = 150;
+    r.m_mm = 30;
+    r.hall_closed = 2600;
+    r.hall_open = 1400;
+    r.grip_open_rad = 0.6f;
+    return r;
+}
+
+} // namespace
+
+extern "C" {
+
+int __wrap_hid_init(void) { return 0; }
+
+struct hid_device_info *__wrap_hid_enumerate(unsigned short vid, unsigned short pid) {
+    std::lock_guard<std::mutex> lock(g_mock->mu);
+    if (!g_mock->plugged || vid != kVendorId || pid != kProductId) return nullptr;
+    auto *d = static_cast<hid_device_info *>(std::calloc(1, sizeof(hid_device_info)));
+    d->path = strdup(g_mock->path.c_str());
+    d->vendor_id = vid;
+    d->product_id = pid;
+    d->serial_number = static_cast<wchar_t *>(std::calloc(g_mock->serial.size() + 1, sizeof(wchar_t)));
+    std::wcscpy(d->serial_number, g_mock->serial.c_str());
+    d->release_number = 0x0201;
+    return d;
+}
+
+void __wrap_hid_free_enumeration(struct hid_device_info *d) {
+    while (d) {
+        hid_device_info *next = d->next;
+        std::free(d->path);
+        std::free(d->serial_number);
+        std::free(d);
+        d = next;
+    }
+}
+
+hid_device *__wrap_hid_open_path(const char *path) {
+    std::lock_guard<std::mutex> lock(g_mock->mu);
+    if (!g_mock->plugged || g_mock->path != path) return nullptr;
+    ++g_mock->opens;
+    ++g_mock->open_handles;
+    return fake_handle();
+}
+
+void __wrap_hid_close(hid_device *d) {
+    assert_ptr_equal(d, fake_handle());
+    std::lock_guard<std::mutex> lock(g_mock->mu);
+    ++g_mock->closes;
+    --g_mock->open_handles;
+}
+
+int __wrap_hid_get_serial_number_string(hid_device *, wchar_t *s, size_t n) {
+    std::lock_guard<std::mutex> lock(g_mock->mu);
+    std::wcsncpy(s, g_mock->serial.c_str(), n);
+    return 0;
+}
+
+const wchar_t *__wrap_hid_error(hid_device *) { return L"mock error"; }
+
+int __wrap_hid_read_timeout(hid_device *d, unsigned char *data, size_t length, int ms) {
+    assert_ptr_equal(d, fake_handle());
+    std::unique_lock<std::mutex> lock(g_mock->mu);
+    g_mock->cv.wait_for(lock, std::chrono::milliseconds(ms),
+                        [] { return !g_mock->plugged || !g_mock->reports.empty(); });
+    if (!g_mock->plugged) return -1; // hidraw after an unplug: ENODEV
+    if (g_mock->reports.empty()) return 0;
+    std::vector<uint8_t> r = g_mock->reports.front();
+    g_mock->reports.pop_front();
+    const size_t n = std::min(length, r.size());
+    std::memcpy(data, r.data(), n);
+    return int(n);
+}
+
+int __wrap_hid_get_feature_report(hid_device *, unsigned char *data, size_t length) {
+    std::lock_guard<std::mutex> lock(g_mock->mu);
+    if (!g_mock->plugged || g_mock->feature_fail) return -1;
+    return g_mock->fw->get_feature(data, length);
+}
+
+int __wrap_hid_send_feature_report(hid_device *, const unsigned char *data, size_t length) {
+    std::lock_guard<std::mutex> lock(g_mock->mu);
+    if (!g_mock->plugged || g_mock->feature_fail) return -1;
+    return g_mock->fw->send_feature(data, length) < 0 ? -1 : int(length);
+}
+
+} // extern "C"
+
+namespace {
+
+std::vector<uint8_t> report_at(uint32_t seq, const double p[3], uint16_t buttons = 0) {
+    cdm::DeviceGeometry g;
+    double l[4];
+    cdm::nominal_lengths(g, p, l);
+    InputReport r;
+    r.sequence = seq;
+    r.device_time_us = uint64_t(seq) * 1000;
+    for (int i = 0; i < 4; ++i) r.pot_adc[i] = uint16_t(std::lround(l[i] / double(0.01f)));
+    r.quat_q14 = {16384, 0, 0, 0};
+    r.hall_adc = 2000; // halfway: grip 0.3 rad
+    r.buttons = buttons;
+    r.status = kStatusImuOk | kStatusPotsOk | kStatusHallOk;
+    std::vector<uint8_t> b(kInputReportSize);
+    serialize_input(r, b.data());
+    return b;
+}
+
+void push(std::vector<uint8_t> r) {
+    std::lock_guard<std::mutex> lock(g_mock->mu);
+    g_mock->reports.push_back(std::move(r));
+    g_mock->cv.notify_all();
+}
+
+void set_plugged(bool on, const char *path = nullptr) {
+    std::lock_guard<std::mutex> lock(g_mock->mu);
+    g_mock->plugged = on;
+    if (path) g_mock->path = path;
+    g_mock->cv.notify_all();
+}
+
+int setup(void **) {
+    g_mock = new Mock;
+    g_mock->fw = std::make_unique<cdm::sim::Firmware>(mock_info());
+    return 0;
+}
+
+int teardown(void **) {
+    assert_int_equal(g_mock->open_handles, 0); // every handle closed
+    delete g_mock;
+    g_mock = nullptr;
+    return 0;
+}
+
+cdm_device *open_ok(const char *uri) {
+    cdm_device *dev = nullptr;
+    const int rc = cdm_open(uri, &dev);
+    if (rc != CDM_OK) fail_msg("cdm_open(%s): %s: %s", uri, cdm_strerror(rc), cdm_thread_error());
+    return dev;
+}
+
+cdm_stats stats(cdm_device *dev) {
+    cdm_stats s{};
+    s.struct_size = sizeof s;
+    assert_int_equal(cdm_get_stats(dev, &s), CDM_OK);
+    return s;
+}
+
+void test_open_read_timeout(void **) {
+    cdm_device *dev = open_ok("hid:/dev/hidraw7");
+    cdm_device_info info{};
+    info.struct_size = sizeof info;
+    assert_int_equal(cdm_get_info(dev, &info), CDM_OK);
+    assert_string_equal(info.transport, "hid");
+    assert_string_equal(info.serial, "MOCK0001");
+    assert_string_equal(info.firmware, "2.1.7");
+    assert_string_equal(info.uri, "serial:MOCK0001");
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    // Nothing read yet: NO_DATA, zeroed; waiting times out.
+    assert_int_equal(cdm_get_pose(dev, &p), CDM_ERR_NO_DATA);
+    assert_int_equal(p.sequence, 0);
+    assert_int_equal(cdm_wait_pose(dev, 100, &p), CDM_ERR_NO_DATA);
+    const double at[3] = {45.0, 12.0, -20.0};
+    push(report_at(100, at, CDM_BUTTON_CLUTCH));
+    assert_int_equal(cdm_wait_pose(dev, 2000, &p), CDM_OK);
+    assert_int_equal(p.sequence, 100);
+    assert_int_equal(p.buttons, CDM_BUTTON_CLUTCH);
+    // Only the ADC's rounding separates the pose from `at`: half a count,
+    // 0.005 mm per cable, amplified < 10 times in x near this point.
+    for (int k = 0; k < 3; ++k) assert_true(std::fabs(p.position[k] - at[k]) < 0.05);
+    assert_true(std::fabs(p.orientation[0] - 1.0) < 1e-12);
+    assert_true(std::fabs(p.grip - 0.3) < 1e-7); // grip_open_rad is the float32 0.6f
+    assert_true(p.device_time_us == 100000);
+    // A timeout of the transport is no error: the pose stays, newer never comes.
+    assert_int_equal(cdm_wait_pose(dev, 100, &p), CDM_ERR_TIMEOUT);
+    assert_int_equal(p.sequence, 100);
+    // A sequence gap counts as dropped reports.
+    push(report_at(105, at));
+    assert_int_equal(cdm_wait_pose(dev, 2000, &p), CDM_OK);
+    assert_int_equal(p.dropped, 4);
+    assert_int_equal(stats(dev).dropped, 4);
+    // Wrap-around of the 32-bit counter is no gap.
+    push(report_at(0xFFFFFFFFu, at));
+    push(report_at(0, at));
+    assert_true(cdm_test::wait_until([&] { cdm_get_pose(dev, &p); return p.sequence == 0; }, 2000));
+    // 105 -> 0xFFFFFFFF is a (huge, backward-looking) jump: it is taken as
+    // a counter reset, not as 4 billion lost reports.
+    assert_true(stats(dev).dropped < 1000);
+    cdm_close(dev);
+}
+
+void test_malformed_counted(void **) {
+    cdm_device *dev = open_ok("hid:/dev/hidraw7");
+    const double at[3] = {50, 0, 0};
+    struct Case {
+        std::vector<uint8_t> bytes;
+        const char *text;
+    };
+    std::vector<Case> cases;
+    auto r = report_at(1, at);
+    cases.push_back({std::vector<uint8_t>(r.begin(), r.begin() + 20), "short report"});
+    auto b = r;
+    b[0] = 0x05;
+    cases.push_back({b, "wrong report ID"});
+    b = r;
+    b[1] = 7;
+    cases.push_back({b, "wrong protocol version"});
+    b = r;
+    std::memset(b.data() + 24, 0, 8);
+    cases.push_back({b, "all-zero quaternion"});
+    b = r;
+    put_u16(b.data() + 26, 16384); // w = x = 1: norm sqrt(2)
+    cases.push_back({b, "norm far from 1"});
+    uint64_t n = 0;
+    for (const Case &c : cases) {
+        push(c.bytes);
+        ++n;
+        assert_true(cdm_test::wait_until([&] { return stats(dev).malformed == n; }, 2000));
+        char text[256];
+        assert_int_equal(cdm_device_error(dev, text, sizeof text), CDM_OK);
+        if (!std::strstr(text, c.text)) fail_msg("device error \"%s\" does not say \"%s\"", text, c.text);
+    }
+    // The reader is still alive and well.
+    push(report_at(2, at));
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_OK && p.sequence == 2; }, 2000));
+    assert_int_equal(stats(dev).reports, 1);
+    // Truncated error text is still terminated.
+    char tiny[5];
+    cdm_device_error(dev, tiny, sizeof tiny);
+    assert_int_equal(std::strlen(tiny), 4);
+    cdm_close(dev);
+}
+
+void test_out_of_workspace(void **) {
+    cdm_device *dev = open_ok("hid:/dev/hidraw7");
+    const double at[3] = {40, 5, 5};
+    push(report_at(1, at));
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    assert_int_equal(cdm_wait_pose(dev, 2000, &p), CDM_OK);
+    const double x = p.position[0];
+    // Cables far too short for the frame: the spheres do not meet.
+    auto r = report_at(2, at);
+    for (int i = 0; i < 4; ++i) put_u16(r.data() + 16 + 2 * i, 100);
+    push(r);
+    assert_true(cdm_test::wait_until([&] { cdm_get_pose(dev, &p); return p.sequence == 2; }, 2000));
+    assert_true(p.flags & CDM_POSE_OUT_OF_WORKSPACE);
+    assert_true(std::isfinite(p.position[0]) && p.position[0] == x);
+    assert_int_equal(stats(dev).out_of_workspace, 1);
+    push(report_at(3, at));
+    assert_true(cdm_test::wait_until([&] { cdm_get_pose(dev, &p); return p.sequence == 3; }, 2000));
+    assert_false(p.flags & CDM_POSE_OUT_OF_WORKSPACE);
+    cdm_close(dev);
+}
+
+void test_feature_reports(void **) {
+    cdm_device *dev = open_ok("serial:MOCK0001");
+    const char blob[] = "{\"format\":\"cdm-calibration\",\"version\":1} and some more bytes to span two chunks "
+                        "of fifty-eight bytes each, at least";
+    assert_int_equal(cdm_device_calibration_write(dev, blob, sizeof blob), CDM_OK);
+    char buf[512];
+    size_t len = 0;
+    assert_int_equal(cdm_device_calibration_read(dev, buf, sizeof buf, &len), CDM_OK);
+    assert_int_equal(len, sizeof blob);
+    assert_memory_equal(buf, blob, sizeof blob);
+    // A flipped bit in the device's store: the host's CRC check catches it.
+    g_mock->fw->corrupt_store(70);
+    assert_int_equal(cdm_device_calibration_read(dev, buf, sizeof buf, &len), CDM_ERR_CRC);
+    assert_non_null(std::strstr(cdm_thread_error(), "CRC"));
+    // The transport failing (a STALL) is an I/O error naming the report.
+    g_mock->feature_fail = true;
+    assert_int_equal(cdm_device_calibration_write(dev, blob, sizeof blob), CDM_ERR_IO);
+    assert_non_null(std::strstr(cdm_thread_error(), "0x03"));
+    g_mock->feature_fail = false;
+    cdm_close(dev);
+    // Opening needs the device-info report.
+    g_mock->feature_fail = true;
+    cdm_device *d2 = nullptr;
+    assert_int_equal(cdm_open("hid:/dev/hidraw7", &d2), CDM_ERR_IO);
+    assert_non_null(std::strstr(cdm_thread_error(), "0x02"));
+    g_mock->feature_fail = false;
+    // Unknown serial.
+    assert_int_equal(cdm_open("hid:serial=OTHER", &d2), CDM_ERR_NO_DEVICE);
+    assert_non_null(std::strstr(cdm_thread_error(), "OTHER"));
+}
+
+void test_enumerate(void **) {
+    cdm_device_list *list = nullptr;
+    assert_int_equal(cdm_enumerate(&list), CDM_OK);
+    assert_int_equal(cdm_device_list_count(list), 1);
+    cdm_device_info info{};
+    info.struct_size = sizeof info;
+    assert_int_equal(cdm_device_list_get(list, 0, &info), CDM_OK);
+    assert_string_equal(info.uri, "hid:/dev/hidraw7");
+    assert_string_equal(info.serial, "MOCK0001");
+    assert_string_equal(info.firmware, "2.1.7"); // from the device-info report, not bcdDevice
+    assert_int_equal(cdm_device_list_get(list, 1, &info), CDM_ERR_INVALID_ARG);
+    cdm_device_list_free(list);
+    cdm_device_list_free(nullptr);
+    // NULL URI, no $CDM_DEVICE: the first device found.
+    unsetenv("CDM_DEVICE");
+    cdm_device *dev = nullptr;
+    assert_int_equal(cdm_open(nullptr, &dev), CDM_OK);
+    cdm_close(dev);
+    set_plugged(false);
+    assert_int_equal(cdm_enumerate(&list), CDM_OK);
+    assert_int_equal(cdm_device_list_count(list), 0);
+    cdm_device_list_free(list);
+}
+
+void test_unplug_replug(void **) {
+    cdm_device *dev = open_ok("hid:/dev/hidraw7");
+    const double at[3] = {50, -10, 10};
+    push(report_at(10, at));
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    assert_int_equal(cdm_wait_pose(dev, 2000, &p), CDM_OK);
+    // Unplug: hid_read_timeout returns -1.
+    set_plugged(false);
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_ERR_DISCONNECTED; }, 2000));
+    assert_true(p.flags & CDM_POSE_DISCONNECTED);
+    assert_int_equal(p.sequence, 10); // the last pose, held
+    assert_true(std::fabs(p.position[1] + 10) < 0.05);
+    cdm_raw raw{};
+    raw.struct_size = sizeof raw;
+    assert_int_equal(cdm_get_raw(dev, &raw), CDM_ERR_DISCONNECTED);
+    char text[256];
+    cdm_device_error(dev, text, sizeof text);
+    assert_non_null(std::strstr(text, "serial:MOCK0001")); // names the device that went away
+    // Feature requests while unplugged fail cleanly.
+    size_t len;
+    char buf[16];
+    assert_int_equal(cdm_device_calibration_read(dev, buf, sizeof buf, &len), CDM_ERR_DISCONNECTED);
+    // Still gone after several retry intervals: no reconnect counted.
+    std::this_thread::sleep_for(std::chrono::milliseconds(600));
+    assert_int_equal(stats(dev).reconnects, 0);
+    // Plugged back in, with the same serial, on another node.
+    set_plugged(true, "/dev/hidraw9");
+    assert_true(cdm_test::wait_until([&] { return stats(dev).reconnects == 1; }, 2000));
+    // The device kept counting while unplugged... (a hub glitch, not a
+    // power cycle): the gap shows in `dropped`.
+    push(report_at(20, at));
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_OK && p.sequence == 20; }, 2000));
+    assert_false(p.flags & CDM_POSE_DISCONNECTED);
+    assert_int_equal(p.dropped, 9);
+    cdm_device_info info{};
+    info.struct_size = sizeof info;
+    cdm_get_info(dev, &info);
+    assert_string_equal(info.uri, "serial:MOCK0001");
+    // ...or restarted from 0 after a power cycle: the gap is estimated from
+    // the host time and the nominal rate, so it is at least the 300 ms spent
+    // unplugged at 1 kHz (minus the slack of the retry interval).
+    set_plugged(false);
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_ERR_DISCONNECTED; }, 2000));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    set_plugged(true);
+    assert_true(cdm_test::wait_until([&] { return stats(dev).reconnects == 2; }, 2000));
+    push(report_at(0, at));
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_OK && p.sequence == 0; }, 2000));
+    assert_true(p.dropped >= 9 + 250);
+    cdm_close(dev);
+}
+
+} // namespace
+
+int main(void) {
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test_setup_teardown(test_open_read_timeout, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_malformed_counted, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_out_of_workspace, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_feature_reports, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_enumerate, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_unplug_replug, setup, teardown),
+    };
+    return cmocka_run_group_tests(tests, nullptr, nullptr);
+}

@@ -1,0 +1,79 @@
+// Dataset CSV: grouping, ignored columns, and errors that name file, line, column.
+#include <cmath>
+#include <cstring>
+#include <setjmp.h>
+#include <cstdarg>
+#include <cstddef>
+#include <cstdint>
+#include <unistd.h>
+#include <cstdlib>
+
+#include "calib/dataset.h"
+
+extern "C" {
+#include <cmocka.h>
+}
+
+using namespace cdm;
+
+static void groups_and_ignores(void **) {
+    Dataset d;
+    std::string err;
+    const char *t = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4,temp\n"
+                    "3,30,0,0,100,101,102,103,21.5\n"
+                    "7,40,5,0,110,111,112,113,21.5\n"
+                    "3,30,0,0,100.2,101.2,102.2,103.2,21.6\n";
+    assert_true(parse_dataset(t, "a.csv", d, err));
+    assert_int_equal(d.rows, 3);
+    assert_int_equal(d.pos.size(), 2);
+    assert_int_equal(d.pos[0].point, 3);
+    assert_int_equal(d.pos[0].n, 2);
+    assert_true(std::fabs(d.pos[0].mean[0] - 100.1) < 1e-12);
+    assert_true(std::fabs(d.pos[0].cov[0][0] - 0.02) < 1e-12);
+    assert_int_equal(d.ignored_columns.size(), 1);
+    assert_string_equal(d.ignored_columns[0].c_str(), "temp");
+    assert_int_equal(d.heights.size(), 2);
+}
+
+static void expect_error(const char *text, const char *where) {
+    Dataset d;
+    std::string err;
+    assert_false(parse_dataset(text, "bad.csv", d, err));
+    if (!strstr(err.c_str(), where)) fail_msg("error \"%s\" does not name \"%s\"", err.c_str(), where);
+}
+
+static void errors_name_line_and_column(void **) {
+    expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3\n1,2,3,4,5,6,7\n", "bad.csv:1:1: header lacks column \"l4\"");
+    expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,30,0,0,100,abc,100,100\n", "bad.csv:2:6: l2 is not a finite number");
+    expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,30,0,0,100,100,100\n", "bad.csv:2:");
+    expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,30,0,0,100,100,100,-1\n", "bad.csv:2:8: l4 must be a positive");
+    expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1.5,30,0,0,100,100,100,100\n", "bad.csv:2:1: point must be an integer");
+    expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,30,0,0,1,1,1,1\n1,40,0,0,1,1,1,1\n",
+                 "bad.csv:3:2: point 1 has x_ref 40");
+    expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,nan,0,0,1,1,1,1\n", "bad.csv:2:2");
+    expect_error("", "empty file");
+    expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n", "no data rows");
+}
+
+static void write_is_atomic(void **) {
+    std::string err;
+    char path[] = "/tmp/cdm_ds_XXXXXX";
+    int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    close(fd);
+    assert_true(write_dataset_csv(path, {1, 1}, {{30, 0, 0}, {30, 0, 0}}, {{1, 2, 3, 4}, {1, 2, 3, 4}}, err));
+    Dataset d;
+    assert_true(load_dataset(path, d, err));
+    assert_int_equal(d.rows, 2);
+    assert_false(write_dataset_csv("/nonexistent-dir/x.csv", {1}, {{30, 0, 0}}, {{1, 2, 3, 4}}, err));
+    unlink(path);
+}
+
+int main(void) {
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(groups_and_ignores),
+        cmocka_unit_test(errors_name_line_and_column),
+        cmocka_unit_test(write_is_atomic),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

@@ -162,3 +162,9 @@ def test_before_option_and_python_api(tmp_path):
         assert f"<td>{d['error_mm'][a]['rms']:.4f}</td>" in html2
     assert sorted(p.name for p in (tmp_path / "r2").glob("*.png")) == \
         sorted(p.name for p in (tmp_path / "r1").glob("*.png"))
+
+
+def test_maps_add_the_current_residual_on_its_own_scale(report):
+    """Nominal ~1 mm vs current ~0.04 mm: the shared scale washes the current one out."""
+    html = (report[0] / "index.html").read_text(encoding="utf-8")
+    assert html.count("and the current residual again on its own colour scale") == 5

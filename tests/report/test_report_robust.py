@@ -185,3 +185,18 @@ def test_validation_null(tmp_path):
     d["validation"] = None  # what the tool writes for the nominal model or one height
     out, html, _ = _run(tmp_path, d)
     assert "No cross-validation in the diagnosis" in html
+
+
+def test_outlier_does_not_flatten_the_colour_scale(tmp_path):
+    import numpy as np
+    m = _module()
+    rng = np.random.default_rng(3)
+    v = rng.normal(0, 0.05, 625)
+    barrel = -np.linspace(0, 2, 625)
+    assert not m._symnorm(barrel).clipped and m._symnorm(barrel).vmax == 2.0
+    v[7] = 50.0  # one wild position (e.g. a mis-seated pin)
+    n = m._symnorm(v)
+    assert n.clipped and n.vmax < 1.0
+    d = _synth.make_diag(n=9, heights=(40, 60))
+    d["positions"]["residual_mm"][7] = [50.0, -50.0, 50.0]
+    _run(tmp_path, d)

@@ -306,12 +306,28 @@ def _map(ax, y, z, v, norm, failing=None):
 
 
 def _symnorm(*arrays):
+    """Symmetric colour scale over all arrays: their largest |value|, unless a few
+    outliers exceed 3x the 99th percentile; then the percentile, and the colour
+    bar shows arrows (``norm.clipped``)."""
     vals = [np.abs(a[np.isfinite(a)]) for a in arrays if a is not None]
     vals = [v for v in vals if v.size]
-    vmax = max((float(v.max()) for v in vals), default=0.0)
+    v = np.concatenate(vals) if vals else np.zeros(0)
+    vmax = float(v.max()) if v.size else 0.0
+    clipped = False
+    if v.size >= 20:
+        p99 = float(np.percentile(v, 99))
+        if p99 > 0 and vmax > 3 * p99:
+            vmax, clipped = p99, True
     if not vmax > 0:
         vmax = 1e-3
-    return Normalize(-vmax, vmax)
+    norm = Normalize(-vmax, vmax)
+    norm.clipped = clipped
+    return norm
+
+
+def _colorbar(fig, mappable, axs, norm, label):
+    fig.colorbar(mappable, ax=axs, label=label, shrink=0.9,
+                 extend="both" if getattr(norm, "clipped", False) else "neither")
 
 
 def _save(fig, tmp, name):
@@ -511,9 +527,19 @@ def section_maps(diag, page, tmp, figs, P):
         cut = (P.residual, "current model", P.nominal, "nominal")
     cols = [c for c in cols if c[0] is not None]
     norms = [_symnorm(*[c[0][:, k] for c in cols]) for k in range(3)]
+    # The current residual again on its own scale when the shared one washes it out,
+    # so that what is left (the next missing effect) is visible.
+    cur = next((c[0] for c in cols if c[2]), None)
+    zoom = [None] * 3
+    if cur is not None and len(cols) > 1:
+        for k in range(3):
+            nk = _symnorm(cur[:, k])
+            if nk.vmax < norms[k].vmax / 3:
+                zoom[k] = nk
+    ncol = len(cols) + (1 if any(zoom) else 0)
     for h, idx in zip(P.heights, P.height_index):
         y, z = P.ref[idx, 1], P.ref[idx, 2]
-        fig, axs = plt.subplots(3, len(cols), figsize=(4.3 * len(cols) + 1.2, 11),
+        fig, axs = plt.subplots(3, ncol, figsize=(4.0 * ncol + 1.6 * (ncol - len(cols) + 1), 11),
                                 squeeze=False, sharex=True, sharey=True,
                                 constrained_layout=True)
         for k in range(3):
@@ -523,7 +549,17 @@ def section_maps(diag, page, tmp, figs, P):
                 fail = P.failing[idx] if current else None
                 m = _map(ax, y, z, arr[idx, k], norms[k], fail)
                 ax.set_title(f"{AXES[k]} residual, {title}", fontsize=9)
-            fig.colorbar(m, ax=axs[k, :], label=f"{AXES[k]} residual (mm)", shrink=0.9)
+            _colorbar(fig, m, axs[k, :len(cols)], norms[k], f"{AXES[k]} residual (mm)")
+            if ncol > len(cols):
+                ax = axs[k, -1]
+                if zoom[k] is None:
+                    ax.set_axis_off()
+                    ax.text(0.5, 0.5, "current residual:\nsee the shared scale", ha="center",
+                            va="center", transform=ax.transAxes, fontsize=9, color="0.4")
+                    continue
+                m = _map(ax, y, z, cur[idx, k], zoom[k], P.failing[idx])
+                ax.set_title(f"{AXES[k]} residual, current, own scale", fontsize=9)
+                _colorbar(fig, m, axs[k, -1], zoom[k], f"{AXES[k]} residual (mm)")
         for ax in axs.ravel():
             ax.label_outer()
         nf = int(P.failing[idx].sum())
@@ -533,10 +569,13 @@ def section_maps(diag, page, tmp, figs, P):
         figs.append(name)
         page.add(_img(name, f"residual maps at {h:g} mm",
                       f"Height {h:g} mm: residual per jig position in the cable plane "
-                      f"(y right, z up), rows x, y, z; {_e(how)}. "
-                      f"One symmetric colour scale per axis for all "
-                      f"heights; black crosses mark positions whose mean residual is beyond "
-                      f"what noise and jig tolerance explain."))
+                      f"(y right, z up), rows x, y, z; {_e(how)}"
+                      + (", and the current residual again on its own colour scale"
+                         if ncol > len(cols) else "")
+                      + ". One symmetric colour scale per axis for all "
+                      f"heights (arrows on a colour bar: a few outliers beyond it are "
+                      f"drawn at its ends); black crosses mark positions whose mean residual "
+                      f"is beyond what noise and jig tolerance explain."))
     if len(P.heights) == 1:
         page.note("Only one height in the data: the x error cannot be separated from a "
                   "height-dependent effect.")
@@ -735,8 +774,8 @@ def section_fingerprints(diag, page, tmp, figs, P):
             axs[0, j].set_title(f"fingerprint x, {P.heights[hi]:g} mm", fontsize=9)
             m1 = _map(axs[1, j], y, z, P.residual[idx, 0], nr)
             axs[1, j].set_title(f"current residual x, {P.heights[hi]:g} mm", fontsize=9)
-        fig.colorbar(m0, ax=axs[0, :], label="x shift by the effect (mm)", shrink=0.9)
-        fig.colorbar(m1, ax=axs[1, :], label="x residual (mm)", shrink=0.9)
+        _colorbar(fig, m0, axs[0, :], nf, "x shift by the effect (mm)")
+        _colorbar(fig, m1, axs[1, :], nr, "x residual (mm)")
         for ax in axs.ravel():
             ax.label_outer()
         title = f"{eff}: corr(x) = {fmt_g(cx, 3)}, corr(x,y,z) = {fmt_g(c3, 3)}"

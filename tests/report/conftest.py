@@ -74,7 +74,32 @@ def check_page(outdir):
     for bad in ("<script", "http://", "https://", "<link", "@import", "url("):
         assert bad not in low, f"page uses an external resource or script: {bad}"
     assert not [p for p in outdir.iterdir() if p.is_dir()], "a temporary directory was left"
+    check_balanced(html)
     return html
+
+
+def check_balanced(html):
+    """Every non-void element is closed, in order."""
+    from html.parser import HTMLParser
+    void = {"meta", "img", "br", "hr", "link", "input"}
+
+    class P(HTMLParser):
+        def __init__(self):
+            super().__init__()
+            self.stack = []
+
+        def handle_starttag(self, tag, attrs):
+            if tag not in void:
+                self.stack.append(tag)
+
+        def handle_endtag(self, tag):
+            assert self.stack and self.stack[-1] == tag, f"</{tag}> closes {self.stack[-3:]}"
+            self.stack.pop()
+
+    p = P()
+    p.feed(html)
+    p.close()
+    assert p.stack == [], f"unclosed: {p.stack}"
 
 
 @pytest.fixture

@@ -102,3 +102,18 @@ def test_self_check_catches_broken_output(tmp_path):
     with pytest.raises(AssertionError):
         check_page(out)
     json.loads(open(a).read())  # the fixture itself is plain JSON (no NaN)
+
+
+def test_out_is_a_file(tmp_path):
+    good = _synth.write(tmp_path / "d.json", _synth.make_diag(n=3, heights=(40,)))
+    out = tmp_path / "taken"
+    out.write_text("a file, not a directory")
+    r = run_report(good, "--out", out)
+    assert r.returncode == 1 and str(out) in r.stderr and "Traceback" not in r.stderr
+
+
+def test_balance_checker_catches_unclosed_tags():
+    from conftest import check_balanced
+    check_balanced("<html><body><table><tr><td>1</td></tr></table><img src=a.png></body></html>")
+    with pytest.raises(AssertionError):
+        check_balanced("<html><body><table><tr><td>1</td></table></body></html>")

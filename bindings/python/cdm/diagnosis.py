@@ -6,6 +6,7 @@ import os
 
 from . import _native
 from .constants import Error
+from .errors import CdmError
 from . import effects as _effects
 
 try:
@@ -73,17 +74,25 @@ def diagnose(data_csv, device_json, effects=None, jig_tolerance_mm=None, progres
             raise raised[0]
         effect_errors = _effects._take_errors()
         if effect_errors:
-            raise err from effect_errors[0]
+            raise err from effect_errors[0][1]
         raise err
     try:
         if not out.value:
-            raise _native.CdmError(Error.CDM_ERR_INTERNAL, "cdm_diagnose returned CDM_OK and no result",
+            raise CdmError(Error.CDM_ERR_INTERNAL, "cdm_diagnose returned CDM_OK and no result",
                                    function="cdm_diagnose")
         text = ctypes.string_at(out.value).decode("utf-8")
     finally:
         L.cdm_free_string(out)
     if raised:
         raise raised[0]
+    # The library does not (yet) fail a diagnosis whose effect returned an
+    # error: its numbers would be computed with unchanged readings. Say so.
+    effect_errors = _effects._take_errors()
+    if effect_errors:
+        name, exc = effect_errors[0]
+        raise CdmError(Error.CDM_ERR_INVALID_ARG, "user effect %r raised %s: %s (%d failed call(s)); the result "
+                       "is not trustworthy" % (name, type(exc).__name__, exc, len(effect_errors)),
+                       function="cdm_diagnose") from exc
     result = json.loads(text)
     if _np is not None and isinstance(result, dict) and "positions" in result:
         result["positions"] = _arrays(result["positions"])

@@ -47,7 +47,7 @@ class _Registration:
             return int(Error.CDM_ERR_INTERNAL)
 
     def _record(self, e):
-        self.errors.append(e)
+        self.errors.append((self.name, e))
         del self.errors[:-10]
 
 
@@ -129,7 +129,7 @@ def effect_names():
 
 
 def _take_errors():
-    """Exceptions raised by Python effects since the last call (for diagnose)."""
+    """(effect name, exception) raised by Python effects since the last call (for diagnose)."""
     out = []
     with _registry_lock:
         for reg in _registry.values():

@@ -357,12 +357,37 @@ Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free) {
     for (size_t j = 0; j < P; ++j)
         if (E.ok[j]) ++used;
     const double q = chi2_3_isf(0.01 / std::max<size_t>(1, used)); // 1 % family-wise
+    // The height fixture's own error: one constant per height (the same at
+    // every hole), like the holes' error a property of the jig, not of the
+    // model. Per-height mean residuals up to 0.15 mm (3x a machined 0.05 mm
+    // tolerance) are taken as the fixture's and removed before the
+    // chi-square, at the cost of their degrees of freedom; larger ones stay.
+    std::map<std::pair<int, int>, std::pair<double, double>> hmean; // (height, axis) -> (sum w r, sum w)
+    for (size_t j = 0; j < P; ++j)
+        if (E.ok[j])
+            for (int a = 0; a < 3; ++a) {
+                const double w = 1.0 / (E.var_mean[j](a) + jig(a) * jig(a));
+                auto &h = hmean[{G.height_index[j], a}];
+                h.first += w * E.res[j](a);
+                h.second += w;
+            }
+    int nuisance = 0;
+    std::map<std::pair<int, int>, double> fixture;
+    for (auto &kv : hmean) {
+        const double m = kv.second.first / kv.second.second;
+        if (std::fabs(m) <= 0.15) {
+            fixture[kv.first] = m;
+            ++nuisance;
+        }
+    }
     for (size_t j = 0; j < P; ++j) {
         if (!E.ok[j]) continue;
         double c = 0;
         for (int a = 0; a < 3; ++a) {
             const double s2 = E.var_mean[j](a) + jig(a) * jig(a);
-            z[a][j] = E.res[j](a) / std::sqrt(s2);
+            auto it = fixture.find({G.height_index[j], a});
+            const double off = it == fixture.end() ? 0.0 : it->second;
+            z[a][j] = (E.res[j](a) - off) / std::sqrt(s2);
             c += z[a][j] * z[a][j];
         }
         v.chi2 += c;
@@ -371,7 +396,7 @@ Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free) {
             ++v.n_failing;
         }
     }
-    v.dof = std::max(1, int(3 * used) - n_free);
+    v.dof = std::max(1, int(3 * used) - n_free - nuisance);
     v.chi2_p = chi2_sf(v.chi2, v.dof);
     double best = -INFINITY;
     for (int a = 0; a < 3; ++a) best = std::max(best, moran_z(z[a], E.ok, G));

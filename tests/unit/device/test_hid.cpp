@@ -9,6 +9,7 @@
 // and cmocka's queues are not thread-safe.
 #include <hidapi.h>
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <cmath>
@@ -52,6 +53,10 @@ struct Mock {
     bool feature_fail = false;
 };
 Mock *g_mock = nullptr;
+// Handles a test opened. A failing assertion jumps out of the test; the
+// teardown then closes what is left, so that no reader thread outlives the
+// mock it reads from (and a failure fails, rather than hangs).
+std::vector<cdm_device *> g_open;
 int g_token; // the address is the fake hid_device*
 hid_device *fake_handle() { return reinterpret_cast<hid_device *>(&g_token); }
 
@@ -193,7 +198,11 @@ int setup(void **) {
 }
 
 int teardown(void **) {
-    assert_int_equal(g_mock->open_handles, 0); // every handle closed
+    const bool leaked = !g_open.empty();
+    for (cdm_device *d : g_open) cdm_close(d);
+    g_open.clear();
+    assert_false(leaked);
+    assert_int_equal(g_mock->open_handles, 0); // every hid handle closed
     delete g_mock;
     g_mock = nullptr;
     return 0;
@@ -203,7 +212,13 @@ cdm_device *open_ok(const char *uri) {
     cdm_device *dev = nullptr;
     const int rc = cdm_open(uri, &dev);
     if (rc != CDM_OK) fail_msg("cdm_open(%s): %s: %s", uri, cdm_strerror(rc), cdm_thread_error());
+    g_open.push_back(dev);
     return dev;
+}
+
+void close_dev(cdm_device *dev) {
+    g_open.erase(std::remove(g_open.begin(), g_open.end(), dev), g_open.end());
+    cdm_close(dev);
 }
 
 cdm_stats stats(cdm_device *dev) {
@@ -254,7 +269,7 @@ void test_open_read_timeout(void **) {
     // 105 -> 0xFFFFFFFF is a (huge, backward-looking) jump: it is taken as
     // a counter reset, not as 4 billion lost reports.
     assert_true(stats(dev).dropped < 1000);
-    cdm_close(dev);
+    close_dev(dev);
 }
 
 void test_malformed_counted(void **) {
@@ -298,7 +313,7 @@ void test_malformed_counted(void **) {
     char tiny[5];
     cdm_device_error(dev, tiny, sizeof tiny);
     assert_int_equal(std::strlen(tiny), 4);
-    cdm_close(dev);
+    close_dev(dev);
 }
 
 void test_out_of_workspace(void **) {
@@ -320,7 +335,7 @@ void test_out_of_workspace(void **) {
     push(report_at(3, at));
     assert_true(cdm_test::wait_until([&] { cdm_get_pose(dev, &p); return p.sequence == 3; }, 2000));
     assert_false(p.flags & CDM_POSE_OUT_OF_WORKSPACE);
-    cdm_close(dev);
+    close_dev(dev);
 }
 
 void test_feature_reports(void **) {
@@ -342,7 +357,7 @@ void test_feature_reports(void **) {
     assert_int_equal(cdm_device_calibration_write(dev, blob, sizeof blob), CDM_ERR_IO);
     assert_non_null(std::strstr(cdm_thread_error(), "0x03"));
     g_mock->feature_fail = false;
-    cdm_close(dev);
+    close_dev(dev);
     // Opening needs the device-info report.
     g_mock->feature_fail = true;
     cdm_device *d2 = nullptr;
@@ -428,7 +443,7 @@ void test_unplug_replug(void **) {
     push(report_at(0, at));
     assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_OK && p.sequence == 0; }, 2000));
     assert_true(p.dropped >= 9 + 250);
-    cdm_close(dev);
+    close_dev(dev);
 }
 
 } // namespace

@@ -153,8 +153,13 @@ Eval evaluate(const Model &m, const Dataset &d, const std::vector<PreparedPos> &
         auto J = reading_jacobian(m, p);
         Eigen::Matrix3d H = J.transpose() * J;
         E.Jp[j] = H.inverse() * J.transpose();
-        Eigen::Matrix3d C = E.Jp[j] * pos[j].cov * E.Jp[j].transpose();
-        for (int a = 0; a < 3; ++a) E.var_mean[j](a) = std::max(C(a, a), 1e-8) / pos[j].n;
+        // Covariance of the mean readings: the samples' (cross-cable terms
+        // included) over n, plus on the diagonal what prepare() added for
+        // quantisation and single samples.
+        Eigen::Matrix4d Cl = pos[j].cov / pos[j].n;
+        for (int c = 0; c < 4; ++c) Cl(c, c) = std::max(Cl(c, c), pos[j].var_mean(c));
+        Eigen::Matrix3d C = E.Jp[j] * Cl * E.Jp[j].transpose();
+        for (int a = 0; a < 3; ++a) E.var_mean[j](a) = std::max(C(a, a), 1e-10);
         E.ok[j] = 1;
         for (int s = 0; s < pos[j].n; ++s) {
             const auto &ls = d.samples[pos[j].first + size_t(s)];
@@ -438,6 +443,25 @@ std::vector<double> lomb(const std::vector<double> &t, const std::vector<double>
     return P;
 }
 
+void detrend_quadratic(const std::vector<double> &t, std::vector<double> &y) {
+    const size_t n = t.size();
+    if (n < 4) return;
+    double lo = *std::min_element(t.begin(), t.end()), hi = *std::max_element(t.begin(), t.end());
+    const double span = hi > lo ? hi - lo : 1.0;
+    Eigen::MatrixXd A(n, 3);
+    Eigen::VectorXd b(n);
+    for (size_t k = 0; k < n; ++k) {
+        const double u = (t[k] - lo) / span;
+        A(long(k), 0) = 1;
+        A(long(k), 1) = u;
+        A(long(k), 2) = u * u;
+        b(long(k)) = y[k];
+    }
+    Eigen::VectorXd c = A.colPivHouseholderQr().solve(b);
+    Eigen::VectorXd r = b - A * c;
+    for (size_t k = 0; k < n; ++k) y[k] = r(long(k));
+}
+
 // Least-squares polynomial fit of degree deg; returns the F-test p-value
 // against a constant and the fitted curve's range.
 struct Trend {
@@ -500,6 +524,11 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
         return false;
     }
     const Grid G = make_grid(pos, data.heights);
+    // A machined plate is within ~0.05 mm: white scatter beyond that is not
+    // the jig's and must not hide an effect. Without repeated samples the
+    // pots' noise is white scatter too, and there is nothing to cap against.
+    const bool repeats = std::any_of(pos.begin(), pos.end(), [](const PreparedPos &p) { return p.n > 1; });
+    const double jig_cap = repeats ? 0.05 : INFINITY;
 
     // --- the seed's procedure: nominal triangulation, then the ellipsoid
     progress("nominal model", 0.0);
@@ -538,9 +567,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     // Jig tolerance from the white part of the residual, then refit with it.
     if (!user_jig) {
         V3 est = estimate_nugget(cur, G);
-        // A machined plate is within ~0.05 mm; larger white scatter is not the
-        // jig's, and must not be allowed to hide an effect.
-        for (int a = 0; a < 3; ++a) jig(a) = std::min(est(a), 0.05);
+        for (int a = 0; a < 3; ++a) jig(a) = std::min(est(a), jig_cap);
         fo.jig_sigma = jig;
         if (model.effect_count() > 0) {
             fit_with_progress(model, fo, "fitting the model", rep);
@@ -603,7 +630,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
             V3 jc = jig;
             if (!user_jig) {
                 V3 est = estimate_nugget(c.E, G);
-                for (int a = 0; a < 3; ++a) jc(a) = std::min(est(a), 0.05);
+                for (int a = 0; a < 3; ++a) jc(a) = std::min(est(a), jig_cap);
             }
             c.v = judge(c.E, G, jc, r2.n_free);
             c.fp.resize(P);
@@ -682,13 +709,18 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                       {"in_sample_rms_mm", {{"x", ins[0].to_json()["rms"]}, {"y", ins[1].to_json()["rms"]}, {"z", ins[2].to_json()["rms"]}}}};
     }
 
-    // --- beyond the catalogue: the current residual against physical variables
+    // --- beyond the catalogue: what is left after the best catalogued
+    // explanation (the current model, or the top candidate on top of it when
+    // neither explains the data), against physical variables
     progress("residual analysis", 0.0);
+    const bool use_top = !vcur.explained && !cands.empty() && cands[0].bic < 0 && !cands[0].v.explained;
+    const Model &basis = use_top ? cands[0].m : model;
+    const Eval &bE = use_top ? cands[0].E : cur;
     std::vector<std::array<double, 4>> lres(P), lmean(P), angle(P);
     for (size_t j = 0; j < P; ++j) {
         double t[3], y[4];
-        model.jig_to_device(pos[j].ref.data(), t);
-        model.readings(t, y);
+        basis.jig_to_device(pos[j].ref.data(), t);
+        basis.readings(t, y);
         const auto A = g;
         for (int c = 0; c < 4; ++c) {
             lres[j][size_t(c)] = pos[j].mean(c) - y[c];
@@ -721,6 +753,9 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                 t.push_back(lmean[j][size_t(c)]);
                 y.push_back(lres[j][size_t(c)]);
             }
+            // A smooth trend in length (gain, non-linearity) would swamp the
+            // low frequencies: take a quadratic out first.
+            detrend_quadratic(t, y);
             auto pw = lomb(t, y, freqs);
             for (size_t f = 0; f < freqs.size(); ++f) pooled[f] += pw[f];
         }
@@ -734,16 +769,18 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
             // amplitude at that period, mean over cables
             double amp = 0;
             for (int c = 0; c < 4; ++c) {
-                Eigen::MatrixXd A(P, 3);
+                Eigen::MatrixXd A(P, 5);
                 Eigen::VectorXd b(P);
                 for (size_t j = 0; j < P; ++j) {
-                    const double ph = 2 * M_PI * freqs[bf] * lmean[j][size_t(c)];
+                    const double l = lmean[j][size_t(c)], ph = 2 * M_PI * freqs[bf] * l, u = (l - lo) / span;
                     A(long(j), 0) = 1;
                     A(long(j), 1) = std::sin(ph);
                     A(long(j), 2) = std::cos(ph);
+                    A(long(j), 3) = u;
+                    A(long(j), 4) = u * u;
                     b(long(j)) = lres[j][size_t(c)];
                 }
-                Eigen::Vector3d s = A.colPivHouseholderQr().solve(b);
+                Eigen::VectorXd s = A.colPivHouseholderQr().solve(b);
                 amp += std::hypot(s(1), s(2)) / 4;
             }
             if (fap < 1e-3)
@@ -782,10 +819,10 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
             for (int a = 0; a < 3; ++a) {
                 std::vector<double> x, y, w;
                 for (size_t j = 0; j < P; ++j)
-                    if (cur.ok[j]) {
+                    if (bE.ok[j]) {
                         x.push_back(var.v[j]);
-                        y.push_back(cur.res[j](a));
-                        w.push_back(1.0 / (cur.var_mean[j](a) + jig(a) * jig(a)));
+                        y.push_back(bE.res[j](a));
+                        w.push_back(1.0 / (bE.var_mean[j](a) + jig(a) * jig(a)));
                     }
                 Trend t = poly_trend(x, y, w, 2);
                 if (t.p < 1e-3)
@@ -829,7 +866,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
         }
         verdict += " Add it with --effects.";
         unexplained_summary = "explained by a catalogued effect (" + top->name + ")";
-    } else if (top && top->bic < 0) {
+    } else if (top && top->bic < 0 && vcur.chi2 - top->v.chi2 >= 0.5 * (vcur.chi2 - vcur.dof)) {
         verdict = modelname + " leaves structured error; the best catalogued effect, " + top->name +
                   ", explains part of it (x RMS " + fmt(errx(cur)) + " -> " + fmt(errx(top->E)) +
                   " mm) but structure remains after it (z = " + fmt(top->v.moran_z, 1) +
@@ -837,8 +874,14 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                   " and diagnose again) or an effect outside the catalogue is at work: see unexplained_structure.";
         unexplained_summary = "not fully explained by any single catalogued effect";
     } else {
-        verdict = modelname + " leaves structured error and no effect in the catalogue explains it. See "
-                  "unexplained_structure for the residual against the physical variables.";
+        verdict = modelname + " leaves structured error (x RMS " + fmt(errx(cur)) + " mm, structure z = " +
+                  fmt(vcur.moran_z, 1) + ") and no effect in the catalogue explains it";
+        if (top && top->bic < 0)
+            verdict += " (the best, " + top->name + ", removes only " +
+                       fmt(std::max(0.0, 100 * (vcur.chi2 - top->v.chi2) / std::max(1.0, vcur.chi2 - vcur.dof)), 0) +
+                       " % of the excess chi-square)";
+        verdict += ". See unexplained_structure for the residual against the physical variables; a user-defined "
+                   "effect (docs/calibration.md) can then be fitted like a catalogued one.";
         unexplained_summary = "no catalogued effect explains the residual";
     }
     if (!vcur.explained && !(top && top->v.explained) && !findings.empty()) {
@@ -888,7 +931,11 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     }
     out["jig_tolerance_mm"] = {{"value", std::sqrt(0.5 * (jig(1) * jig(1) + jig(2) * jig(2)))},
                                {"per_axis", vec3(jig)},
-                               {"source", user_jig ? "user" : "estimated"}};
+                               {"source", user_jig ? "user" : "estimated"},
+                               {"note", repeats ? "white position-to-position scatter beyond the pots' repeatability, "
+                                                  "from second differences along the plate; capped at 0.05 mm"
+                                                : "no repeated samples: the pots' noise and the jig's scatter cannot be "
+                                                  "told apart, both are in this estimate"}};
     out["chi2_per_dof"] = vcur.chi2 / vcur.dof;
     out["dof"] = vcur.dof;
     out["chi2_p_value"] = vcur.chi2_p;
@@ -955,7 +1002,9 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
         insep.push_back({{"effects", grp}, {"separate_by", sep}});
     }
     out["inseparable"] = insep;
-    out["unexplained_structure"] = {{"summary", unexplained_summary}, {"findings", findings}};
+    out["unexplained_structure"] = {{"summary", unexplained_summary},
+                                    {"residual_of", use_top ? "the model plus " + cands[0].name : modelname},
+                                    {"findings", findings}};
     out["validation"] = validation;
     if (opt.per_position) {
         json pj;

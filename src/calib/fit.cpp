@@ -24,6 +24,7 @@
 // for a well-determined parameter.
 #include "calib/fit.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
@@ -35,22 +36,47 @@
 namespace cdm {
 
 std::vector<PreparedPos> prepare(const Dataset &d) {
+    // The readings' resolution per cable: the smallest step between distinct
+    // values (the ADC count through the nominal scale; the CSV's last digit
+    // for unquantised data).
+    double q[4];
+    for (int c = 0; c < 4; ++c) {
+        std::vector<double> v;
+        v.reserve(d.samples.size());
+        for (auto &s : d.samples) v.push_back(s[size_t(c)]);
+        std::sort(v.begin(), v.end());
+        q[c] = INFINITY;
+        for (size_t k = 1; k < v.size(); ++k)
+            if (v[k] - v[k - 1] > 1e-9) q[c] = std::min(q[c], v[k] - v[k - 1]);
+        if (!std::isfinite(q[c])) q[c] = 0;
+    }
+    // Pooled within-position variance, for positions measured once.
+    double pooled[4] = {0, 0, 0, 0}, dof = 0;
+    for (auto &p : d.pos)
+        if (p.n > 1) {
+            for (int c = 0; c < 4; ++c) pooled[c] += p.cov[c][c] * (p.n - 1);
+            dof += p.n - 1;
+        }
+    for (int c = 0; c < 4; ++c) pooled[c] = dof > 0 ? pooled[c] / dof : 0;
     std::vector<PreparedPos> v;
     v.reserve(d.pos.size());
     for (auto &p : d.pos) {
-        PreparedPos q;
-        q.ref = Eigen::Vector3d(p.ref[0], p.ref[1], p.ref[2]);
+        PreparedPos pp;
+        pp.ref = Eigen::Vector3d(p.ref[0], p.ref[1], p.ref[2]);
         for (int c = 0; c < 4; ++c) {
-            q.mean(c) = p.mean[c];
-            for (int k = 0; k < 4; ++k) q.cov(c, k) = p.cov[c][k];
-            // A single sample or a reading stuck on one ADC count has no
-            // measurable spread; 1e-4 mm^2 (0.01 mm) keeps its weight finite.
-            double var = p.n > 1 ? p.cov[c][c] : 1e-4;
-            q.var_mean(c) = std::max(var, 1e-6) / p.n;
+            pp.mean(c) = p.mean[c];
+            for (int k = 0; k < 4; ++k) pp.cov(c, k) = p.cov[c][k];
+            const double var = p.n > 1 ? p.cov[c][c] : pooled[c];
+            // Noise that spans several ADC steps dithers the quantisation
+            // away in the mean; noise below half a step does not, and the
+            // mean keeps the rounding error of variance q^2/12.
+            const double q12 = q[c] * q[c] / 12;
+            pp.var_mean(c) = var / p.n + (var < 3 * q12 ? q12 : 0.0);
+            pp.var_mean(c) = std::max(pp.var_mean(c), 1e-10);
         }
-        q.n = p.n;
-        q.first = p.first;
-        v.push_back(q);
+        pp.n = p.n;
+        pp.first = p.first;
+        v.push_back(pp);
     }
     return v;
 }

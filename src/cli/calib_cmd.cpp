@@ -181,7 +181,7 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
 }
 
 struct SimArgs {
-    std::string out, effects, truth, device;
+    std::string out, effects, truth, device, plugin;
     uint64_t effect_seed = 1, seed = 1;
     JigSimOptions o;
     std::string heights;
@@ -191,6 +191,10 @@ struct SimArgs {
 int cmd_simulate(SimArgs &a) {
     DeviceGeometry g;
     std::string err;
+    if (!a.plugin.empty() && cdm_effect_load_plugin(a.plugin.c_str()) != CDM_OK) {
+        std::fprintf(stderr, "cdm calib simulate: %s\n", cdm_thread_error());
+        return 2;
+    }
     if (!a.device.empty()) {
         std::ifstream f(a.device);
         std::stringstream ss;
@@ -273,6 +277,7 @@ void add_calib_commands(CLI::App &app) {
     sim->add_option("--effects", s.effects, "Hidden effects, random realistic magnitudes");
     sim->add_option("--effect-seed", s.effect_seed, "Seed of the hidden effects' magnitudes");
     sim->add_option("--truth", s.truth, "Calibration JSON to use as the true model");
+    sim->add_option("--plugin", s.plugin, "Load a user-effect plugin (.so) first (its effects can be in --truth)");
     sim->add_option("--truth-out", s.truth_out, "Write the true model (with the hidden magnitudes) here");
     sim->add_option("--seed", s.seed, "Noise seed");
     sim->add_option("--noise-mm", s.o.noise_mm, "Per-sample pot noise std (mm)");

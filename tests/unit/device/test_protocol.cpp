@@ -373,6 +373,7 @@ void test_descriptor(void **) {
     assert_int_equal(seen[2].second, int(kCalHeaderReportSize));
     assert_int_equal(seen[3].second, int(kCalChunkReportSize));
     assert_int_equal(kReportDescriptor[kReportDescriptorSize - 1], 0xC0);
+    assert_int_equal(kReportDescriptorSize, 47); // as docs/protocol.md lists it
 }
 
 } // namespace

@@ -514,6 +514,54 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
     return ok;
 }
 
+Overlap effect_overlap(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt,
+                       const std::string &name) {
+    Model copy = m;
+    Problem pb(copy, pos, opt);
+    Overlap out;
+    Eigen::VectorXd res;
+    Eigen::MatrixXd J;
+    pb.residuals(res, &J);
+    auto &I = copy.impl();
+    auto cols = [&](size_t e) {
+        const int o = pb.eff_offset[e], n = int(I.effects[e].p.size());
+        Eigen::MatrixXd C = J.middleCols(o, n);
+        for (int k = 0; k < n; ++k) {
+            const double nn = C.col(k).norm();
+            if (nn > 0) C.col(k) /= nn;
+        }
+        return C;
+    };
+    int target = -1;
+    for (size_t e = 0; e < I.effects.size(); ++e)
+        if (I.effects[e].desc->name == name && pb.eff_offset[e] >= 0) target = int(e);
+    if (target < 0) return out;
+    const Eigen::MatrixXd Jc = cols(size_t(target));
+    const double total = Jc.squaredNorm();
+    if (total <= 0) return out;
+    auto fraction = [&](const Eigen::MatrixXd &B) {
+        if (B.cols() == 0) return 0.0;
+        // projection onto span(B) via a rank-revealing QR
+        Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(B);
+        qr.setThreshold(1e-10);
+        const int r = int(qr.rank());
+        if (r == 0) return 0.0;
+        Eigen::MatrixXd Qm = qr.householderQ() * Eigen::MatrixXd::Identity(B.rows(), r);
+        return std::sqrt((Qm.transpose() * Jc).squaredNorm() / total);
+    };
+    Eigen::MatrixXd all(J.rows(), 0);
+    for (size_t e = 0; e < I.effects.size(); ++e) {
+        if (int(e) == target || pb.eff_offset[e] < 0) continue;
+        Eigen::MatrixXd B = cols(e);
+        out.per_effect.emplace_back(I.effects[e].desc->name, fraction(B));
+        Eigen::MatrixXd tmp(J.rows(), all.cols() + B.cols());
+        tmp << all, B;
+        all = tmp;
+    }
+    out.all = fraction(all);
+    return out;
+}
+
 double model_chi2(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt, int *n_obs) {
     Model copy = m;
     Problem pb(copy, pos, opt);

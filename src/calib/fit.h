@@ -54,6 +54,17 @@ struct FitReport {
 // their current values. Gauge freedoms are fixed explicitly (see fit.cpp).
 bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt, FitReport &rep);
 
+// How much of effect `name`'s action on the readings (its Jacobian columns,
+// each normalised, weighted like the fit) lies in the span of each other
+// effect of `m`, and of all of them together: 1 = the others reproduce it
+// exactly (indistinguishable from the data's point of view), 0 = orthogonal.
+struct Overlap {
+    std::vector<std::pair<std::string, double>> per_effect;
+    double all = 0;
+};
+Overlap effect_overlap(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt,
+                       const std::string &name);
+
 // Reading-space weighted chi-square of a model (no fitting).
 double model_chi2(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt, int *n_obs = nullptr);
 

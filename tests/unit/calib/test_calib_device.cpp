@@ -27,13 +27,16 @@ static double mean_x_error(cdm_device *dev, int n) {
     for (int k = 0; k < 20 * n && got < n; ++k) {
         cdm_pose p{};
         p.struct_size = sizeof p;
-        if (cdm_wait_pose(dev, 200, &p) != CDM_OK) continue;
+        // A stale pose (the reader thread starved past the 50 ms deadline on
+        // a loaded machine) is still a real pose to compare with the truth.
+        const int rc = cdm_wait_pose(dev, 200, &p);
+        if (rc != CDM_OK && rc != CDM_ERR_STALE) continue;
         double t[3];
         if (!sim_truth(dev, p.sequence, t)) continue;
         s += std::fabs(p.position[0] - t[0]);
         ++got;
     }
-    assert_true(got == n);
+    if (got != n) fail_msg("only %d of %d poses had a simulator truth", got, n);
     return s / n;
 }
 
@@ -67,8 +70,10 @@ static void calibration_corrects_the_sim(void **) {
     cdm_pose p{};
     p.struct_size = sizeof p;
     // wait for a pose computed with the calibration
-    for (int k = 0; k < 100; ++k)
-        if (cdm_wait_pose(dev, 200, &p) == CDM_OK && (p.flags & CDM_POSE_COMPENSATED)) break;
+    for (int k = 0; k < 100; ++k) {
+        const int rc = cdm_wait_pose(dev, 200, &p);
+        if ((rc == CDM_OK || rc == CDM_ERR_STALE) && (p.flags & CDM_POSE_COMPENSATED)) break;
+    }
     assert_true(p.flags & CDM_POSE_COMPENSATED);
     const double after = mean_x_error(dev, 300);
     cdm_close(dev);

@@ -676,8 +676,33 @@ def section_candidates(diag, page, tmp, figs):
                     groups[s] = len(groups)
                     gk = s
                 colours.append(pal(groups[gk] % 10) if len(s) > 1 else "0.55")
-            fig, ax = plt.subplots(figsize=(8.5, 0.45 * len(cands) + 1.6), constrained_layout=True)
+            # Right panel: the x RMS each candidate leaves, on a log scale
+            # against the current model's and the noise floor. With a large
+            # residual every candidate removes most of the chi-square and the
+            # BIC bars look alike; what is left is what tells them apart.
+            after_x = np.array([_num((_dict(_dict(c, "error_mm_after") or {}, "x") or {}).get("rms"))
+                                for c in cands])
+            show_after = np.isfinite(after_x).any() and np.nanmin(after_x) > 0
+            fig, axs = plt.subplots(1, 2 if show_after else 1, figsize=(13 if show_after else 8.5,
+                                    0.45 * len(cands) + 1.6), constrained_layout=True, squeeze=False)
+            ax = axs[0][0]
             yy = np.arange(len(cands))
+            if show_after:
+                ax2 = axs[0][1]
+                ax2.barh(yy, np.where(np.isfinite(after_x), after_x, np.nan), color=colours)
+                ax2.set_xscale("log")
+                ax2.set_yticks(yy, [""] * len(cands))
+                ax2.invert_yaxis()
+                cur = _num((_dict(_dict(diag, "error_mm") or {}, "x") or {}).get("rms"))
+                floor = _num((_dict(_dict(diag, "noise_floor_mm") or {}, "x") or {}).get("rms"))
+                if np.isfinite(cur) and cur > 0:
+                    ax2.axvline(cur, color="tab:red", lw=1.2, label=f"current model {cur:.3f} mm")
+                if np.isfinite(floor) and floor > 0:
+                    ax2.axvline(floor, color="k", ls="--", lw=1.2, label=f"noise floor {floor:.3f} mm")
+                ax2.set_xlabel("x RMS error with the effect added (mm, log)")
+                ax2.set_title("What each candidate leaves")
+                ax2.legend(loc="lower right", fontsize=8)
+                ax2.grid(axis="x", alpha=0.3, which="both")
             ax.barh(yy, np.nan_to_num(vals), color=colours)
             ax.set_yticks(yy, names)
             ax.invert_yaxis()
@@ -698,7 +723,8 @@ def section_candidates(diag, page, tmp, figs):
             page.add(_img(name, "candidate ranking",
                           f"Each catalogued effect not in the model, fitted on top of it, "
                           f"ranked by {label}. Bars of one colour (and '≈' names) are "
-                          f"effects the data cannot tell apart."))
+                          f"effects the data cannot tell apart. Right: the x RMS error "
+                          f"left with each one added; the right effect reaches the noise floor."))
         rows = []
         for c in cands:
             after = _dict(c, "error_mm_after") or {}

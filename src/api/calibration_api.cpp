@@ -16,23 +16,9 @@ namespace {
 
 int parse_calibration(const std::string &text, const std::string &source, cdm_calibration **out) {
     nlohmann::json j;
-    try {
-        j = nlohmann::json::parse(text);
-    } catch (const nlohmann::json::parse_error &e) {
-        size_t line = 1, col = 1;
-        for (size_t k = 0; k + 1 < e.byte && k < text.size(); ++k) {
-            if (text[k] == '\n') {
-                ++line;
-                col = 1;
-            } else {
-                ++col;
-            }
-        }
-        return cdm::fail(CDM_ERR_PARSE, source + ":" + std::to_string(line) + ":" + std::to_string(col) +
-                                              ": JSON syntax error: " + e.what());
-    }
-    cdm::Model m{cdm::DeviceGeometry{}};
     std::string err;
+    if (!cdm::parse_json_text(text, source, j, err)) return cdm::fail(CDM_ERR_PARSE, err);
+    cdm::Model m{cdm::DeviceGeometry{}};
     if (!cdm::Model::from_json(j, source, m, err)) return cdm::fail(CDM_ERR_PARSE, err);
     *out = new cdm_calibration{std::make_shared<const cdm::Model>(m)};
     return CDM_OK;

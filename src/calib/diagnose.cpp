@@ -208,6 +208,20 @@ Eval evaluate_seed(const DeviceGeometry &g, const Dataset &d, const std::vector<
     return E;
 }
 
+// The seed's eq. 5: the ellipsoid fitted to the x error of an evaluation
+// over its estimated y, z, each position weighted by its sample count.
+Ellipsoid ellipsoid_on(const Eval &E, const std::vector<PreparedPos> &pos) {
+    std::vector<double> y, z, x, w;
+    for (size_t j = 0; j < pos.size(); ++j)
+        if (E.ok[j]) {
+            y.push_back(E.est[j](1));
+            z.push_back(E.est[j](2));
+            x.push_back(E.res[j](0));
+            w.push_back(pos[j].n);
+        }
+    return fit_ellipsoid(y, z, x, w);
+}
+
 // ------------------------------------------------------------ grid helpers
 
 struct Grid {
@@ -533,15 +547,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     // --- the seed's procedure: nominal triangulation, then the ellipsoid
     progress("nominal model", 0.0);
     Eval nom = evaluate_seed(g, data, pos, nullptr);
-    std::vector<double> ye, ze, xe, wn;
-    for (size_t j = 0; j < P; ++j)
-        if (nom.ok[j]) {
-            ye.push_back(nom.est[j](1));
-            ze.push_back(nom.est[j](2));
-            xe.push_back(nom.res[j](0));
-            wn.push_back(pos[j].n);
-        }
-    Ellipsoid ell = fit_ellipsoid(ye, ze, xe, wn);
+    Ellipsoid ell = ellipsoid_on(nom, pos);
     Eval ellE = evaluate_seed(g, data, pos, &ell);
 
     // --- the model
@@ -577,15 +583,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     // The ellipsoid on top of the physical model, when asked for.
     bool model_has_ellipsoid = std::find(opt.effects.begin(), opt.effects.end(), "ellipsoid") != opt.effects.end();
     if (model_has_ellipsoid) {
-        std::vector<double> y2, z2, x2, w2;
-        for (size_t j = 0; j < P; ++j)
-            if (cur.ok[j]) {
-                y2.push_back(cur.est[j](1));
-                z2.push_back(cur.est[j](2));
-                x2.push_back(cur.res[j](0));
-                w2.push_back(pos[j].n);
-            }
-        Ellipsoid e2 = fit_ellipsoid(y2, z2, x2, w2);
+        Ellipsoid e2 = ellipsoid_on(cur, pos);
         std::string e3;
         model.add_effect("ellipsoid", {{"L", e2.L}, {"M", e2.M}, {"N", e2.N}}, e3);
         cur = evaluate(model, data, pos);

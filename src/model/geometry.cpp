@@ -76,11 +76,10 @@ bool get_positive(const nlohmann::json &j, const char *key, double &out, const s
 }
 } // namespace
 
-bool parse_device_json(const std::string &text, const std::string &source, DeviceGeometry &out,
-                       std::string &err) {
-    nlohmann::json j;
+bool parse_json_text(const std::string &text, const std::string &source, nlohmann::json &out, std::string &err) {
     try {
-        j = nlohmann::json::parse(text);
+        out = nlohmann::json::parse(text);
+        return true;
     } catch (const nlohmann::json::parse_error &e) {
         // byte offset -> line and column
         size_t line = 1, col = 1;
@@ -97,6 +96,12 @@ bool parse_device_json(const std::string &text, const std::string &source, Devic
         err = os.str();
         return false;
     }
+}
+
+bool parse_device_json(const std::string &text, const std::string &source, DeviceGeometry &out,
+                       std::string &err) {
+    nlohmann::json j;
+    if (!parse_json_text(text, source, j, err)) return false;
     if (!j.is_object()) {
         err = source + ": device description must be a JSON object";
         return false;

@@ -33,6 +33,10 @@ struct DeviceGeometry {
     static constexpr double sz[4] = {-1, +1, -1, +1};
 };
 
+// Parses JSON text; on a syntax error returns false with `err` naming
+// source:line:column.
+bool parse_json_text(const std::string &text, const std::string &source, nlohmann::json &out, std::string &err);
+
 // Parses a device description. On error returns false and sets `err` to a
 // message naming `source` and, for JSON syntax errors, the line and column.
 bool parse_device_json(const std::string &text, const std::string &source, DeviceGeometry &out,

@@ -245,7 +245,10 @@ void test_open_read_timeout(void **) {
     assert_int_equal(cdm_wait_pose(dev, 100, &p), CDM_ERR_NO_DATA);
     const double at[3] = {45.0, 12.0, -20.0};
     push(report_at(100, at, CDM_BUTTON_CLUTCH));
-    assert_int_equal(cdm_wait_pose(dev, 2000, &p), CDM_OK);
+    // Wait for that report itself: cdm_wait_pose waits for one newer than
+    // the newest at its call, which may already be this one (a race the
+    // slower sanitizer builds lose).
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_OK && p.sequence == 100; }, 2000));
     assert_int_equal(p.sequence, 100);
     assert_int_equal(p.buttons, CDM_BUTTON_CLUTCH);
     // Only the ADC's rounding separates the pose from `at`: half a count,
@@ -259,7 +262,10 @@ void test_open_read_timeout(void **) {
     assert_int_equal(p.sequence, 100);
     // A sequence gap counts as dropped reports.
     push(report_at(105, at));
-    assert_int_equal(cdm_wait_pose(dev, 2000, &p), CDM_OK);
+    // Wait for that report itself: cdm_wait_pose waits for one newer than
+    // the newest at its call, which may already be this one (a race the
+    // slower sanitizer builds lose).
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_OK && p.sequence == 105; }, 2000));
     assert_int_equal(p.dropped, 4);
     assert_int_equal(stats(dev).dropped, 4);
     // Wrap-around of the 32-bit counter is no gap.
@@ -322,7 +328,10 @@ void test_out_of_workspace(void **) {
     push(report_at(1, at));
     cdm_pose p{};
     p.struct_size = sizeof p;
-    assert_int_equal(cdm_wait_pose(dev, 2000, &p), CDM_OK);
+    // Wait for that report itself: cdm_wait_pose waits for one newer than
+    // the newest at its call, which may already be this one (a race the
+    // slower sanitizer builds lose).
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_OK && p.sequence == 1; }, 2000));
     const double x = p.position[0];
     // Cables far too short for the frame: the spheres do not meet.
     auto r = report_at(2, at);
@@ -399,7 +408,10 @@ void test_unplug_replug(void **) {
     push(report_at(10, at));
     cdm_pose p{};
     p.struct_size = sizeof p;
-    assert_int_equal(cdm_wait_pose(dev, 2000, &p), CDM_OK);
+    // Wait for that report itself: cdm_wait_pose waits for one newer than
+    // the newest at its call, which may already be this one (a race the
+    // slower sanitizer builds lose).
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_OK && p.sequence == 10; }, 2000));
     // Unplug: hid_read_timeout returns -1.
     set_plugged(false);
     assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_ERR_DISCONNECTED; }, 2000));

@@ -230,19 +230,26 @@ struct Grid {
     std::vector<int> ycentre, zcentre;
     std::vector<int> height_index;
     double pitch = 5;
+    bool layered = true; // positions on a few fixture heights (the seed's jig)
 };
 
 Grid make_grid(const std::vector<PreparedPos> &pos, const std::vector<double> &heights) {
     Grid G;
     const size_t P = pos.size();
     G.nb.resize(P);
-    G.height_index.resize(P);
-    for (size_t j = 0; j < P; ++j) {
-        int best = 0;
-        for (size_t h = 0; h < heights.size(); ++h)
-            if (std::fabs(heights[h] - pos[j].ref(0)) < std::fabs(heights[size_t(best)] - pos[j].ref(0))) best = int(h);
-        G.height_index[j] = best;
-    }
+    G.height_index.assign(P, 0);
+    // The seed's jig puts every position on one of a few fixture heights.
+    // Positions scattered in x (a free-hand or robot-arm reference) form one
+    // layer, and their neighbours are found in 3-D.
+    G.layered = heights.size() <= std::min<size_t>(50, std::max<size_t>(1, P / 4));
+    if (G.layered)
+        for (size_t j = 0; j < P; ++j) {
+            int best = 0;
+            for (size_t h = 0; h < heights.size(); ++h)
+                if (std::fabs(heights[h] - pos[j].ref(0)) < std::fabs(heights[size_t(best)] - pos[j].ref(0)))
+                    best = int(h);
+            G.height_index[j] = best;
+        }
     // pitch: the smallest positive spacing in y or z among positions
     double pitch = INFINITY;
     std::vector<double> ys;
@@ -276,7 +283,9 @@ Grid make_grid(const std::vector<PreparedPos> &pos, const std::vector<double> &h
             G.zpair.push_back({dn, up});
         }
     }
-    // Irregular layouts: fall back to the 4 nearest positions at the same height.
+    // Irregular layouts: the nearest positions of the same layer (4 in a
+    // plane, 6 in 3-D), then made symmetric (Moran's I takes w_jk = w_kj).
+    const size_t knn = G.layered ? 4 : 6;
     for (size_t j = 0; j < P; ++j) {
         if (!G.nb[j].empty()) continue;
         std::vector<std::pair<double, int>> dist;
@@ -284,8 +293,19 @@ Grid make_grid(const std::vector<PreparedPos> &pos, const std::vector<double> &h
             if (k != j && G.height_index[k] == G.height_index[j])
                 dist.push_back({(pos[k].ref - pos[j].ref).squaredNorm(), int(k)});
         std::sort(dist.begin(), dist.end());
-        for (size_t k = 0; k < std::min<size_t>(4, dist.size()); ++k) G.nb[j].push_back(dist[k].second);
+        for (size_t k = 0; k < std::min(knn, dist.size()); ++k) G.nb[j].push_back(dist[k].second);
     }
+    std::vector<std::vector<int>> sym(P);
+    for (size_t j = 0; j < P; ++j)
+        for (int k : G.nb[j]) {
+            sym[j].push_back(k);
+            sym[size_t(k)].push_back(int(j));
+        }
+    for (auto &v : sym) {
+        std::sort(v.begin(), v.end());
+        v.erase(std::unique(v.begin(), v.end()), v.end());
+    }
+    G.nb = std::move(sym);
     return G;
 }
 
@@ -310,7 +330,24 @@ V3 estimate_nugget(const Eval &E, const Grid &G) {
         };
         add(G.ycentre, G.ypair);
         add(G.zcentre, G.zpair);
-        out(a) = cnt > 0 ? std::sqrt(std::max(0.0, (num - noise) / (1.5 * cnt))) : 0.0;
+        if (cnt >= 20) {
+            out(a) = std::sqrt(std::max(0.0, (num - noise) / (1.5 * cnt)));
+            continue;
+        }
+        // No plate rows (an irregular layout): first differences between
+        // nearest neighbours, E[(r_j - r_k)^2] = v_j + v_k + 2 s^2, which a
+        // smooth error biases more (its gradient times the spacing).
+        num = noise = 0;
+        cnt = 0;
+        for (size_t j = 0; j < G.nb.size(); ++j)
+            for (int k : G.nb[j]) {
+                if (size_t(k) <= j || !E.ok[j] || !E.ok[size_t(k)]) continue;
+                const double dd = E.res[j](a) - E.res[size_t(k)](a);
+                num += dd * dd;
+                noise += E.var_mean[j](a) + E.var_mean[size_t(k)](a);
+                ++cnt;
+            }
+        out(a) = cnt > 0 ? std::sqrt(std::max(0.0, (num - noise) / (2.0 * cnt))) : 0.0;
     }
     return out;
 }
@@ -684,7 +721,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
 
     // --- leave-one-height-out validation
     json validation = nullptr;
-    if (opt.validation && rep.n_free > 0 && data.heights.size() > 1) {
+    if (opt.validation && rep.n_free > 0 && G.layered && data.heights.size() > 1 && data.heights.size() <= 20) {
         Acc held[3];
         json folds = json::array();
         for (size_t h = 0; h < data.heights.size(); ++h) {

@@ -1,5 +1,6 @@
 #include "calib/simulate.h"
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -11,10 +12,18 @@ template <class Sink> bool run(const Model &truth, const JigSimOptions &o, Sink 
     std::normal_distribution<double> g(0.0, 1.0);
     long id = 0;
     const double c = (o.n - 1) / 2.0;
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    const double hlo = *std::min_element(o.heights.begin(), o.heights.end());
+    const double hhi = *std::max_element(o.heights.begin(), o.heights.end());
     for (double h : o.heights)
         for (int iz = 0; iz < o.n; ++iz)
             for (int iy = 0; iy < o.n; ++iy) {
-                const double ref[3] = {h, (iy - c) * o.pitch_mm, (iz - c) * o.pitch_mm};
+                double ref[3] = {h, (iy - c) * o.pitch_mm, (iz - c) * o.pitch_mm};
+                if (o.scattered) {
+                    ref[0] = hlo + (hhi - hlo) * u(rng);
+                    ref[1] = (2 * u(rng) - 1) * c * o.pitch_mm;
+                    ref[2] = (2 * u(rng) - 1) * c * o.pitch_mm;
+                }
                 double jig[3];
                 for (int k = 0; k < 3; ++k) jig[k] = ref[k] + o.jig_tolerance_mm * g(rng);
                 double p[3], L[4];

@@ -22,6 +22,9 @@ struct JigSimOptions {
     double quant_mm = 0.01;     // ADC step (mm per count)
     double jig_tolerance_mm = 0.03; // std of each position's own error, per axis
     uint64_t seed = 1;
+    // Instead of the plate: as many positions drawn uniformly in the same
+    // box (x over the heights' range), as a robot arm or tracker would give.
+    bool scattered = false;
 };
 
 // Writes the CSV text; false + err on I/O or model failure.

@@ -117,12 +117,14 @@ bool parse_device_json(const std::string &text, const std::string &source, Devic
         return false;
     }
     if (auto it = j.find("exit_axis"); it != j.end()) {
-        if (!it->is_array() || it->size() != 4) {
-            err = source + ": \"exit_axis\" must be an array of 4 [x,y,z] vectors (cables 1..4)";
+        // One [x,y,z] for the four pots, or one per cable.
+        const bool one = it->is_array() && it->size() == 3 && (*it)[0].is_number();
+        if (!one && (!it->is_array() || it->size() != 4)) {
+            err = source + ": \"exit_axis\" must be [x,y,z] (all cables) or an array of 4 [x,y,z] (cables 1..4)";
             return false;
         }
         for (int i = 0; i < 4; ++i) {
-            const auto &v = (*it)[i];
+            const auto &v = one ? *it : (*it)[i];
             if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() ||
                 !v[2].is_number()) {
                 err = source + ": exit_axis[" + std::to_string(i) + "] must be [x,y,z] numbers";

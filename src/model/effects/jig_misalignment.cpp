@@ -11,9 +11,9 @@ EffectDesc make_jig_misalignment() {
                  "Rotation vector in rad about the device origin, translation in mm. Typical: 0.1-0.5 deg, 0.2-1 mm.",
                  Stage::Jig, E_JIG, {}};
     for (const char *n : {"rx", "ry", "rz"})
-        d.params.push_back({n, "rad", 5e-3, -0.2, 0.2, 0.0, 1.5e-3, 8e-3});
+        d.params.push_back({n, "rad", 5e-3, -0.5, 0.5, 0.0, 1.5e-3, 8e-3});
     for (const char *n : {"tx", "ty", "tz"})
-        d.params.push_back({n, "mm", 0.5, -20, 20, 0.0, 0.2, 1.0});
+        d.params.push_back({n, "mm", 0.5, -100, 100, 0.0, 0.2, 1.0});
     return d;
 }
 } // namespace cdm

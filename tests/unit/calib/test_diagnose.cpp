@@ -34,10 +34,13 @@ static JigSimOptions small_jig(uint64_t seed) {
     return o;
 }
 
-static nlohmann::json run(const Model &truth, uint64_t seed, std::vector<std::string> effects, bool candidates) {
+static nlohmann::json run(const Model &truth, uint64_t seed, std::vector<std::string> effects, bool candidates,
+                          bool scattered = false) {
     Dataset d;
     std::string err;
-    assert_true(simulate_jig(truth, small_jig(seed), d, err));
+    JigSimOptions so = small_jig(seed);
+    so.scattered = scattered;
+    assert_true(simulate_jig(truth, so, d, err));
     DiagnoseOptions o;
     o.effects = std::move(effects);
     o.candidates = candidates;
@@ -139,11 +142,28 @@ static void effect_outside_catalogue(void **) {
     assert_int_equal(cdm_effect_unregister("drum_ripple"), CDM_OK);
 }
 
+// Positions not on a plate (a tracker or robot-arm reference): neighbours
+// are found in 3-D, and the same verdicts come out.
+static void scattered_positions(void **) {
+    auto clean = run(Model{DeviceGeometry{}}, 31, {}, false, true);
+    if (!clean["explained"].get<bool>())
+        fail_msg("clean scattered data not explained: chi2/dof %g structure z %g", clean["chi2_per_dof"].get<double>(),
+                 clean["structure"]["statistic"].get<double>());
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    assert_true(truth.add_effect_random("exit_pulley", 32, err));
+    auto r = run(truth, 33, {}, true, true);
+    assert_false(r["explained"].get<bool>());
+    assert_string_equal(r["candidates"][0]["effect"].get<std::string>().c_str(), "exit_pulley");
+    assert_true(r["candidates"][0]["explained_after"].get<bool>());
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(clean_data_is_explained),
         cmocka_unit_test(each_hidden_effect_is_found),
         cmocka_unit_test(effect_outside_catalogue),
+        cmocka_unit_test(scattered_positions),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

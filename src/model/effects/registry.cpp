@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <mutex>
-#include <regex>
 
 #include "model/effect.h"
 
@@ -62,7 +61,13 @@ int register_user_effect(const cdm_effect_def *def, std::string &err) {
         err = "cdm_effect_register: NULL definition or struct_size smaller than the 1.0 cdm_effect_def";
         return CDM_ERR_INVALID_ARG;
     }
-    if (!def->name || !std::regex_match(def->name, std::regex("[a-z0-9_]+"))) {
+    auto valid_name = [](const char *n) {
+        if (!n || !*n) return false;
+        for (const char *c = n; *c; ++c)
+            if (!((*c >= 'a' && *c <= 'z') || (*c >= '0' && *c <= '9') || *c == '_')) return false;
+        return true;
+    };
+    if (!valid_name(def->name)) {
         err = std::string("cdm_effect_register: name must match [a-z0-9_]+, got \"") +
               (def->name ? def->name : "(null)") + "\"";
         return CDM_ERR_INVALID_ARG;

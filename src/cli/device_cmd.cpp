@@ -18,7 +18,6 @@
 #include <thread>
 #include <vector>
 
-#include "api/calibration_handle.h"
 #include "calib/jig_plan.h"
 #include "cdm/cdm.h"
 #include "cli/commands.h"
@@ -61,29 +60,6 @@ std::string buttons_text(uint32_t b) {
 }
 
 double now_s() { return double(cdm::monotonic_ns()) * 1e-9; }
-
-// Loads CALIB.json into a calibration handle through the model's own reader
-// (the same one cdm_calibration_load uses).
-bool load_calibration(const std::string &path, cdm_calibration &cal, std::string &err) {
-    std::ifstream f(path);
-    if (!f) {
-        err = path + ": cannot open";
-        return false;
-    }
-    std::stringstream ss;
-    ss << f.rdbuf();
-    nlohmann::json j;
-    try {
-        j = nlohmann::json::parse(ss.str());
-    } catch (const std::exception &e) {
-        err = path + ": " + e.what();
-        return false;
-    }
-    auto m = std::make_shared<Model>(DeviceGeometry{});
-    if (!Model::from_json(j, path, *m, err)) return false;
-    cal.model = m;
-    return true;
-}
 
 int cmd_list() {
     cdm_device_list *list = nullptr;
@@ -223,14 +199,14 @@ int cmd_stream(const std::string &uri, double seconds, double rate, const std::s
         return 1;
     }
     if (!calib.empty()) {
-        cdm_calibration cal;
-        std::string err;
-        if (!load_calibration(calib, cal, err)) {
+        cdm_calibration *cal = nullptr;
+        if (cdm_calibration_load(calib.c_str(), &cal) != CDM_OK) {
             cdm_close(dev);
-            std::fprintf(stderr, "cdm: --calibration: %s\n", err.c_str());
+            std::fprintf(stderr, "cdm: --calibration: %s\n", cdm_thread_error());
             return 1;
         }
-        cdm_set_calibration(dev, &cal);
+        cdm_set_calibration(dev, cal); // the device keeps its own reference
+        cdm_calibration_free(cal);
     }
     std::printf("streaming %s (%s, serial %s, %.0f Hz nominal); Ctrl-C stops\n", info.uri, info.transport,
                 info.serial, info.report_rate_hz);

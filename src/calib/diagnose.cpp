@@ -719,6 +719,56 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                 confused[a].push_back(cands[b].name);
         }
 
+    // --- model review: is each effect in the model still earning its
+    // parameters, and would a candidate do its job better? Greedy forward
+    // selection can pick a many-parameter effect that mimics two small ones
+    // (anchors for a jig tilt plus a gain error); this catches it.
+    json review = json::array();
+    {
+        auto &I = model.impl();
+        const double bic_cur = model_chi2(model, pos, fo) + rep.n_free * std::log(n_obs);
+        auto rebuild = [&](const std::string &skip, const std::string &add, Model &m2) {
+            std::string e2;
+            for (auto &e : I.effects) {
+                if (e.desc->name == skip || e.desc->stage == Stage::Position) continue;
+                json pj = json::object();
+                for (size_t q = 0; q < e.p.size(); ++q) pj[e.desc->params[q].name] = e.p[q];
+                m2.add_effect(e.desc->name, pj, e2);
+            }
+            if (!add.empty()) m2.add_effect(add, nullptr, e2);
+        };
+        for (auto &e : I.effects) {
+            if (e.desc->stage == Stage::Position) continue;
+            const std::string name = e.desc->name;
+            Model without{g};
+            rebuild(name, "", without);
+            FitReport rw;
+            fit_with_progress(without, fo, "reviewing " + name, rw);
+            const double bic_without = rw.chi2 + rw.n_free * std::log(n_obs);
+            json item = {{"effect", name}, {"bic_change_if_removed", bic_without - bic_cur},
+                         {"redundant", bic_without - bic_cur < 10}};
+            double best = 0;
+            std::string best_name;
+            // Every catalogued effect not in the model (not only the ranked
+            // candidates: one that adds no free parameter to the model, like
+            // the jig transform beside the anchors, can still replace one).
+            for (auto &cd : candidate_effects()) {
+                if (model.has_effect(cd->name)) continue;
+                Model swapped{g};
+                rebuild(name, cd->name, swapped);
+                FitReport rs;
+                fit_with_progress(swapped, fo, "reviewing " + name, rs);
+                const double d = rs.chi2 + rs.n_free * std::log(n_obs) - bic_cur;
+                if (d < best) {
+                    best = d;
+                    best_name = cd->name;
+                }
+            }
+            if (best < -10) item["better_swap"] = {{"effect", best_name}, {"bic_change", best}};
+            review.push_back(item);
+        }
+    }
+
     // --- leave-one-height-out validation
     json validation = nullptr;
     if (opt.validation && rep.n_free > 0 && G.layered && data.heights.size() > 1 && data.heights.size() <= 20) {
@@ -930,6 +980,16 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                    "effect (docs/calibration.md) can then be fitted like a catalogued one.";
         unexplained_summary = "no catalogued effect explains the residual";
     }
+    for (auto &r : review) {
+        if (r.contains("better_swap"))
+            verdict += " Review: replacing " + r["effect"].get<std::string>() + " with " +
+                       r["better_swap"]["effect"].get<std::string>() + " explains the data as well with fewer "
+                       "parameters (BIC " + fmt(r["better_swap"]["bic_change"].get<double>(), 0) + ").";
+        else if (r["redundant"].get<bool>())
+            verdict += " Review: " + r["effect"].get<std::string>() +
+                       " no longer earns its parameters (removing it changes BIC by " +
+                       fmt(r["bic_change_if_removed"].get<double>(), 0) + ").";
+    }
     if (!vcur.explained && !(top && top->v.explained) && !findings.empty()) {
         unexplained_summary += "; found: ";
         for (size_t k = 0; k < std::min<size_t>(3, findings.size()); ++k)
@@ -1060,6 +1120,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
         insep.push_back({{"effects", grp}, {"separate_by", sep}});
     }
     out["inseparable"] = insep;
+    out["model_review"] = review;
     out["unexplained_structure"] = {{"summary", unexplained_summary},
                                     {"residual_of", use_top ? "the model plus " + cands[0].name : modelname},
                                     {"findings", findings}};

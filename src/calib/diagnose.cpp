@@ -628,6 +628,9 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     }
     Verdict vcur = judge(cur, G, jig, rep.n_free);
     const double n_obs = 4.0 * double(P);
+    // The fitted model's reading-space chi-square, the reference every
+    // candidate and every review refit is compared with.
+    const double chi2_cur = model_chi2(model, pos, fo);
 
     // --- candidates
     struct Cand {
@@ -666,7 +669,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                     for (auto &pe : ov.per_effect) c.in_model.push_back(pe.first);
             }
             if (c.k <= 0) continue; // nothing left to fit after the gauge: indistinguishable from the model
-            c.dchi2 = model_chi2(model, pos, fo) - r2.chi2;
+            c.dchi2 = chi2_cur - r2.chi2;
             c.bic = -c.dchi2 + c.k * std::log(n_obs);
             c.score = -c.bic;
             c.E = evaluate(c.m, data, pos);
@@ -726,7 +729,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     json review = json::array();
     {
         auto &I = model.impl();
-        const double bic_cur = model_chi2(model, pos, fo) + rep.n_free * std::log(n_obs);
+        const double bic_cur = chi2_cur + rep.n_free * std::log(n_obs);
         auto rebuild = [&](const std::string &skip, const std::string &add, Model &m2) {
             std::string e2;
             for (auto &e : I.effects) {

@@ -296,3 +296,20 @@ def check(code, function):
     if code < 0:
         raise fail(code, function)
     return code
+
+
+class Closing:
+    """A handle that frees its native object on close(), idempotently; as a
+    context manager and at garbage collection too. Subclasses define close()."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass

@@ -21,7 +21,7 @@ def _vector(values, n, what):
     return (ctypes.c_double * n)(*vals)
 
 
-class Calibration:
+class Calibration(_native.Closing):
     """A fitted calibration (cdm_calibration). Create with Calibration.load(path)
     or Calibration.parse(text); free with close() or a with-block (or let the
     garbage collector do it). Read-only: safe to share between threads."""
@@ -59,18 +59,6 @@ class Calibration:
         h, self._h = self._h, None
         if h:
             _native.lib().cdm_calibration_free(h)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-    def __del__(self):
-        try:
-            self.close()
-        except Exception:
-            pass
 
     def __repr__(self):
         return "<cdm.Calibration %s%s>" % (self.source, " closed" if self._h is None else "")

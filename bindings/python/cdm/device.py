@@ -152,7 +152,7 @@ def _make_sample_callback(fn):
     return _native.cdm_sample_fn(trampoline)
 
 
-class Device:
+class Device(_native.Closing):
     """An open master. Use as a context manager, or call close() (idempotent).
 
     Methods other than close() may be called from any thread; close() must not
@@ -175,18 +175,6 @@ class Device:
     @property
     def closed(self):
         return self._h is None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-    def __del__(self):
-        try:
-            self.close()
-        except Exception:
-            pass
 
     def __repr__(self):
         return "<cdm.Device %r%s>" % (self.uri, " closed" if self.closed else "")

@@ -1,49 +1,48 @@
 #include "calib/simulate.h"
 
-#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <random>
+
+#include "jig/errors.h"
 
 namespace cdm {
 
 namespace {
 template <class Sink> bool run(const Model &truth, const JigSimOptions &o, Sink sink, std::string &err) {
+    JigPlanOptions po;
+    po.n = o.n;
+    po.pitch_mm = o.pitch_mm;
+    po.heights_mm = o.heights;
+    po.samples = o.samples;
+    if (!check_jig_options(po, err)) return false;
+    const auto plan = o.scattered ? make_scattered_plan(po, o.seed ^ 0x3C6EF372FE94F82Bull) : make_jig_plan(po);
+    JigErrorOptions je;
+    je.hole_mm = o.jig_hole_mm;
+    je.fixture_mm = o.jig_fixture_mm;
+    je.seat_mm = o.jig_tolerance_mm;
+    je.seed = o.seed ^ 0xBB67AE8584CAA73Bull;
+    const auto where = jig_true_positions(plan, o.n, je);
     std::mt19937_64 rng(o.seed);
     std::normal_distribution<double> g(0.0, 1.0);
-    long id = 0;
-    const double c = (o.n - 1) / 2.0;
-    std::uniform_real_distribution<double> u(0.0, 1.0);
-    const double hlo = *std::min_element(o.heights.begin(), o.heights.end());
-    const double hhi = *std::max_element(o.heights.begin(), o.heights.end());
-    for (double h : o.heights)
-        for (int iz = 0; iz < o.n; ++iz)
-            for (int iy = 0; iy < o.n; ++iy) {
-                double ref[3] = {h, (iy - c) * o.pitch_mm, (iz - c) * o.pitch_mm};
-                if (o.scattered) {
-                    ref[0] = hlo + (hhi - hlo) * u(rng);
-                    ref[1] = (2 * u(rng) - 1) * c * o.pitch_mm;
-                    ref[2] = (2 * u(rng) - 1) * c * o.pitch_mm;
-                }
-                double jig[3];
-                for (int k = 0; k < 3; ++k) jig[k] = ref[k] + o.jig_tolerance_mm * g(rng);
-                double p[3], L[4];
-                truth.jig_to_device(jig, p);
-                truth.readings(p, L);
-                for (int k = 0; k < 4; ++k)
-                    if (!std::isfinite(L[k])) {
-                        err = "simulated readings are not finite at point " + std::to_string(id);
-                        return false;
-                    }
-                for (int s = 0; s < o.samples; ++s) {
-                    double l[4];
-                    for (int k = 0; k < 4; ++k) {
-                        l[k] = L[k] + o.noise_mm * g(rng);
-                        if (o.quant_mm > 0) l[k] = std::round(l[k] / o.quant_mm) * o.quant_mm;
-                    }
-                    sink(id, ref, l);
-                }
-                ++id;
+    for (size_t k = 0; k < plan.size(); ++k) {
+        double p[3], L[4];
+        truth.jig_to_device(where[k].data(), p);
+        truth.readings(p, L);
+        for (int c = 0; c < 4; ++c)
+            if (!std::isfinite(L[c])) {
+                err = "simulated readings are not finite at point " + std::to_string(plan[k].point);
+                return false;
             }
+        for (int s = 0; s < o.samples; ++s) {
+            double l[4];
+            for (int c = 0; c < 4; ++c) {
+                l[c] = L[c] + o.noise_mm * g(rng);
+                if (o.quant_mm > 0) l[c] = std::round(l[c] / o.quant_mm) * o.quant_mm;
+            }
+            sink(long(plan[k].point), plan[k].ref, l);
+        }
+    }
     return true;
 }
 } // namespace

@@ -1,7 +1,10 @@
 // Jig datasets from a known model: the seed's experiment in software
 // (hole plate, height fixture, repeated samples, pot noise and ADC
-// quantisation, the plate's own hole errors). Used by the tests, by
+// quantisation, the jig's own errors). Used by the tests, by
 // `cdm calib simulate`, and as the truth behind docs/calibration.md.
+// The plan and the jig's error model are jig/'s, shared with the simulated
+// master's motion=jig script; this writes the readings straight into a
+// dataset instead of going through the HID protocol.
 #pragma once
 
 #include <cstdint>
@@ -9,6 +12,7 @@
 #include <vector>
 
 #include "calib/dataset.h"
+#include "jig/plan.h"
 #include "model/model.h"
 
 namespace cdm {
@@ -20,7 +24,12 @@ struct JigSimOptions {
     int samples = 100;
     double noise_mm = 0.05;     // per-sample pot noise (std)
     double quant_mm = 0.01;     // ADC step (mm per count)
-    double jig_tolerance_mm = 0.03; // std of each position's own error, per axis
+    // The jig's errors (jig/errors.h): std of each visit's own seating
+    // error per axis; of each hole's (y, z) error shared by every height;
+    // of each fixture height's x error shared by every hole.
+    double jig_tolerance_mm = 0.03;
+    double jig_hole_mm = 0.0;
+    double jig_fixture_mm = 0.0;
     uint64_t seed = 1;
     // Instead of the plate: as many positions drawn uniformly in the same
     // box (x over the heights' range), as a robot arm or tracker would give.

@@ -1,5 +1,4 @@
 list(APPEND CDM_SOURCES
-  calib/jig_plan.cpp
   calib/dataset.cpp
   calib/fit.cpp
   calib/simulate.cpp

@@ -18,7 +18,7 @@
 #include <thread>
 #include <vector>
 
-#include "calib/jig_plan.h"
+#include "jig/plan.h"
 #include "cdm/cdm.h"
 #include "cli/commands.h"
 #include "device/device.h"

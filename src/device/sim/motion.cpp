@@ -1,5 +1,7 @@
 #include "device/sim/motion.h"
 
+#include "jig/errors.h"
+
 #include <cmath>
 #include <random>
 #include <vector>
@@ -90,21 +92,13 @@ private:
 class JigMotion final : public Motion {
 public:
     JigMotion(const ModelPtr &truth, const JigMotionOptions &o) : o_(o), plan_(make_jig_plan(o.plan)) {
-        std::mt19937_64 rng(o.seed);
-        std::normal_distribution<double> n(0.0, 1.0);
-        const size_t holes = size_t(o.plan.n) * size_t(o.plan.n);
-        hole_err_.resize(holes * 2);
-        for (double &e : hole_err_) e = o.tolerance_mm * n(rng);
-        height_err_.resize(o.plan.heights_mm.size());
-        for (double &e : height_err_) e = o.tolerance_mm * n(rng);
+        JigErrorOptions je;
+        je.hole_mm = o.tolerance_mm;
+        je.fixture_mm = o.tolerance_mm;
+        je.seed = o.seed;
+        const auto where = jig_true_positions(plan_, o.plan.n, je);
         truth_.resize(plan_.size() * 3);
-        for (size_t k = 0; k < plan_.size(); ++k) {
-            const JigPosition &jp = plan_[k];
-            const size_t h = size_t(jp.row) * o.plan.n + size_t(jp.col);
-            const double ref[3] = {jp.ref[0] + height_err_[size_t(jp.height_index)],
-                                   jp.ref[1] + hole_err_[2 * h], jp.ref[2] + hole_err_[2 * h + 1]};
-            truth->jig_to_device(ref, &truth_[3 * k]);
-        }
+        for (size_t k = 0; k < plan_.size(); ++k) truth->jig_to_device(where[k].data(), &truth_[3 * k]);
     }
     bool at(uint64_t index, double, HandState &s) override {
         const uint64_t block = uint64_t(o_.transit) + uint64_t(o_.plan.samples);
@@ -134,7 +128,7 @@ public:
 private:
     JigMotionOptions o_;
     std::vector<JigPosition> plan_;
-    std::vector<double> hole_err_, height_err_, truth_;
+    std::vector<double> truth_;
 };
 } // namespace
 

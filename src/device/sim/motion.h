@@ -6,7 +6,7 @@
 #include <memory>
 #include <string>
 
-#include "calib/jig_plan.h"
+#include "jig/plan.h"
 #include "model/model.h"
 
 namespace cdm::sim {
@@ -45,8 +45,9 @@ struct JigMotionOptions {
 // The seed's calibration session: for each plan position in order, a
 // transit with MARK released, then `plan.samples` samples seated with MARK
 // pressed. The true position is model.jig_to_device(reference + jig error);
-// the jig errors are drawn once (a hole is off by the same amount at every
-// height, a fixture height is off by the same amount at every hole).
+// the jig errors come from the one jig error model (jig/errors.h): a hole is
+// off by the same amount at every height, a fixture height by the same
+// amount at every hole; tolerance_mm is the std of both.
 std::unique_ptr<Motion> make_jig_motion(const ModelPtr &truth, const JigMotionOptions &o);
 
 // Hamilton product r = a * b, quaternions w,x,y,z.

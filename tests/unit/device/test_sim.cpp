@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "api/calibration_handle.h"
-#include "calib/jig_plan.h"
+#include "jig/plan.h"
 #include "cdm/cdm.h"
 #include "device/sim/sim_truth.h"
 #include "model/model.h"

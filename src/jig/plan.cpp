@@ -1,8 +1,10 @@
-#include "calib/jig_plan.h"
+#include "jig/plan.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <random>
 
 namespace cdm {
 
@@ -53,6 +55,25 @@ std::vector<JigPosition> make_jig_plan(const JigPlanOptions &o) {
                 plan.push_back(p);
             }
         }
+    }
+    return plan;
+}
+
+std::vector<JigPosition> make_scattered_plan(const JigPlanOptions &o, uint64_t seed) {
+    std::vector<JigPosition> plan = make_jig_plan(o);
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    double hlo = o.heights_mm.front(), hhi = hlo;
+    for (double h : o.heights_mm) {
+        hlo = std::min(hlo, h);
+        hhi = std::max(hhi, h);
+    }
+    const double half = (o.n - 1) / 2.0 * o.pitch_mm;
+    for (auto &p : plan) {
+        p.height_index = p.row = p.col = -1;
+        p.ref[0] = hlo + (hhi - hlo) * u(rng);
+        p.ref[1] = (2 * u(rng) - 1) * half;
+        p.ref[2] = (2 * u(rng) - 1) * half;
     }
     return plan;
 }

@@ -1002,7 +1002,8 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     // --- JSON
     out = json::object();
     out["tool"] = "cdm calib diagnose";
-    out["version"] = cdm_version();
+    // The header's version, not cdm_version(): calib sits below the API layer.
+    out["version"] = std::to_string(CDM_VERSION_MAJOR) + "." + std::to_string(CDM_VERSION_MINOR) + "." + std::to_string(CDM_VERSION_PATCH);
     out["data"] = {{"path", data.path},
                    {"rows", data.rows},
                    {"positions", P},

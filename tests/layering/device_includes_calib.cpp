@@ -1,0 +1,2 @@
+// Not allowed: device is not built on calib.
+#include "calib/fit.h"

@@ -1,0 +1,3 @@
+// Allowed: device is built on model.
+#include "model/model.h"
+int layering_probe_ok;

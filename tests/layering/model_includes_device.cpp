@@ -1,0 +1,2 @@
+// Not allowed: model is below device.
+#include "device/device.h"

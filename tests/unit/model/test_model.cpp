@@ -8,6 +8,7 @@
 
 #include "model/effect.h"
 #include "model/model.h"
+#include "model/model_json.h"
 
 extern "C" {
 #include <cmocka.h>
@@ -110,12 +111,12 @@ static void json_round_trip_and_errors(void **) {
     assert_true(m.add_effect_random("cable_offset", 4, err));
     assert_true(m.add_effect_random("exit_pulley", 5, err));
     Model back{DeviceGeometry{}};
-    assert_true(Model::from_json(m.to_json(), "t", back, err));
+    assert_true(model_from_json(model_to_json(m), "t", back, err));
     double p[3] = {40, 5, 5}, a[4], b[4];
     m.readings(p, a);
     back.readings(p, b);
     for (int i = 0; i < 4; ++i) assert_true(a[i] == b[i]);
-    assert_false(m.add_effect("no_such_effect", nullptr, err));
+    assert_false(m.add_effect("no_such_effect", {}, err));
     assert_non_null(strstr(err.c_str(), "no_such_effect"));
     assert_false(m.add_effect("cable_gain", {{"zzz", 1.0}}, err));
     assert_non_null(strstr(err.c_str(), "zzz"));

@@ -2,6 +2,7 @@
 #include <cmath>
 
 #include "model/model.h"
+#include "model/triangulate.h"
 
 namespace cdm {
 
@@ -28,25 +29,11 @@ void nominal_lengths(const DeviceGeometry &g, const double p[3], double lengths[
 bool triangulate(const DeviceGeometry &g, const double R[4], double p[3]) {
     for (int i = 0; i < 4; ++i)
         if (!std::isfinite(R[i]) || R[i] < 0) return false;
-    const double a = g.a_mm, b = g.b_mm, m = g.m_mm;
-    const double R1 = R[0] * R[0], R2 = R[1] * R[1], R3 = R[2] * R[2], R4 = R[3] * R[3];
-    // eq. (1), (2)
-    const double ye = ((R3 - R1) + (R4 - R2)) / (4.0 * (2.0 * a - m));
-    const double ze = ((R1 - R2) + (R3 - R4)) / (4.0 * (2.0 * b - m));
-    // eq. (3) in the digest's geometric form: mean of the four heights.
-    double xs = 0.0;
-    for (int i = 0; i < 4; ++i) {
-        const double dy = ye - DeviceGeometry::sy[i] * (a - m / 2);
-        const double dz = ze - DeviceGeometry::sz[i] * (b - m / 2);
-        const double h2 = R[i] * R[i] - dy * dy - dz * dz;
-        if (!(h2 >= 0.0)) return false; // the four spheres do not meet
-        xs += std::sqrt(h2);
-    }
-    const double xe = xs / 4.0;
-    if (!std::isfinite(xe) || !std::isfinite(ye) || !std::isfinite(ze)) return false;
-    p[0] = xe;
-    p[1] = ye;
-    p[2] = ze;
+    double q[3];
+    if (!triangulate_t<double>(g, R, q)) return false;
+    for (int k = 0; k < 3; ++k)
+        if (!std::isfinite(q[k])) return false;
+    for (int k = 0; k < 3; ++k) p[k] = q[k];
     return true;
 }
 

@@ -88,6 +88,10 @@ public:
     // (out is then not to be used). Does not allocate for built-in effects.
     int readings(const double p[3], double out[4]) const { return readings(p, 0.0, out); }
     int readings(const double p[3], double t_s, double out[4]) const;
+    // The readings and their derivatives d reading_i / d p_k (4x3,
+    // row-major): automatic differentiation for the built-ins, central
+    // differences through user effects. Same return as readings().
+    int readings_jacobian(const double p[3], double t_s, double out[4], double dr_dp[12]) const;
 
     // Forward kinematics: the position whose predicted readings best match
     // `lengths` (Gauss-Newton from the triangulation). Returns 0, or -1 when

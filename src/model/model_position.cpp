@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "model/model_impl.h"
+#include "model/triangulate.h"
 
 namespace cdm {
 
@@ -73,6 +74,17 @@ void correct(const Model::Impl &I, double x[3], Eigen::Matrix3d *D) {
 
 } // namespace
 
+int Model::readings_jacobian(const double p[3], double t_s, double out[4], double dr_dp[12]) const {
+    Eigen::Matrix<double, 4, 1> y;
+    Eigen::Matrix<double, 4, 3> J;
+    if (!readings_and_jacobian(*this, *impl_, p, t_s, y, J)) return -1;
+    for (int i = 0; i < 4; ++i) {
+        out[i] = y(i);
+        for (int k = 0; k < 3; ++k) dr_dp[3 * i + k] = J(i, k);
+    }
+    return 0;
+}
+
 int Model::position(const double lengths[4], double t_s, double p[3], double dp_dl[12]) const {
     const Impl &m = *impl_;
     for (int i = 0; i < 4; ++i)
@@ -113,7 +125,14 @@ int Model::position(const double lengths[4], double t_s, double p[3], double dp_
         if (!ok || !(x[0] > 0) || !std::isfinite(x[0] + x[1] + x[2])) return -1;
     }
     Eigen::Matrix<double, 3, 4> dxdl;
-    if (dp_dl) {
+    if (dp_dl && !m.lay.reading_effects) {
+        // The nominal model's position is the triangulation itself.
+        using AD4 = Eigen::AutoDiffScalar<Eigen::Matrix<double, 4, 1>>;
+        AD4 R[4], q[3];
+        for (int i = 0; i < 4; ++i) R[i] = AD4(lengths[i], 4, i);
+        if (!triangulate_t<AD4>(m.g, R, q)) return -1;
+        for (int k = 0; k < 3; ++k) dxdl.row(k) = q[k].derivatives().transpose();
+    } else if (dp_dl) {
         // At the solution the readings match the lengths in the least-squares
         // sense: dx/dl = (J'J)^-1 J' (exact where the residual vanishes).
         if (!readings_and_jacobian(*this, m, x, t_s, y, J)) return -1;

@@ -18,6 +18,15 @@ const char *stage_name(Stage s) {
     }
     return "?";
 }
+// A '|' inside a cell would end it.
+std::string cell(const std::string &t) {
+    std::string o;
+    for (char c : t) {
+        if (c == '|') o += '\\';
+        o += c;
+    }
+    return o;
+}
 } // namespace
 
 std::string catalogue_markdown() {
@@ -26,7 +35,7 @@ std::string catalogue_markdown() {
     int n = 0;
     for (const auto &e : all_effects()) {
         if (e->builtin_id < 0) continue;
-        os << "| " << ++n << " | `" << e->name << "` | " << stage_name(e->stage) << " | " << e->doc << " | ";
+        os << "| " << ++n << " | `" << e->name << "` | " << stage_name(e->stage) << " | " << cell(e->doc) << " | ";
         for (size_t k = 0; k < e->params.size(); ++k)
             os << (k ? ", " : "") << e->params[k].name << (e->params[k].unit.empty() ? "" : " (" + e->params[k].unit + ")");
         os << " |\n";

@@ -47,20 +47,24 @@ bool readings_and_jacobian(const Model &m, const Model::Impl &I, const double x[
 }
 
 // Position-stage corrections at x, and their Jacobian (3x3) when asked.
-void correct(const Model::Impl &I, double x[3], Eigen::Matrix3d *D) {
+// False when a Position-stage effect has more parameters than the stack
+// buffer holds (a new built-in that needs a larger kMaxPositionParams).
+constexpr size_t kMaxPositionParams = 8;
+bool correct(const Model::Impl &I, double x[3], Eigen::Matrix3d *D) {
     const EffectParams<double> pd = I.whole_params();
     if (!D) {
         position_map<double>(pd, x);
-        return;
+        return true;
     }
     // The corrections' parameters as AD constants, on the stack.
-    AD3 store[kBuiltinCount][8];
+    AD3 store[kBuiltinCount][kMaxPositionParams];
     EffectParams<AD3> pa{};
     for (int id = 0; id < kBuiltinCount; ++id) {
         const int e = I.lay.idx[size_t(id)];
         if (e < 0 || I.effects[size_t(e)].desc->stage != Stage::Position) continue;
         const auto &p = I.effects[size_t(e)].p;
-        for (size_t k = 0; k < p.size() && k < 8; ++k) store[id][k] = AD3(p[k]);
+        if (p.size() > kMaxPositionParams) return false;
+        for (size_t k = 0; k < p.size(); ++k) store[id][k] = AD3(p[k]);
         pa[size_t(id)] = store[id];
     }
     AD3 xa[3];
@@ -70,6 +74,7 @@ void correct(const Model::Impl &I, double x[3], Eigen::Matrix3d *D) {
         x[k] = xa[k].value();
         D->row(k) = xa[k].derivatives().transpose();
     }
+    return true;
 }
 
 } // namespace
@@ -140,7 +145,7 @@ int Model::position(const double lengths[4], double t_s, double p[3], double dp_
         dxdl = H.ldlt().solve(J.transpose());
     }
     Eigen::Matrix3d D;
-    correct(m, x, dp_dl ? &D : nullptr);
+    if (!correct(m, x, dp_dl ? &D : nullptr)) return -1;
     if (!std::isfinite(x[0] + x[1] + x[2])) return -1;
     if (dp_dl) {
         Eigen::Matrix<double, 3, 4> G = D * dxdl;

@@ -4,7 +4,9 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <new>
 #include <fstream>
 #include <setjmp.h>
 #include <sstream>
@@ -20,6 +22,16 @@ extern "C" {
 }
 
 using namespace cdm;
+
+// Counts heap allocations, for the driver-path test below.
+static size_t g_allocations = 0;
+void *operator new(size_t n) {
+    ++g_allocations;
+    if (void *p = std::malloc(n ? n : 1)) return p;
+    throw std::bad_alloc();
+}
+void operator delete(void *p) noexcept { std::free(p); }
+void operator delete(void *p, size_t) noexcept { std::free(p); }
 
 // The seed's triangulation inverts the ideal geometry exactly: over the
 // whole workspace (y, z in +-60 mm, x 20..80 mm) the error is rounding
@@ -216,6 +228,27 @@ static void catalogue_table_matches_docs(void **) {
     }
 }
 
+// The driver's path (cdm_get_pose -> Model::position) does not allocate,
+// with every built-in on, the seed's ellipsoid included; neither do the
+// readings (the simulator's path) nor the jig map.
+static void driver_path_does_not_allocate(void **) {
+    Model m{DeviceGeometry{}};
+    std::string err;
+    for (const auto &d : all_effects())
+        if (d->builtin_id >= 0 && d->stage != Stage::Position) assert_true(m.add_effect_random(d->name, 9, err));
+    assert_true(m.add_effect("ellipsoid", {{"L", 5989.1}, {"M", 2950.2}, {"N", 3092.8}}, err));
+    double p[3] = {55, 12, -30}, L[4], q[3], J[12], r[3];
+    const size_t before = g_allocations;
+    assert_int_equal(m.readings(p, L), 0);
+    assert_int_equal(m.position(L, q), 0);
+    assert_int_equal(m.position(L, 0.0, q, J), 0);
+    m.jig_to_device(p, r);
+    assert_int_equal(g_allocations - before, 0);
+    // The counter sees allocations (a copy of the model allocates).
+    Model copy = m;
+    assert_true(g_allocations > before);
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(triangulation_is_exact),
@@ -227,6 +260,7 @@ int main(void) {
         cmocka_unit_test(apply_failure_is_reported),
         cmocka_unit_test(effect_accessors),
         cmocka_unit_test(catalogue_table_matches_docs),
+        cmocka_unit_test(driver_path_does_not_allocate),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

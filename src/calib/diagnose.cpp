@@ -603,7 +603,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
         return fit_model(m, pos, f, r);
     };
     if (!fit_with_progress(model, fo, "fitting the model", rep)) {
-        err = "fit cancelled";
+        err = rep.message.empty() ? "fit cancelled" : rep.message;
         return false;
     }
     Eval cur = evaluate(model, data, pos);
@@ -655,7 +655,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
             if (!c.m.add_effect(d->name, {}, e2)) continue;
             FitReport r2;
             if (!fit_with_progress(c.m, fo, "scoring " + d->name, r2)) {
-                err = "fit cancelled";
+                err = r2.message.empty() ? "fit cancelled" : r2.message;
                 return false;
             }
             c.k = r2.n_free - (rep.n_free - (model_has_ellipsoid ? 3 : 0));
@@ -784,7 +784,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
             for (size_t j = 0; j < P; ++j) fv.use[j] = G.height_index[j] != int(h);
             FitReport rv;
             if (!fit_with_progress(mv, fv, "validation", rv)) {
-                err = "fit cancelled";
+                err = rv.message.empty() ? "fit cancelled" : rv.message;
                 return false;
             }
             Eval ev = evaluate(mv, data, pos);

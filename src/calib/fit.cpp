@@ -349,7 +349,7 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         pb.set_full(W.best_full);
         if (!pb.failure.empty()) return fail();
         if (pb.cancelled) {
-            rep.message = "cancelled";
+            rep.message = "fit cancelled";
             ok = false;
             break;
         }

@@ -11,6 +11,7 @@
 #include "api/errors.h"
 #include "calib/diagnose.h"
 #include "model/effect.h"
+#include "model/model_json.h"
 
 namespace {
 
@@ -19,7 +20,7 @@ int parse_calibration(const std::string &text, const std::string &source, cdm_ca
     std::string err;
     if (!cdm::parse_json_text(text, source, j, err)) return cdm::fail(CDM_ERR_PARSE, err);
     cdm::Model m{cdm::DeviceGeometry{}};
-    if (!cdm::Model::from_json(j, source, m, err)) return cdm::fail(CDM_ERR_PARSE, err);
+    if (!cdm::model_from_json(j, source, m, err)) return cdm::fail(CDM_ERR_PARSE, err);
     *out = new cdm_calibration{std::make_shared<const cdm::Model>(m)};
     return CDM_OK;
 }
@@ -189,7 +190,7 @@ int cdm_diagnose(const char *data_csv_path, const char *device_json_path, const 
         cdm::Model fitted(g);
         if (!cdm::diagnose(data, g, opt, out, fitted, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
         if (!calib_out.empty()) {
-            auto cj = fitted.to_json();
+            auto cj = cdm::model_to_json(fitted);
             cj["fit"] = {{"data", data_csv_path}, {"error_mm", out["error_mm"]}};
             const std::string tmp = calib_out + ".tmp";
             {

@@ -12,7 +12,7 @@
 #include "calib/fit.h"
 #include "cdm/cdm.h"
 #include "model/effect.h"
-#include "model/model_impl.h"
+#include "model/model_json.h"
 
 namespace cdm {
 
@@ -591,7 +591,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     Model model(g);
     for (auto &e : opt.effects) {
         if (e == "ellipsoid") continue; // fitted in position space below
-        if (!model.add_effect(e, nullptr, err)) return false;
+        if (!model.add_effect(e, {}, err)) return false;
     }
     const bool user_jig = opt.jig_tolerance_mm >= 0;
     V3 jig = V3::Constant(user_jig ? opt.jig_tolerance_mm : 0.03);
@@ -603,7 +603,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
         return fit_model(m, pos, f, r);
     };
     if (!fit_with_progress(model, fo, "fitting the model", rep)) {
-        err = "fit cancelled";
+        err = rep.message.empty() ? "fit cancelled" : rep.message;
         return false;
     }
     Eval cur = evaluate(model, data, pos);
@@ -652,10 +652,10 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
             if (model.has_effect(d->name)) continue;
             Cand c{d->name, 0, 0, 0, 0, 0, {}, {}, model, {}, {}};
             std::string e2;
-            if (!c.m.add_effect(d->name, nullptr, e2)) continue;
+            if (!c.m.add_effect(d->name, {}, e2)) continue;
             FitReport r2;
             if (!fit_with_progress(c.m, fo, "scoring " + d->name, r2)) {
-                err = "fit cancelled";
+                err = r2.message.empty() ? "fit cancelled" : r2.message;
                 return false;
             }
             c.k = r2.n_free - (rep.n_free - (model_has_ellipsoid ? 3 : 0));
@@ -728,21 +728,21 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     // (anchors for a jig tilt plus a gain error); this catches it.
     json review = json::array();
     {
-        auto &I = model.impl();
         const double bic_cur = chi2_cur + rep.n_free * std::log(n_obs);
         auto rebuild = [&](const std::string &skip, const std::string &add, Model &m2) {
             std::string e2;
-            for (auto &e : I.effects) {
-                if (e.desc->name == skip || e.desc->stage == Stage::Position) continue;
-                json pj = json::object();
-                for (size_t q = 0; q < e.p.size(); ++q) pj[e.desc->params[q].name] = e.p[q];
-                m2.add_effect(e.desc->name, pj, e2);
+            for (size_t q = 0; q < model.effect_count(); ++q) {
+                const EffectDesc &d = model.effect_desc(q);
+                if (d.name == skip || d.stage == Stage::Position) continue;
+                ParamValues pv;
+                for (size_t k = 0; k < d.params.size(); ++k) pv.emplace_back(d.params[k].name, model.effect_params(q)[k]);
+                m2.add_effect(d.name, pv, e2);
             }
-            if (!add.empty()) m2.add_effect(add, nullptr, e2);
+            if (!add.empty()) m2.add_effect(add, {}, e2);
         };
-        for (auto &e : I.effects) {
-            if (e.desc->stage == Stage::Position) continue;
-            const std::string name = e.desc->name;
+        for (size_t q = 0; q < model.effect_count(); ++q) {
+            if (model.effect_desc(q).stage == Stage::Position) continue;
+            const std::string name = model.effect_name(q);
             Model without{g};
             rebuild(name, "", without);
             FitReport rw;
@@ -784,7 +784,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
             for (size_t j = 0; j < P; ++j) fv.use[j] = G.height_index[j] != int(h);
             FitReport rv;
             if (!fit_with_progress(mv, fv, "validation", rv)) {
-                err = "fit cancelled";
+                err = rv.message.empty() ? "fit cancelled" : rv.message;
                 return false;
             }
             Eval ev = evaluate(mv, data, pos);
@@ -1014,11 +1014,12 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     json mlist = json::array(), params = json::object();
     for (size_t k = 0; k < model.effect_count(); ++k) {
         mlist.push_back(model.effect_name(k));
-        const auto &inst = model.impl().effects[k];
+        const EffectDesc &desc = model.effect_desc(k);
+        const auto &val = model.effect_params(k);
         json pj = json::object();
-        for (size_t q = 0; q < inst.p.size(); ++q) {
+        for (size_t q = 0; q < val.size(); ++q) {
             double sd = (k < rep.std.size() && q < rep.std[k].size()) ? rep.std[k][q] : 0.0;
-            pj[inst.desc->params[q].name] = {{"value", inst.p[q]}, {"std", sd}, {"unit", inst.desc->params[q].unit}};
+            pj[desc.params[q].name] = {{"value", val[q]}, {"std", sd}, {"unit", desc.params[q].unit}};
         }
         params[model.effect_name(k)] = pj;
     }

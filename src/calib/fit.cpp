@@ -9,12 +9,13 @@
 // (anchor positions against pot offsets); parameters in mm, rad and 1/mm
 // need no hand scaling. The whitening is redone at the solution and the fit
 // repeated until the objective stops falling (usually two passes).
-// Derivatives: forward-mode automatic differentiation (Eigen AutoDiffScalar)
-// over each cable's 15 local variables, chained to the global parameters;
-// central differences through user-defined effects.
+// Derivatives: model/evaluator.h (forward-mode automatic differentiation of
+// the templated kernel generated from effects/list.h, seeded on the position
+// and each cable's own parameters and scattered into the full Jacobian;
+// central differences through user-defined effects).
 //
 // Gauge: parameters that change nothing measurable are fixed, not left to
-// wander: with jig_misalignment on, the anchors' common rigid motion (3
+// wander (each effect's gauge() in its file says which): with jig_misalignment on, the anchors' common rigid motion (3
 // translations, 3 small rotations) is the jig's and is projected out of
 // anchor_position; the holder points' common translation is the jig's (or the
 // anchors') and is projected out of holder_geometry; cable_stretch's s0 is the
@@ -29,9 +30,9 @@
 #include <cmath>
 
 #include <nlopt.h>
-#include <unsupported/Eigen/AutoDiff>
 
-#include "model/model_impl.h"
+#include "model/effect.h"
+#include "model/evaluator.h"
 
 namespace cdm {
 
@@ -83,227 +84,86 @@ std::vector<PreparedPos> prepare(const Dataset &d) {
 
 namespace {
 
-using AD16 = Eigen::AutoDiffScalar<Eigen::Matrix<double, kLocalCount, 1>>;
-using AD6 = Eigen::AutoDiffScalar<Eigen::Matrix<double, 6, 1>>;
-
-struct ParamRef {
-    int effect; // index in model effects
-    int k;      // parameter index
-};
-
 struct Problem {
     Model &m;
     const std::vector<PreparedPos> &pos;
     const FitOptions &opt;
-    std::vector<ParamRef> params;     // full parameter list
-    std::vector<int> eff_offset;      // first full index of each effect (-1: not fitted)
-    Eigen::VectorXd base, scale, lo, hi, init;
+    ReadingEvaluator ev;
+    Eigen::VectorXd cur;              // the full parameter vector being evaluated
+    Eigen::VectorXd scale, lo, hi, init;
     Eigen::MatrixXd Q;                // full = base + Q * free
     std::vector<int> rows;            // positions used
     Eigen::VectorXd w;                // weights per observation (4 per used position)
     int evals = 0;
     bool cancelled = false;
+    std::string failure;              // a user effect's apply failed: its message
 
-    Problem(Model &m_, const std::vector<PreparedPos> &p_, const FitOptions &o_) : m(m_), pos(p_), opt(o_) {
-        auto &I = m.impl();
-        eff_offset.assign(I.effects.size(), -1);
-        for (size_t e = 0; e < I.effects.size(); ++e) {
-            if (I.effects[e].desc->stage == Stage::Position) continue;
-            eff_offset[e] = int(params.size());
-            for (size_t k = 0; k < I.effects[e].p.size(); ++k) params.push_back({int(e), int(k)});
-        }
-        const int n = int(params.size());
-        base.resize(n);
+    Problem(Model &m_, const std::vector<PreparedPos> &p_, const FitOptions &o_)
+        : m(m_), pos(p_), opt(o_), ev(m_) {
+        const int n = ev.size();
+        cur = ev.current();
         scale.resize(n);
         lo.resize(n);
         hi.resize(n);
         init.resize(n);
-        for (int a = 0; a < n; ++a) {
-            auto &e = I.effects[params[a].effect];
-            auto &pd = e.desc->params[params[a].k];
-            base(a) = e.p[params[a].k];
-            scale(a) = pd.scale;
-            lo(a) = pd.lower;
-            hi(a) = pd.upper;
-            init(a) = pd.init;
+        for (size_t e = 0; e < m.effect_count(); ++e) {
+            if (ev.offset(e) < 0) continue;
+            const auto &ps = m.effect_desc(e).params;
+            for (size_t k = 0; k < ps.size(); ++k) {
+                const int a = ev.offset(e) + int(k);
+                scale(a) = ps[k].scale;
+                lo(a) = ps[k].lower;
+                hi(a) = ps[k].upper;
+                init(a) = ps[k].init;
+            }
         }
         build_gauge();
         for (size_t j = 0; j < pos.size(); ++j)
             if (opt.use.empty() || opt.use[j]) rows.push_back(int(j));
         compute_weights();
     }
-
-    int off(int builtin) const {
-        int e = m.impl().idx[builtin];
-        return e >= 0 ? eff_offset[e] : -1;
-    }
+    int n_params() const { return ev.size(); }
 
     void build_gauge() {
-        const int n = int(params.size());
-        std::vector<Eigen::MatrixXd> blocks;
+        const int n = ev.size();
         Q = Eigen::MatrixXd::Zero(n, n);
         int col = 0;
-        auto &I = m.impl();
-        const bool jig = off(E_JIG) >= 0, anchor = off(E_ANCHOR) >= 0;
-        for (size_t e = 0; e < I.effects.size(); ++e) {
-            if (eff_offset[e] < 0) continue;
-            const int o = eff_offset[e], np = int(I.effects[e].p.size());
-            const int id = I.effects[e].desc->builtin_id;
-            Eigen::MatrixXd B = Eigen::MatrixXd::Identity(np, np);
-            if (id == E_ANCHOR && jig) {
-                // rigid modes of the four anchors about their centroid
-                Eigen::MatrixXd R(12, 6);
-                for (int i = 0; i < 4; ++i) {
-                    auto A = I.g.anchor(i);
-                    Eigen::Vector3d a(A[0], A[1], A[2]);
-                    for (int k = 0; k < 3; ++k) {
-                        Eigen::Vector3d ek = Eigen::Vector3d::Unit(k);
-                        R.block<3, 1>(3 * i, k) = ek;
-                        R.block<3, 1>(3 * i, 3 + k) = ek.cross(a) / 100.0;
-                    }
-                }
-                B = complement(R);
-            } else if (id == E_HOLDER && (jig || anchor)) {
-                Eigen::MatrixXd R(12, 3);
-                for (int i = 0; i < 4; ++i) R.block<3, 3>(3 * i, 0) = Eigen::Matrix3d::Identity();
-                B = complement(R);
-            } else if (id == E_STRETCH) {
-                std::vector<int> keep;
-                if (off(E_GAIN) < 0) keep.push_back(0);
-                if (off(E_NONLIN) < 0) keep.push_back(1);
-                B = Eigen::MatrixXd::Zero(2, int(keep.size()));
-                for (size_t c = 0; c < keep.size(); ++c) B(keep[c], int(c)) = 1;
-            }
-            Q.block(o, col, np, B.cols()) = B;
+        for (size_t e = 0; e < m.effect_count(); ++e) {
+            if (ev.offset(e) < 0) continue;
+            const int o = ev.offset(e);
+            const Eigen::MatrixXd B = effect_gauge_basis(m, e);
+            Q.block(o, col, B.rows(), B.cols()) = B;
             col += int(B.cols());
         }
         Q.conservativeResize(n, col);
     }
 
-    static Eigen::MatrixXd complement(const Eigen::MatrixXd &R) {
-        Eigen::JacobiSVD<Eigen::MatrixXd> svd(R, Eigen::ComputeFullU);
-        const int r = int(R.cols());
-        return svd.matrixU().rightCols(R.rows() - r);
+    void set_full(const Eigen::VectorXd &full) { cur = full; }
+    Eigen::VectorXd get_full() const { return cur; }
+
+    // Writes the parameters back into the model, clamped to their bounds
+    // (SLSQP honours them to its constraint tolerance, 1e-9).
+    void commit() {
+        for (size_t e = 0; e < m.effect_count(); ++e) {
+            if (ev.offset(e) < 0) continue;
+            std::vector<double> v(m.effect_params(e).size());
+            for (size_t k = 0; k < v.size(); ++k) {
+                const int a = ev.offset(e) + int(k);
+                v[k] = std::clamp(cur(a), lo(a), hi(a));
+            }
+            std::string err;
+            if (!m.set_effect_params(e, v, err) && failure.empty()) failure = err;
+        }
     }
 
-    void set_full(const Eigen::VectorXd &full) {
-        auto &I = m.impl();
-        for (int a = 0; a < int(params.size()); ++a) I.effects[params[a].effect].p[params[a].k] = full(a);
-    }
-    Eigen::VectorXd get_full() const {
-        Eigen::VectorXd v(params.size());
-        auto &I = m.impl();
-        for (int a = 0; a < int(params.size()); ++a) v(a) = I.effects[params[a].effect].p[params[a].k];
-        return v;
-    }
-
-    // Predicted readings and d(readings)/d(full params) at used position j.
-    void eval_position(const PreparedPos &pp, Eigen::Vector4d &y, Eigen::Matrix<double, 4, Eigen::Dynamic> *J,
+    // Predicted readings and d(readings)/d(full params) at a position.
+    bool eval_position(const PreparedPos &pp, Eigen::Vector4d &y, Eigen::Matrix<double, 4, Eigen::Dynamic> *J,
                        Eigen::Matrix<double, 4, 3> *dydP) {
-        const auto &I = m.impl();
-        const int n = int(params.size());
-        // jig: P = R(w) ref + t
-        double P[3];
-        Eigen::Matrix<double, 3, 6> dPdj = Eigen::Matrix<double, 3, 6>::Zero();
-        const int oj = off(E_JIG);
-        if (oj >= 0) {
-            const double *jp = I.params(E_JIG);
-            AD6 wv[3], x[3], out[3];
-            for (int k = 0; k < 3; ++k) {
-                wv[k] = AD6(jp[k], 6, k);
-                x[k] = AD6(pp.ref(k));
-            }
-            rotvec_apply<AD6>(wv, x, out);
-            for (int k = 0; k < 3; ++k) {
-                P[k] = out[k].value() + jp[3 + k];
-                dPdj.row(k) = out[k].derivatives().transpose();
-                dPdj(k, 3 + k) += 1.0;
-            }
-        } else {
-            for (int k = 0; k < 3; ++k) P[k] = pp.ref(k);
-        }
-        if (J) J->setZero(4, n);
-        Eigen::Matrix<double, 4, 3> dP;
-        for (int i = 0; i < 4; ++i) {
-            auto v = I.cable_vars(i);
-            AD16 Pa[3];
-            for (int k = 0; k < 3; ++k) Pa[k] = AD16(P[k], kLocalCount, k);
-            CableVars<AD16> cv;
-            double raw[kCableVarCount] = {v.dA[0], v.dA[1], v.dA[2], v.dh[0], v.dh[1], v.dh[2], v.r,
-                                          v.s0,    v.s1,    v.g,     v.k2,    v.off};
-            AD16 *dst[kCableVarCount] = {&cv.dA[0], &cv.dA[1], &cv.dA[2], &cv.dh[0], &cv.dh[1], &cv.dh[2], &cv.r,
-                                         &cv.s0,    &cv.s1,    &cv.g,     &cv.k2,    &cv.off};
-            for (int k = 0; k < kCableVarCount; ++k) *dst[k] = AD16(raw[k], kLocalCount, 3 + k);
-            AD16 r = cable_reading<AD16>(I.g, i, Pa, cv, I.pulley());
-            y(i) = r.value();
-            const auto &d = r.derivatives();
-            dP.row(i) = d.head<3>().transpose();
-            if (!J) continue;
-            if (oj >= 0) J->block(i, oj, 1, 6) += d.head<3>().transpose() * dPdj;
-            int o;
-            if ((o = off(E_ANCHOR)) >= 0)
-                for (int k = 0; k < 3; ++k) (*J)(i, o + 3 * i + k) += d(3 + k);
-            if ((o = off(E_HOLDER)) >= 0)
-                for (int k = 0; k < 3; ++k) (*J)(i, o + 3 * i + k) += d(6 + k);
-            if ((o = off(E_PULLEY)) >= 0) (*J)(i, o) += d(9);
-            if ((o = off(E_STRETCH)) >= 0) {
-                (*J)(i, o) += d(10);
-                (*J)(i, o + 1) += d(11);
-            }
-            if ((o = off(E_GAIN)) >= 0) (*J)(i, o + i) += d(12);
-            if ((o = off(E_NONLIN)) >= 0) (*J)(i, o + i) += d(13);
-            if ((o = off(E_OFFSET)) >= 0) (*J)(i, o + i) += d(14);
-        }
-        if (I.has_user) apply_user_chain(P, dPdj, oj, y, J, dP);
-        if (dydP) *dydP = dP;
-    }
-
-    // User effects act on the readings: chain their central-difference
-    // derivatives (w.r.t. their parameters, the incoming readings and the
-    // position) onto the built-in Jacobian.
-    void apply_user_chain(const double P[3], const Eigen::Matrix<double, 3, 6> &dPdj, int oj, Eigen::Vector4d &y,
-                          Eigen::Matrix<double, 4, Eigen::Dynamic> *J, Eigen::Matrix<double, 4, 3> &dP) {
-        auto &I = m.impl();
-        for (size_t e = 0; e < I.effects.size(); ++e) {
-            auto &ef = I.effects[e];
-            if (ef.desc->stage != Stage::User) continue;
-            auto call = [&](const std::vector<double> &prm, const double *Pv, const Eigen::Vector4d &yin) {
-                double buf[4] = {yin(0), yin(1), yin(2), yin(3)};
-                ef.desc->apply(ef.desc->user, prm.data(), Pv, buf);
-                return Eigen::Vector4d(buf[0], buf[1], buf[2], buf[3]);
-            };
-            Eigen::Vector4d y1 = call(ef.p, P, y);
-            if (J) {
-                Eigen::Matrix4d Dy;
-                Eigen::Matrix<double, 4, 3> DP;
-                for (int c = 0; c < 4; ++c) {
-                    const double h = 1e-5;
-                    Eigen::Vector4d yp = y, ym = y;
-                    yp(c) += h;
-                    ym(c) -= h;
-                    Dy.col(c) = (call(ef.p, P, yp) - call(ef.p, P, ym)) / (2 * h);
-                }
-                for (int k = 0; k < 3; ++k) {
-                    const double h = 1e-4;
-                    double Pp[3] = {P[0], P[1], P[2]}, Pm[3] = {P[0], P[1], P[2]};
-                    Pp[k] += h;
-                    Pm[k] -= h;
-                    DP.col(k) = (call(ef.p, Pp, y) - call(ef.p, Pm, y)) / (2 * h);
-                }
-                Eigen::Matrix<double, 4, Eigen::Dynamic> Jn = Dy * (*J);
-                if (oj >= 0) Jn.block(0, oj, 4, 6) += DP * dPdj;
-                for (size_t k = 0; k < ef.p.size(); ++k) {
-                    const double h = 1e-6 * std::max(1.0, ef.desc->params[k].scale * 1e3);
-                    auto pp = ef.p, pm = ef.p;
-                    pp[k] += h;
-                    pm[k] -= h;
-                    Jn.col(eff_offset[e] + int(k)) += (call(pp, P, y) - call(pm, P, y)) / (2 * h);
-                }
-                *J = Jn;
-                dP = Dy * dP + DP;
-            }
-            y = y1;
-        }
+        const double ref[3] = {pp.ref(0), pp.ref(1), pp.ref(2)};
+        std::string err;
+        if (ev.eval(cur, ref, pp.t_s, y, J, dydP, &err)) return true;
+        if (failure.empty()) failure = err;
+        return false;
     }
 
     void compute_weights() {
@@ -312,7 +172,7 @@ struct Problem {
             const auto &pp = pos[rows[r]];
             Eigen::Vector4d y;
             Eigen::Matrix<double, 4, 3> dP;
-            eval_position(pp, y, nullptr, &dP);
+            if (!eval_position(pp, y, nullptr, &dP)) dP.setZero();
             for (int c = 0; c < 4; ++c) {
                 double jig = 0;
                 for (int a = 0; a < 3; ++a) jig += dP(c, a) * dP(c, a) * opt.jig_sigma(a) * opt.jig_sigma(a);
@@ -321,22 +181,24 @@ struct Problem {
         }
     }
 
-    // Weighted residuals (sqrt(w) * (mean - y)) and Jacobian of y.
-    void residuals(Eigen::VectorXd &res, Eigen::MatrixXd *J) {
-        const int n = int(params.size());
+    // Weighted residuals (sqrt(w) * (mean - y)) and Jacobian of y. False
+    // when a user effect's apply fails (message in `failure`).
+    bool residuals(Eigen::VectorXd &res, Eigen::MatrixXd *J) {
+        const int n = n_params();
         res.resize(4 * int(rows.size()));
         if (J) J->resize(4 * int(rows.size()), n);
         Eigen::Matrix<double, 4, Eigen::Dynamic> Jp(4, n);
         for (size_t r = 0; r < rows.size(); ++r) {
             const auto &pp = pos[rows[r]];
             Eigen::Vector4d y;
-            eval_position(pp, y, J ? &Jp : nullptr, nullptr);
+            if (!eval_position(pp, y, J ? &Jp : nullptr, nullptr)) return false;
             for (int c = 0; c < 4; ++c) {
                 const double sw = std::sqrt(w(4 * r + c));
                 res(4 * r + c) = sw * (pp.mean(c) - y(c));
                 if (J) J->row(4 * r + c) = sw * Jp.row(c);
             }
         }
+        return true;
     }
 
     double prior(const Eigen::VectorXd &full, Eigen::VectorXd *grad) const {
@@ -368,7 +230,12 @@ double objective(unsigned n, const double *z, double *grad, void *data) {
     pb.set_full(full);
     Eigen::VectorXd res;
     Eigen::MatrixXd J;
-    pb.residuals(res, grad ? &J : nullptr);
+    if (!pb.residuals(res, grad ? &J : nullptr)) {
+        // A user effect failed: stop; fit_model reports it.
+        if (grad) std::fill(grad, grad + n, 0.0);
+        nlopt_force_stop(nullptr);
+        return 1e300;
+    }
     Eigen::VectorXd pg;
     double f = 0.5 * (res.squaredNorm() + pb.prior(full, grad ? &pg : nullptr));
     if (!std::isfinite(f)) f = 1e300;
@@ -416,13 +283,19 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
     const int nfree = int(pb.Q.cols());
     rep.n_free = nfree;
     rep.n_obs = 4 * int(pb.rows.size());
-    auto &I = m.impl();
+    auto fail = [&] {
+        rep.message = "fit failed: " + pb.failure;
+        rep.converged = false;
+        rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        return false;
+    };
+    if (!pb.failure.empty()) return fail(); // while weighting
     if (nfree == 0) {
         Eigen::VectorXd res;
-        pb.residuals(res, nullptr);
+        if (!pb.residuals(res, nullptr)) return fail();
         rep.chi2 = res.squaredNorm();
         rep.converged = true;
-        for (auto &e : I.effects) rep.std.emplace_back(e.p.size(), 0.0);
+        for (size_t e = 0; e < m.effect_count(); ++e) rep.std.emplace_back(m.effect_params(e).size(), 0.0);
         return true;
     }
     double prev = INFINITY;
@@ -433,7 +306,7 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         pb.set_full(full);
         Eigen::VectorXd res;
         Eigen::MatrixXd J;
-        pb.residuals(res, &J);
+        if (!pb.residuals(res, &J)) return fail();
         Eigen::MatrixXd JQ = J * pb.Q;
         Hfree = JQ.transpose() * JQ;
         for (int a = 0; a < int(full.size()); ++a) {
@@ -466,8 +339,9 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         nlopt_result r = nlopt_optimize(o, z.data(), &f);
         nlopt_destroy(o);
         pb.set_full(W.best_full);
+        if (!pb.failure.empty()) return fail();
         if (pb.cancelled) {
-            rep.message = "cancelled";
+            rep.message = "fit cancelled";
             ok = false;
             break;
         }
@@ -480,8 +354,10 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         }
         prev = W.best;
     }
+    pb.commit();
+    pb.set_full(pb.ev.current());
     Eigen::VectorXd res;
-    pb.residuals(res, nullptr);
+    if (!pb.residuals(res, nullptr)) return fail();
     rep.chi2 = res.squaredNorm();
     rep.evals = pb.evals;
     if (!rep.converged && rep.message.empty()) rep.message = "evaluation budget spent before convergence";
@@ -489,10 +365,10 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
     // when the residual is larger than the weights claim.
     {
         Eigen::MatrixXd J;
-        pb.residuals(res, &J);
+        if (!pb.residuals(res, &J)) return fail();
         Eigen::MatrixXd JQ = J * pb.Q;
         Eigen::MatrixXd H = JQ.transpose() * JQ;
-        for (int a = 0; a < int(pb.params.size()); ++a) {
+        for (int a = 0; a < pb.n_params(); ++a) {
             const double sd = 10 * pb.scale(a);
             H += pb.Q.row(a).transpose() * pb.Q.row(a) / (sd * sd);
         }
@@ -500,11 +376,11 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         const double dof = std::max(1, rep.n_obs - nfree);
         const double infl = std::max(1.0, rep.chi2 / dof);
         rep.std.clear();
-        for (size_t e = 0; e < I.effects.size(); ++e) {
-            std::vector<double> s(I.effects[e].p.size(), 0.0);
-            if (pb.eff_offset[e] >= 0)
+        for (size_t e = 0; e < m.effect_count(); ++e) {
+            std::vector<double> s(m.effect_params(e).size(), 0.0);
+            if (pb.ev.offset(e) >= 0)
                 for (size_t k = 0; k < s.size(); ++k) {
-                    const int a = pb.eff_offset[e] + int(k);
+                    const int a = pb.ev.offset(e) + int(k);
                     s[k] = std::sqrt(std::max(0.0, C(a, a)) * infl);
                 }
             rep.std.push_back(s);
@@ -521,10 +397,9 @@ Overlap effect_overlap(const Model &m, const std::vector<PreparedPos> &pos, cons
     Overlap out;
     Eigen::VectorXd res;
     Eigen::MatrixXd J;
-    pb.residuals(res, &J);
-    auto &I = copy.impl();
+    if (!pb.residuals(res, &J)) return out;
     auto cols = [&](size_t e) {
-        const int o = pb.eff_offset[e], n = int(I.effects[e].p.size());
+        const int o = pb.ev.offset(e), n = int(copy.effect_params(e).size());
         Eigen::MatrixXd C = J.middleCols(o, n);
         for (int k = 0; k < n; ++k) {
             const double nn = C.col(k).norm();
@@ -533,8 +408,8 @@ Overlap effect_overlap(const Model &m, const std::vector<PreparedPos> &pos, cons
         return C;
     };
     int target = -1;
-    for (size_t e = 0; e < I.effects.size(); ++e)
-        if (I.effects[e].desc->name == name && pb.eff_offset[e] >= 0) target = int(e);
+    for (size_t e = 0; e < copy.effect_count(); ++e)
+        if (copy.effect_name(e) == name && pb.ev.offset(e) >= 0) target = int(e);
     if (target < 0) return out;
     const Eigen::MatrixXd Jc = cols(size_t(target));
     const double total = Jc.squaredNorm();
@@ -550,10 +425,10 @@ Overlap effect_overlap(const Model &m, const std::vector<PreparedPos> &pos, cons
         return std::sqrt((Qm.transpose() * Jc).squaredNorm() / total);
     };
     Eigen::MatrixXd all(J.rows(), 0);
-    for (size_t e = 0; e < I.effects.size(); ++e) {
-        if (int(e) == target || pb.eff_offset[e] < 0) continue;
+    for (size_t e = 0; e < copy.effect_count(); ++e) {
+        if (int(e) == target || pb.ev.offset(e) < 0) continue;
         Eigen::MatrixXd B = cols(e);
-        out.per_effect.emplace_back(I.effects[e].desc->name, fraction(B));
+        out.per_effect.emplace_back(copy.effect_name(e), fraction(B));
         Eigen::MatrixXd tmp(J.rows(), all.cols() + B.cols());
         tmp << all, B;
         all = tmp;
@@ -566,80 +441,22 @@ double model_chi2(const Model &m, const std::vector<PreparedPos> &pos, const Fit
     Model copy = m;
     Problem pb(copy, pos, opt);
     Eigen::VectorXd res;
-    pb.residuals(res, nullptr);
-    if (n_obs) *n_obs = int(res.size());
+    if (n_obs) *n_obs = 4 * int(pb.rows.size());
+    // A model whose user effect cannot be evaluated explains nothing.
+    if (!pb.residuals(res, nullptr)) return INFINITY;
     return res.squaredNorm();
 }
 
-// ---------------------------------------------------------------- ellipsoid
-
-double Ellipsoid::xc(double y, double z) const {
-    return L * (1.0 - std::sqrt(1.0 + y * y / (M * M) + z * z / (N * N)));
-}
-
-namespace {
-struct EllData {
-    const std::vector<double> *y, *z, *e, *w;
-    double Ls, as, bs; // scales
-};
-double ell_sse(const double *v, const EllData &d) {
-    const double L = v[0] * d.Ls, a = std::fabs(v[1]) * d.as, b = std::fabs(v[2]) * d.bs;
-    double s = 0;
-    for (size_t j = 0; j < d.y->size(); ++j) {
-        const double yy = (*d.y)[j], zz = (*d.z)[j];
-        const double xc = L * (1.0 - std::sqrt(1.0 + a * yy * yy + b * zz * zz));
-        const double r = (*d.e)[j] - xc;
-        s += (*d.w)[j] * r * r;
+bool fit_residual_jacobian(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt,
+                           Eigen::VectorXd &res, Eigen::MatrixXd &J, std::string &err) {
+    Model copy = m;
+    Problem pb(copy, pos, opt);
+    if (!pb.residuals(res, &J)) {
+        err = pb.failure;
+        return false;
     }
-    return s;
-}
-double ell_obj(unsigned, const double *v, double *, void *data) { return ell_sse(v, *static_cast<EllData *>(data)); }
-} // namespace
-
-Ellipsoid fit_ellipsoid(const std::vector<double> &ye, const std::vector<double> &ze, const std::vector<double> &xerr,
-                        const std::vector<double> &w) {
-    // Start: the paraboloid limit, x_err = cy*y^2 + cz*z^2 (linear least
-    // squares, no intercept: eq. 4 is zero at the centre).
-    Eigen::Matrix2d A = Eigen::Matrix2d::Zero();
-    Eigen::Vector2d b = Eigen::Vector2d::Zero();
-    for (size_t j = 0; j < ye.size(); ++j) {
-        Eigen::Vector2d f(ye[j] * ye[j], ze[j] * ze[j]);
-        A += w[j] * f * f.transpose();
-        b += w[j] * f * xerr[j];
-    }
-    Eigen::Vector2d c = A.ldlt().solve(b);
-    Ellipsoid best;
-    best.L = 0;
-    if (!c.allFinite()) return best;
-    // x_c ~ -L/2 (a y^2 + b z^2): one sign for both axes (an ellipsoid);
-    // an axis that wants the other sign starts flat.
-    const double sgn = (c(0) + c(1)) <= 0 ? 1.0 : -1.0;
-    const double L0 = sgn * 5000.0;
-    double a0 = std::max(-2 * c(0) / L0, 1e-12), b0 = std::max(-2 * c(1) / L0, 1e-12);
-    EllData d{&ye, &ze, &xerr, &w, std::fabs(L0), a0, b0};
-    double v[3] = {sgn, 1.0, 1.0};
-    nlopt_opt o = nlopt_create(NLOPT_LN_BOBYQA, 3);
-    nlopt_set_min_objective(o, ell_obj, &d);
-    double lb[3] = {-100, 0, 0}, ub[3] = {100, 1e3, 1e3};
-    nlopt_set_lower_bounds(o, lb);
-    nlopt_set_upper_bounds(o, ub);
-    nlopt_set_xtol_rel(o, 1e-10);
-    nlopt_set_maxeval(o, 4000);
-    double f;
-    nlopt_optimize(o, v, &f);
-    nlopt_destroy(o);
-    const double zero_sse = [&] {
-        double s = 0;
-        for (size_t j = 0; j < ye.size(); ++j) s += w[j] * xerr[j] * xerr[j];
-        return s;
-    }();
-    // Eq. 4 contains "no compensation" (L = 0): never return worse than that.
-    if (!(ell_sse(v, d) < zero_sse)) return best;
-    best.L = v[0] * d.Ls;
-    const double a = std::fabs(v[1]) * d.as, bb = std::fabs(v[2]) * d.bs;
-    best.M = a > 0 ? 1.0 / std::sqrt(a) : 1e12;
-    best.N = bb > 0 ? 1.0 / std::sqrt(bb) : 1e12;
-    return best;
+    J = -J; // residual = sqrt(w) * (mean - y)
+    return true;
 }
 
 } // namespace cdm

@@ -26,6 +26,7 @@ struct PreparedPos {
     Eigen::Matrix4d cov;      // sample covariance of the readings
     int n = 0;
     size_t first = 0;
+    double t_s = 0; // acquisition time of the position (s), for effects that drift in time
 };
 
 std::vector<PreparedPos> prepare(const Dataset &d);
@@ -52,6 +53,8 @@ struct FitReport {
 
 // Fits every parameter of every effect in `m` except the ellipsoid's, from
 // their current values. Gauge freedoms are fixed explicitly (see fit.cpp).
+// False with rep.message when cancelled or when a user effect's apply
+// returns non-zero (the message names the effect).
 bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt, FitReport &rep);
 
 // How much of effect `name`'s action on the readings (its Jacobian columns,
@@ -65,8 +68,17 @@ struct Overlap {
 Overlap effect_overlap(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt,
                        const std::string &name);
 
-// Reading-space weighted chi-square of a model (no fitting).
+// Reading-space weighted chi-square of a model (no fitting); +infinity when
+// a user effect's apply fails.
 double model_chi2(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt, int *n_obs = nullptr);
+
+// The fit's weighted residuals sqrt(w) * (mean - y) at the model's current
+// parameters, and their Jacobian with respect to every fitted parameter
+// (columns: the effects in model order, each effect's parameters in order,
+// Position-stage effects left out) — what the NLopt objective uses. False +
+// err naming the effect when a user effect's apply fails.
+bool fit_residual_jacobian(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt,
+                           Eigen::VectorXd &res, Eigen::MatrixXd &J, std::string &err);
 
 // The seed's ellipsoid (eq. 4-5): fitted to per-position x errors over the
 // estimated (y, z), least squares weighted by sample count. Returns L, M, N.

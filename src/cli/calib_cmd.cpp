@@ -16,6 +16,7 @@
 #include "cdm/cdm.h"
 #include "cli/commands.h"
 #include "model/effect.h"
+#include "model/model_json.h"
 
 namespace cdm::cli {
 
@@ -210,7 +211,7 @@ int cmd_simulate(SimArgs &a) {
         std::stringstream ss;
         ss << f.rdbuf();
         try {
-            if (!Model::from_json(nlohmann::json::parse(ss.str()), a.truth, truth, err)) throw std::runtime_error(err);
+            if (!model_from_json(nlohmann::json::parse(ss.str()), a.truth, truth, err)) throw std::runtime_error(err);
         } catch (const std::exception &e) {
             std::fprintf(stderr, "cdm calib simulate: %s\n", e.what());
             return 2;
@@ -231,7 +232,7 @@ int cmd_simulate(SimArgs &a) {
         std::fprintf(stderr, "cdm calib simulate: %s\n", err.c_str());
         return 2;
     }
-    if (!a.truth_out.empty() && !write_atomic(a.truth_out, truth.to_json().dump(2) + "\n")) return 2;
+    if (!a.truth_out.empty() && !write_atomic(a.truth_out, model_to_json(truth).dump(2) + "\n")) return 2;
     std::printf("wrote %s (%zu positions x %d samples)\n", a.out.c_str(),
                 a.o.heights.size() * size_t(a.o.n) * size_t(a.o.n), a.o.samples);
     return 0;

@@ -15,6 +15,7 @@
 #include "device/sim/sim_truth.h"
 #include "device/sim/simulator.h"
 #include "device/transport.h"
+#include "model/model_json.h"
 
 namespace cdm {
 
@@ -244,7 +245,7 @@ int open_sim(const Uri &u, TransportPtr &out, std::string &err) {
             return CDM_ERR_PARSE;
         }
         model = std::make_shared<Model>(g);
-        if (!Model::from_json(j, truth_path, *model, err)) {
+        if (!model_from_json(j, truth_path, *model, err)) {
             err = "URI \"" + u.text + "\": option truth: " + err;
             return CDM_ERR_PARSE;
         }

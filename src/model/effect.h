@@ -1,6 +1,6 @@
 // The effect catalogue: what a physical effect is to the model (its
 // parameters, units, typical magnitude, where it acts), and the registry that
-// lists the built-in ones (effects/*.h, one file per effect) and the ones a
+// lists the built-in ones (effects/list.h, one file per effect) and the ones a
 // user registers at run time (C callback, plugin, Python).
 #pragma once
 
@@ -37,7 +37,7 @@ struct EffectDesc {
     std::string name;
     std::string doc;       // the physics in one paragraph, with the typical magnitude
     Stage stage;
-    int builtin_id;        // BuiltinEffect, or -1 for a user effect
+    int builtin_id;        // index in CDM_BUILTIN_EFFECTS (effects/list.h), or -1 for a user effect
     std::vector<ParamDesc> params;
     // user effects only
     cdm_effect_apply_fn apply = nullptr;
@@ -45,19 +45,6 @@ struct EffectDesc {
 };
 
 using EffectDescPtr = std::shared_ptr<const EffectDesc>;
-
-enum BuiltinEffect {
-    E_JIG = 0,
-    E_ANCHOR,
-    E_HOLDER,
-    E_OFFSET,
-    E_GAIN,
-    E_NONLIN,
-    E_PULLEY,
-    E_STRETCH,
-    E_ELLIPSOID,
-    E_BUILTIN_COUNT
-};
 
 // The registry. Built-ins first (in catalogue order), then user effects in
 // registration order. Thread-safe.
@@ -69,15 +56,8 @@ std::vector<EffectDescPtr> candidate_effects();
 int register_user_effect(const cdm_effect_def *def, std::string &err);
 int unregister_user_effect(const std::string &name, std::string &err);
 
-// Descriptors of the built-ins, one per file in effects/.
-EffectDesc make_jig_misalignment();
-EffectDesc make_anchor_position();
-EffectDesc make_holder_geometry();
-EffectDesc make_cable_offset();
-EffectDesc make_cable_gain();
-EffectDesc make_pot_nonlinearity();
-EffectDesc make_exit_pulley();
-EffectDesc make_cable_stretch();
-EffectDesc make_ellipsoid();
+// The catalogue as a Markdown table (docs/calibration.md carries a copy that
+// a test keeps equal): one row per built-in, in the order of application.
+std::string catalogue_markdown();
 
 } // namespace cdm

@@ -1,73 +1,135 @@
-// The measurement kernel: one cable's predicted reading at a holder position,
-// templated on the scalar so that the fit (Eigen's AutoDiffScalar over the
-// cable's local variables) and the driver (double) run the same code.
+// The measurement kernel, generated from the effect list (effects/list.h):
+// one cable's predicted reading at a sample, the jig map and the position
+// correction, templated on the scalar so that the fit (AutoDiffScalar over
+// the position and the cable's own parameters), the forward kinematics
+// (AutoDiffScalar over the position) and the simulator (double) run the
+// same code. Private to src/model.
 #pragma once
 
+#include <array>
 #include <cmath>
 
-#include <unsupported/Eigen/AutoDiff>
-
-#include "model/model.h"
+#include "model/effects/list.h"
 
 namespace cdm {
 
-// Eigen's atan2 for AutoDiffScalar returns a dynamically sized derivative
-// (a heap allocation on the driver's path); this one keeps the caller's type.
-inline double kernel_atan2(double y, double x) { return std::atan2(y, x); }
-template <class D>
-Eigen::AutoDiffScalar<D> kernel_atan2(const Eigen::AutoDiffScalar<D> &y, const Eigen::AutoDiffScalar<D> &x) {
-    const double yv = y.value(), xv = x.value();
-    const double den = xv * xv + yv * yv;
-    return Eigen::AutoDiffScalar<D>(std::atan2(yv, xv),
-                                    D((y.derivatives() * xv - x.derivatives() * yv) / den));
-}
-
-// Everything one cable's reading depends on besides the holder position.
-// Zero for every effect that is off.
-template <class T> struct CableVars {
-    T dA[3]; // anchor_position
-    T dh[3]; // holder_geometry
-    T r;     // exit_pulley radius (mm); the straight line when the effect is off
-    T s0, s1; // cable_stretch
-    T g;     // cable_gain
-    T k2;    // pot_nonlinearity
-    T off;   // cable_offset
+enum BuiltinIndex : int {
+#define CDM_EFFECT_INDEX(E) kIdx_##E,
+    CDM_BUILTIN_EFFECTS(CDM_EFFECT_INDEX)
+#undef CDM_EFFECT_INDEX
+    kBuiltinCount
 };
-constexpr int kCableVarCount = 12; // the fields above, in that order
-constexpr int kLocalCount = 15;    // 3 position + 12 cable variables
 
-// Pulley kinematics. The cable arrives along the pot axis u at the anchor A,
-// wraps over a guide of radius r whose centre is A + r n (n: the unit vector
-// from the axis toward the holder, in the plane of u and the holder) and
-// leaves tangentially to H. In that plane (s along u, t along n) the centre
-// is (0, r), H is (hs, ht); the cable goes round counter-clockwise from the
-// angle -pi/2 to the tangent point at phi - acos(r/D), phi = atan2(ht - r, hs),
-// D = |H - C|. Wrap beta = phi + pi/2 - acos(r/D); free length sqrt(D^2-r^2).
-// At r = 0 this is |H - A|.
-template <class T>
-T cable_path_length(const double u[3], const T d[3], const T &r, bool pulley) {
-    using std::acos;
-    using std::sqrt;
-    if (!pulley) return sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-    T hs = d[0] * u[0] + d[1] * u[1] + d[2] * u[2];
-    T p0 = d[0] - hs * u[0], p1 = d[1] - hs * u[1], p2 = d[2] - hs * u[2];
-    T ht = sqrt(p0 * p0 + p1 * p1 + p2 * p2);
-    T dt = ht - r;
-    T D2 = hs * hs + dt * dt;
-    T D = sqrt(D2);
-    T beta = kernel_atan2(dt, hs) + T(M_PI / 2) - acos(r / D);
-    return r * beta + sqrt(D2 - r * r);
+template <class E> struct BuiltinIndexOf;
+#define CDM_EFFECT_INDEX_OF(E)                                                                                       \
+    template <> struct BuiltinIndexOf<E> {                                                                           \
+        static constexpr int value = kIdx_##E;                                                                       \
+    };
+CDM_BUILTIN_EFFECTS(CDM_EFFECT_INDEX_OF)
+#undef CDM_EFFECT_INDEX_OF
+
+// Every cable parameter of every built-in, if all were on: the size of the
+// per-cable parameter block (and of the fit's AD derivative vector, + 3).
+constexpr int kMaxCableSlots = 0
+#define CDM_EFFECT_SLOTS(E) +E::kCableParams
+    CDM_BUILTIN_EFFECTS(CDM_EFFECT_SLOTS);
+#undef CDM_EFFECT_SLOTS
+
+// The list order is the order of application, so stages may not decrease.
+constexpr bool stages_in_order() {
+    const Stage s[] = {
+#define CDM_EFFECT_STAGE(E) E::kStage,
+        CDM_BUILTIN_EFFECTS(CDM_EFFECT_STAGE)
+#undef CDM_EFFECT_STAGE
+    };
+    for (size_t k = 1; k < sizeof s / sizeof s[0]; ++k)
+        if (s[k] < s[k - 1]) return false;
+    return true;
 }
+static_assert(stages_in_order(), "effects/list.h: the list is the order of application; stages must not decrease");
 
+// Where each active reading-stage built-in's cable parameters sit in a
+// cable's parameter block: slot[id] is the first, -1 when the effect is off.
+// The same for the four cables (kCableParams is per effect).
+struct CableLayout {
+    std::array<int, kBuiltinCount> slot;
+    int nslots = 0;
+};
+
+// Parameters of whole effects (Jig and Position stages): p[id], or nullptr.
+template <class T> using EffectParams = std::array<const T *, kBuiltinCount>;
+
+namespace detail {
+template <class E, class T>
+void geometry_step(const CableLayout &lay, const T *q, int i, const Sample<T> &s, CableGeom<T> &g) {
+    if constexpr (E::kStage == Stage::Geometry) {
+        const int o = lay.slot[BuiltinIndexOf<E>::value];
+        if (o >= 0) E::geometry(q + o, i, s, g);
+    }
+}
+template <class E, class T>
+void path_step(const CableLayout &lay, const T *q, int i, const Sample<T> &s, const PathIn<T> &in, T &len) {
+    if constexpr (E::kStage == Stage::Path) {
+        const int o = lay.slot[BuiltinIndexOf<E>::value];
+        if (o >= 0) E::path(q + o, i, s, in, len);
+    }
+}
+template <class E, class T>
+void transfer_step(const CableLayout &lay, const T *q, int i, const Sample<T> &s, TransferState<T> &st) {
+    if constexpr (E::kStage == Stage::Transfer) {
+        const int o = lay.slot[BuiltinIndexOf<E>::value];
+        if (o >= 0) E::transfer(q + o, i, s, st);
+    }
+}
+template <class E, class T> void jig_step(const EffectParams<T> &p, T x[3]) {
+    if constexpr (E::kStage == Stage::Jig) {
+        if (const T *pe = p[BuiltinIndexOf<E>::value]) E::jig(pe, x);
+    }
+}
+template <class E, class T> void position_step(const EffectParams<T> &p, T x[3]) {
+    if constexpr (E::kStage == Stage::Position) {
+        if (const T *pe = p[BuiltinIndexOf<E>::value]) E::position(pe, x);
+    }
+}
+} // namespace detail
+
+// Cable i's reading from the built-in effects (user effects act after).
+// q: the cable's parameter block laid out by `lay`.
 template <class T>
-T cable_reading(const DeviceGeometry &g, int i, const T P[3], const CableVars<T> &v, bool pulley) {
+T cable_reading(const DeviceGeometry &g, int i, const Sample<T> &s, const CableLayout &lay, const T *q) {
+    using std::sqrt;
+    CableGeom<T> geo;
+#define CDM_STEP(E) detail::geometry_step<E, T>(lay, q, i, s, geo);
+    CDM_BUILTIN_EFFECTS(CDM_STEP)
+#undef CDM_STEP
     const auto A0 = g.anchor(i);
     const auto h0 = g.holder(i);
     T d[3];
-    for (int k = 0; k < 3; ++k) d[k] = P[k] + T(h0[k]) + v.dh[k] - T(A0[k]) - v.dA[k];
-    T L = cable_path_length(g.exit_axis[i].data(), d, v.r, pulley);
-    T Lu = L * (T(1) - v.s0 - v.s1 * L);
-    return v.off + (T(1) + v.g) * Lu + v.k2 * Lu * Lu;
+    for (int k = 0; k < 3; ++k) d[k] = s.P[k] + T(h0[k]) + geo.dh[k] - T(A0[k]) - geo.dA[k];
+    T len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    const PathIn<T> in{g.exit_axis[i].data(), d};
+#define CDM_STEP(E) detail::path_step<E, T>(lay, q, i, s, in, len);
+    CDM_BUILTIN_EFFECTS(CDM_STEP)
+#undef CDM_STEP
+    TransferState<T> st{len, len};
+#define CDM_STEP(E) detail::transfer_step<E, T>(lay, q, i, s, st);
+    CDM_BUILTIN_EFFECTS(CDM_STEP)
+#undef CDM_STEP
+    return st.reading;
+}
+
+// Jig reference position -> device frame (Jig-stage effects, in order).
+template <class T> void jig_map(const EffectParams<T> &p, T x[3]) {
+#define CDM_STEP(E) detail::jig_step<E, T>(p, x);
+    CDM_BUILTIN_EFFECTS(CDM_STEP)
+#undef CDM_STEP
+}
+
+// Position-space corrections (Position-stage effects, in order).
+template <class T> void position_map(const EffectParams<T> &p, T x[3]) {
+#define CDM_STEP(E) detail::position_step<E, T>(p, x);
+    CDM_BUILTIN_EFFECTS(CDM_STEP)
+#undef CDM_STEP
 }
 
 } // namespace cdm

@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include <nlohmann/json.hpp>
+#include <utility>
 
 namespace cdm {
 
@@ -33,16 +33,6 @@ struct DeviceGeometry {
     static constexpr double sz[4] = {-1, +1, -1, +1};
 };
 
-// Parses JSON text; on a syntax error returns false with `err` naming
-// source:line:column.
-bool parse_json_text(const std::string &text, const std::string &source, nlohmann::json &out, std::string &err);
-
-// Parses a device description. On error returns false and sets `err` to a
-// message naming `source` and, for JSON syntax errors, the line and column.
-bool parse_device_json(const std::string &text, const std::string &source, DeviceGeometry &out,
-                       std::string &err);
-nlohmann::json device_to_json(const DeviceGeometry &g);
-
 // The seed's triangulation, eq. (1)-(3) with the digest's geometric eq. (3).
 // Exact inverse of the ideal geometry. Returns false (and leaves p alone) when
 // the four spheres do not meet (a negative square root) or any input is not
@@ -53,6 +43,10 @@ bool triangulate(const DeviceGeometry &g, const double lengths[4], double p[3]);
 void nominal_lengths(const DeviceGeometry &g, const double p[3], double lengths[4]);
 
 class Model; // model/model_impl: geometry + effects with parameters
+struct EffectDesc; // model/effect.h
+
+// Parameter values by name, for add_effect.
+using ParamValues = std::vector<std::pair<std::string, double>>;
 
 // Shared, immutable once built: the driver swaps whole models.
 using ModelPtr = std::shared_ptr<const Model>;
@@ -70,9 +64,15 @@ public:
     size_t effect_count() const;
     const std::string &effect_name(size_t i) const;
     // Adds an effect (built-in or user-registered) with its parameters at
-    // zero (or the given values, by parameter name). False + err on unknown
-    // name or parameter.
-    bool add_effect(const std::string &name, const nlohmann::json &params, std::string &err);
+    // their start values, or the given values (by parameter name). False +
+    // err on an unknown effect or parameter, or a non-finite value.
+    bool add_effect(const std::string &name, const ParamValues &params, std::string &err);
+    // Effect i's description and parameter values (effect_desc(i).params order).
+    const EffectDesc &effect_desc(size_t i) const;
+    const std::vector<double> &effect_params(size_t i) const;
+    // Replaces effect i's parameter values; false + err when the size is
+    // wrong or a value is non-finite or outside the parameter's bounds.
+    bool set_effect_params(size_t i, const std::vector<double> &v, std::string &err);
     bool has_effect(const std::string &name) const;
     // Adds an effect with parameters drawn at random within the realistic
     // ranges its doc states (the simulator's hidden effects).
@@ -83,28 +83,30 @@ public:
     void jig_to_device(const double ref[3], double out[3]) const;
 
     // Predicted pot readings (mm, nominal scale) at holder centre p, device
-    // frame. Does not allocate for built-in effects.
-    void readings(const double p[3], double out[4]) const;
+    // frame, at acquisition time t_s (s; effects that drift in time read
+    // it). Returns 0, or -1 when a user effect's apply returned non-zero
+    // (out is then not to be used). Does not allocate for built-in effects.
+    int readings(const double p[3], double out[4]) const { return readings(p, 0.0, out); }
+    int readings(const double p[3], double t_s, double out[4]) const;
+    // The readings and their derivatives d reading_i / d p_k (4x3,
+    // row-major): automatic differentiation for the built-ins, central
+    // differences through user effects. Same return as readings().
+    int readings_jacobian(const double p[3], double t_s, double out[4], double dr_dp[12]) const;
 
     // Forward kinematics: the position whose predicted readings best match
     // `lengths` (Gauss-Newton from the triangulation). Returns 0, or -1 when
-    // there is no real solution or no convergence (p untouched). Does not
-    // allocate for built-in effects.
-    int position(const double lengths[4], double p[3]) const;
+    // there is no real solution, no convergence or a user effect's apply
+    // failed (p untouched). dp_dl, when not null, receives d p / d lengths
+    // (3x4, row-major) at the solution. Does not allocate for built-in
+    // effects.
+    int position(const double lengths[4], double p[3]) const { return position(lengths, 0.0, p, nullptr); }
+    int position(const double lengths[4], double t_s, double p[3], double dp_dl[12]) const;
 
     // Position-space correction of the seed's ellipsoid (eq. 4), if the
     // model has the `ellipsoid` effect; applied inside position().
     bool is_nominal() const;
 
-    // Calibration JSON: {"format":"cdm-calibration","version":1,
-    //   "device":{...},"effects":[{"name":..,"params":{..}}], ...}
-    nlohmann::json to_json() const;
-    static bool from_json(const nlohmann::json &j, const std::string &source, Model &out,
-                          std::string &err);
-
-    struct Impl;
-    Impl &impl();
-    const Impl &impl() const;
+    struct Impl; // model_impl.h, private to src/model
 
 private:
     std::unique_ptr<Impl> impl_;

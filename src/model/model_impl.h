@@ -1,7 +1,9 @@
-// Model internals, shared with the fit (calib/). Not part of any API.
+// Model internals. Private to src/model: the fit goes through
+// model/evaluator.h and the public accessors.
 #pragma once
 
 #include <array>
+#include <string>
 #include <vector>
 
 #include "model/effect.h"
@@ -15,45 +17,43 @@ struct EffectInst {
     std::vector<double> p;
 };
 
+// Built from the model's effects (refresh): where each active built-in's
+// parameters are, and where each cable's parameter block comes from.
+struct ModelLayout {
+    std::array<int, kBuiltinCount> idx;      // model effect index of each built-in, -1 when off
+    CableLayout cable;                        // slot layout of a cable's parameter block
+    std::array<std::array<int, kMaxCableSlots>, 4> slot_effect{}; // model effect index of each slot
+    std::array<std::array<int, kMaxCableSlots>, 4> slot_param{};  // parameter index of each slot
+    bool has_user = false;
+    bool reading_effects = false; // anything besides Jig and Position stages
+
+};
+// descs: the model's effects in order.
+ModelLayout build_layout(const std::vector<const EffectDesc *> &descs);
+
 struct Model::Impl {
     DeviceGeometry g;
-    std::vector<EffectInst> effects; // ordered by stage
-    std::array<int, E_BUILTIN_COUNT> idx{};
-    bool has_user = false;
-    bool reading_effects = false; // anything besides jig and ellipsoid
+    std::vector<EffectInst> effects; // in the order of application
+    ModelLayout lay;
 
     void refresh();
     const double *params(int builtin) const {
-        return idx[builtin] >= 0 ? effects[idx[builtin]].p.data() : nullptr;
+        return lay.idx[builtin] >= 0 ? effects[size_t(lay.idx[builtin])].p.data() : nullptr;
     }
-    // Cable i's variables from the current parameters (double).
-    CableVars<double> cable_vars(int i) const;
-    bool pulley() const { return idx[E_PULLEY] >= 0; }
-    // Readings of the built-in stages only (before user effects).
-    void builtin_readings(const double p[3], double out[4]) const;
-    void apply_user(const double p[3], double readings[4]) const;
-    void ellipsoid_correct(double p[3]) const;
+    // Cable i's parameter block, converted to T (constants for AD).
+    template <class T> void gather(int i, T *q) const {
+        for (int s = 0; s < lay.cable.nslots; ++s)
+            q[s] = T(effects[size_t(lay.slot_effect[i][s])].p[size_t(lay.slot_param[i][s])]);
+    }
+    EffectParams<double> whole_params() const {
+        EffectParams<double> p{};
+        for (int id = 0; id < kBuiltinCount; ++id) p[size_t(id)] = params(id);
+        return p;
+    }
+    // Readings of the built-in stages, then user effects. 0, or -1 when a
+    // user effect's apply fails (its name in *who).
+    int builtin_readings(const Sample<double> &s, double out[4]) const;
+    int apply_user(const double p[3], double readings[4], std::string *who) const;
 };
-
-// Rotation matrix of a rotation vector (Rodrigues), templated for the fit.
-template <class T> void rotvec_apply(const T w[3], const T x[3], T out[3]) {
-    using std::cos;
-    using std::sin;
-    using std::sqrt;
-    T th2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
-    // Series below 1e-12 rad^2 keeps derivatives exact at zero.
-    T a, b;
-    if (th2 < T(1e-12)) {
-        a = T(1) - th2 / T(6);
-        b = T(0.5) - th2 / T(24);
-    } else {
-        T th = sqrt(th2);
-        a = sin(th) / th;
-        b = (T(1) - cos(th)) / th2;
-    }
-    T c[3] = {w[1] * x[2] - w[2] * x[1], w[2] * x[0] - w[0] * x[2], w[0] * x[1] - w[1] * x[0]};
-    T cc[3] = {w[1] * c[2] - w[2] * c[1], w[2] * c[0] - w[0] * c[2], w[0] * c[1] - w[1] * c[0]};
-    for (int k = 0; k < 3; ++k) out[k] = x[k] + a * c[k] + b * cc[k];
-}
 
 } // namespace cdm

@@ -53,7 +53,7 @@ void BM_FitExitPulley(benchmark::State &st) {
     for (auto _ : st) {
         cdm::Model m{cdm::DeviceGeometry{}};
         std::string err;
-        m.add_effect("exit_pulley", nullptr, err);
+        m.add_effect("exit_pulley", {}, err);
         cdm::FitReport r;
         benchmark::DoNotOptimize(cdm::fit_model(m, pos, cdm::FitOptions{}, r));
     }
@@ -65,8 +65,8 @@ void BM_FitAnchorsAndJig(benchmark::State &st) {
     for (auto _ : st) {
         cdm::Model m{cdm::DeviceGeometry{}};
         std::string err;
-        m.add_effect("anchor_position", nullptr, err);
-        m.add_effect("jig_misalignment", nullptr, err);
+        m.add_effect("anchor_position", {}, err);
+        m.add_effect("jig_misalignment", {}, err);
         cdm::FitReport r;
         benchmark::DoNotOptimize(cdm::fit_model(m, pos, cdm::FitOptions{}, r));
     }

@@ -7,6 +7,7 @@
 #include "calib/dataset.h"
 #include "cdm/cdm.h"
 #include "model/model.h"
+#include "model/model_json.h"
 
 void fuzz_calib_one(const uint8_t *data, size_t size) {
     const std::string text(reinterpret_cast<const char *>(data), size);

@@ -3,17 +3,35 @@
 #include <cstdarg>
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <new>
+#include <fstream>
 #include <setjmp.h>
+#include <sstream>
+#include <vector>
 
+#include "calib/fit.h"
 #include "model/effect.h"
 #include "model/model.h"
+#include "model/model_json.h"
 
 extern "C" {
 #include <cmocka.h>
 }
 
 using namespace cdm;
+
+// Counts heap allocations, for the driver-path test below.
+static size_t g_allocations = 0;
+void *operator new(size_t n) {
+    ++g_allocations;
+    if (void *p = std::malloc(n ? n : 1)) return p;
+    throw std::bad_alloc();
+}
+void operator delete(void *p) noexcept { std::free(p); }
+void operator delete(void *p, size_t) noexcept { std::free(p); }
 
 // The seed's triangulation inverts the ideal geometry exactly: over the
 // whole workspace (y, z in +-60 mm, x 20..80 mm) the error is rounding
@@ -110,12 +128,12 @@ static void json_round_trip_and_errors(void **) {
     assert_true(m.add_effect_random("cable_offset", 4, err));
     assert_true(m.add_effect_random("exit_pulley", 5, err));
     Model back{DeviceGeometry{}};
-    assert_true(Model::from_json(m.to_json(), "t", back, err));
+    assert_true(model_from_json(model_to_json(m), "t", back, err));
     double p[3] = {40, 5, 5}, a[4], b[4];
     m.readings(p, a);
     back.readings(p, b);
     for (int i = 0; i < 4; ++i) assert_true(a[i] == b[i]);
-    assert_false(m.add_effect("no_such_effect", nullptr, err));
+    assert_false(m.add_effect("no_such_effect", {}, err));
     assert_non_null(strstr(err.c_str(), "no_such_effect"));
     assert_false(m.add_effect("cable_gain", {{"zzz", 1.0}}, err));
     assert_non_null(strstr(err.c_str(), "zzz"));
@@ -126,6 +144,111 @@ static void json_round_trip_and_errors(void **) {
     assert_non_null(strstr(err.c_str(), "m_mm"));
 }
 
+// A user effect whose apply fails (here: beyond a reach it models) must
+// fail what uses it, never hand out a number computed without it.
+static int fails_beyond_x80(void *, const double *, const double p[3], double r[4]) {
+    if (p[0] > 80) return 7;
+    for (int i = 0; i < 4; ++i) r[i] += 0.01;
+    return 0;
+}
+
+static void apply_failure_is_reported(void **) {
+    const char *names[] = {"o"};
+    const double scale[] = {0.1};
+    cdm_effect_def def{};
+    def.struct_size = sizeof def;
+    def.n_params = 1;
+    def.name = "test_fails_far";
+    def.param_names = names;
+    def.param_scale = scale;
+    def.apply = fails_beyond_x80;
+    std::string err;
+    assert_int_equal(register_user_effect(&def, err), CDM_OK);
+    Model m{DeviceGeometry{}};
+    assert_true(m.add_effect("test_fails_far", {}, err));
+    double near[3] = {50, 0, 0}, far[3] = {100, 0, 0}, L[4], q[3];
+    assert_int_equal(m.readings(near, L), 0);
+    assert_int_equal(m.position(L, q), 0);
+    assert_int_equal(m.readings(far, L), -1);
+    Model nominal{DeviceGeometry{}};
+    nominal.readings(far, L);
+    assert_int_equal(m.position(L, q), -1); // Gauss-Newton starts near x = 100
+    // The fit: one position beyond the reach.
+    std::vector<PreparedPos> pos(2);
+    for (int j = 0; j < 2; ++j) {
+        pos[size_t(j)].ref = Eigen::Vector3d(j ? 100 : 50, 0, 0);
+        double y[4];
+        nominal.readings(pos[size_t(j)].ref.data(), y);
+        for (int c = 0; c < 4; ++c) pos[size_t(j)].mean(c) = y[c];
+        pos[size_t(j)].var_mean.setConstant(1e-4);
+        pos[size_t(j)].n = 1;
+    }
+    FitReport rep;
+    assert_false(fit_model(m, pos, FitOptions{}, rep));
+    assert_non_null(strstr(rep.message.c_str(), "test_fails_far"));
+    assert_true(std::isinf(model_chi2(m, pos, FitOptions{})));
+    assert_int_equal(unregister_user_effect("test_fails_far", err), CDM_OK);
+}
+
+// The accessors the JSON codec and the diagnosis use.
+static void effect_accessors(void **) {
+    Model m{DeviceGeometry{}};
+    std::string err;
+    assert_true(m.add_effect("cable_gain", {{"g2", 0.01}}, err));
+    assert_true(m.add_effect("jig_misalignment", {}, err));
+    // Order of application: the jig first.
+    assert_string_equal(m.effect_desc(0).name.c_str(), "jig_misalignment");
+    assert_true(m.effect_params(1)[1] == 0.01);
+    assert_false(m.set_effect_params(1, {0, 0, 0}, err));
+    assert_non_null(strstr(err.c_str(), "4 parameters"));
+    assert_false(m.set_effect_params(1, {0, 0.5, 0, 0}, err)); // bound 0.2
+    assert_non_null(strstr(err.c_str(), "g2"));
+    assert_false(m.set_effect_params(1, {0, NAN, 0, 0}, err));
+    assert_true(m.set_effect_params(1, {0.001, 0.002, 0.003, 0.004}, err));
+    assert_true(m.effect_params(1)[3] == 0.004);
+    assert_false(m.add_effect("cable_gain", {{"g1", INFINITY}}, err));
+}
+
+// docs/calibration.md's catalogue table is the registry's (the list in
+// effects/list.h): regenerate it from the expected text printed here.
+static void catalogue_table_matches_docs(void **) {
+    std::ifstream f(CDM_SOURCE_DIR "/docs/calibration.md");
+    assert_true(f.good());
+    std::stringstream ss;
+    ss << f.rdbuf();
+    const std::string doc = ss.str();
+    const std::string begin = "<!-- catalogue:begin (generated: tests/unit/model/test_model.cpp) -->\n";
+    const std::string end = "<!-- catalogue:end -->";
+    const size_t a = doc.find(begin), b = doc.find(end);
+    const std::string want = catalogue_markdown();
+    if (a == std::string::npos || b == std::string::npos || doc.substr(a + begin.size(), b - a - begin.size()) != want) {
+        std::printf("docs/calibration.md: the catalogue between\n%s and %s\nmust read:\n%s", begin.c_str(), end.c_str(),
+                    want.c_str());
+        fail();
+    }
+}
+
+// The driver's path (cdm_get_pose -> Model::position) does not allocate,
+// with every built-in on, the seed's ellipsoid included; neither do the
+// readings (the simulator's path) nor the jig map.
+static void driver_path_does_not_allocate(void **) {
+    Model m{DeviceGeometry{}};
+    std::string err;
+    for (const auto &d : all_effects())
+        if (d->builtin_id >= 0 && d->stage != Stage::Position) assert_true(m.add_effect_random(d->name, 9, err));
+    assert_true(m.add_effect("ellipsoid", {{"L", 5989.1}, {"M", 2950.2}, {"N", 3092.8}}, err));
+    double p[3] = {55, 12, -30}, L[4], q[3], J[12], r[3];
+    const size_t before = g_allocations;
+    assert_int_equal(m.readings(p, L), 0);
+    assert_int_equal(m.position(L, q), 0);
+    assert_int_equal(m.position(L, 0.0, q, J), 0);
+    m.jig_to_device(p, r);
+    assert_int_equal(g_allocations - before, 0);
+    // The counter sees allocations (a copy of the model allocates).
+    Model copy = m;
+    assert_true(g_allocations > before);
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(triangulation_is_exact),
@@ -134,6 +257,10 @@ int main(void) {
         cmocka_unit_test(forward_kinematics_inverts_each_effect),
         cmocka_unit_test(pulley_limits),
         cmocka_unit_test(json_round_trip_and_errors),
+        cmocka_unit_test(apply_failure_is_reported),
+        cmocka_unit_test(effect_accessors),
+        cmocka_unit_test(catalogue_table_matches_docs),
+        cmocka_unit_test(driver_path_does_not_allocate),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

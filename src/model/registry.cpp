@@ -1,20 +1,24 @@
-// The one list of effects: adding a built-in is a file in effects/ and a
-// line here.
+// The registry: the built-ins from the one list (effects/list.h), then the
+// effects users register at run time.
 #include <algorithm>
 #include <cmath>
 #include <mutex>
 
-#include "model/effect.h"
+#include "model/kernel.h"
 
 namespace cdm {
 namespace {
 
 std::vector<EffectDescPtr> make_builtins() {
     std::vector<EffectDescPtr> v;
-    for (auto f : {make_jig_misalignment, make_anchor_position, make_holder_geometry, make_cable_offset,
-                   make_cable_gain, make_pot_nonlinearity, make_exit_pulley, make_cable_stretch,
-                   make_ellipsoid})
-        v.push_back(std::make_shared<const EffectDesc>(f()));
+#define CDM_EFFECT_DESC(E)                                                                                           \
+    {                                                                                                                \
+        EffectDesc d = E::describe();                                                                                \
+        d.builtin_id = BuiltinIndexOf<E>::value;                                                                     \
+        v.push_back(std::make_shared<const EffectDesc>(std::move(d)));                                               \
+    }
+    CDM_BUILTIN_EFFECTS(CDM_EFFECT_DESC)
+#undef CDM_EFFECT_DESC
     return v;
 }
 

@@ -124,8 +124,8 @@ bool parse_dataset(const std::string &text, const std::string &src, Dataset &out
             }
         for (int k = 4; k < 8; ++k)
             if (!(v[k] > 0) || v[k] > kDatasetMaxLengthMm) {
-                err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " = " + shown(f[size_t(colidx[k])].first, f[size_t(colidx[k])].second) +
-                      " must be a length in mm within (0, 10000]";
+                err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " must be a positive length in mm, at most 10000 (got " +
+                      shown(f[size_t(colidx[k])].first, f[size_t(colidx[k])].second) + ")";
                 return false;
             }
         long id = long(v[0]);

@@ -37,8 +37,8 @@ bool effect_from_json(const JsonValue &e, size_t k, const std::string &source, M
     for (const auto &p : d->params) {
         const std::string unit = p.unit.empty() ? "" : p.unit;
         double v = 0;
-        if (!get_number(*ps, p.name.c_str(), p.lower, p.upper, unit.c_str(), source + ": effect \"" + d->name + "\"", v,
-                        err, true))
+        if (!get_number(*ps, p.name.c_str(), p.lower, p.upper, unit.c_str(), source, v, err, true,
+                        "effect \"" + d->name + "\": "))
             return false;
         values.emplace_back(p.name, v);
     }

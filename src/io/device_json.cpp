@@ -41,18 +41,18 @@ bool axis_from_json(const JsonValue &v, int i, const std::string &source, std::a
 } // namespace
 
 bool get_number(const JsonValue &j, const char *key, double lo, double hi, const char *unit,
-                const std::string &source, double &out, std::string &err, bool required) {
+                const std::string &source, double &out, std::string &err, bool required, const std::string &context) {
     const JsonValue *v = j.find(key);
     if (!v) {
-        if (required) err = where(source, j) + "missing required field \"" + key + "\"";
+        if (required) err = where(source, j) + context + "missing required field \"" + key + "\"";
         return !required;
     }
     if (v->type != JsonValue::Number) {
-        err = where(source, *v) + "field \"" + key + "\" must be a number, got " + v->type_name();
+        err = where(source, *v) + context + "field \"" + key + "\" must be a number, got " + v->type_name();
         return false;
     }
     if (!std::isfinite(v->number) || v->number < lo || v->number > hi) {
-        err = where(source, *v) + "field \"" + key + "\" = " + num(v->number) + " " + unit + " is outside the sane range " +
+        err = where(source, *v) + context + "field \"" + key + "\" = " + num(v->number) + " " + unit + " is outside the sane range " +
               num(lo) + " to " + num(hi) + " " + unit;
         return false;
     }

@@ -34,6 +34,7 @@ nlohmann::json device_to_json(const DeviceGeometry &g);
 // Shared by the codecs: a finite number in [lo, hi] at `key` of object `j`.
 // Absent and not required: `out` untouched.
 bool get_number(const JsonValue &j, const char *key, double lo, double hi, const char *unit,
-                const std::string &source, double &out, std::string &err, bool required);
+                const std::string &source, double &out, std::string &err, bool required,
+                const std::string &context = "");
 
 } // namespace cdm::io

@@ -281,6 +281,18 @@ def lib():
     return _lib
 
 
+def c_path(value, what="path"):
+    """A str, bytes or os.PathLike as the NUL-terminated bytes C receives.
+
+    An embedded NUL would silently cut the string where C reads it ("a\\x00b"
+    would open "a"), so it is a ValueError naming `what`.
+    """
+    data = os.fsencode(value) if not isinstance(value, bytes) else value
+    if b"\x00" in data:
+        raise ValueError(f"{what} contains a NUL character: {value!r}")
+    return data
+
+
 def fail(code, function, detail=""):
     """The CdmError for a failed call. Call it right after the call: the thread's
     detail text is valid only until this thread's next cdm_* call."""

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <memory>
+#include <vector>
 
 #include "api/calibration_handle.h"
 #include "api/errors.h"
@@ -149,6 +151,10 @@ int diagnose_body(const char *data_csv_path, const char *device_json_path, const
 
 } // namespace
 
+struct cdm_dataset_writer {
+    cdm::DatasetWriter w;
+};
+
 extern "C" {
 
 int cdm_calibration_load(const char *path, cdm_calibration **out) {
@@ -274,5 +280,42 @@ int cdm_diagnose(const char *data_csv_path, const char *device_json_path, const 
 }
 
 void cdm_free_string(char *s) { std::free(s); }
+
+int cdm_dataset_writer_open(const char *path, const char *const *protect_paths, size_t n_protect,
+                            cdm_dataset_writer **out) {
+    return cdm::guarded("cdm_dataset_writer_open", [&]() -> int {
+        if (!out || !path || (n_protect && !protect_paths))
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_dataset_writer_open: NULL argument");
+        *out = nullptr;
+        std::vector<std::string> protect;
+        for (size_t k = 0; k < n_protect; ++k)
+            if (protect_paths[k]) protect.emplace_back(protect_paths[k]);
+        auto w = std::make_unique<cdm_dataset_writer>();
+        std::string err;
+        if (!w->w.open(path, protect, err)) return cdm::fail(CDM_ERR_IO, err);
+        *out = w.release();
+        return CDM_OK;
+    });
+}
+
+int cdm_dataset_writer_add(cdm_dataset_writer *w, int point, const double ref_mm[3], const double lengths_mm[4]) {
+    return cdm::guarded("cdm_dataset_writer_add", [&]() -> int {
+        if (!w || !ref_mm || !lengths_mm) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_dataset_writer_add: NULL argument");
+        std::string err;
+        if (!w->w.add_row(long(point), ref_mm, lengths_mm, err)) return cdm::fail(CDM_ERR_IO, err);
+        return CDM_OK;
+    });
+}
+
+int cdm_dataset_writer_commit(cdm_dataset_writer *w) {
+    return cdm::guarded("cdm_dataset_writer_commit", [&]() -> int {
+        if (!w) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_dataset_writer_commit: NULL writer");
+        std::string err;
+        if (!w->w.commit(err)) return cdm::fail(CDM_ERR_IO, err);
+        return CDM_OK;
+    });
+}
+
+void cdm_dataset_writer_free(cdm_dataset_writer *w) { delete w; }
 
 } // extern "C"

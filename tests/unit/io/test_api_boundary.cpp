@@ -148,6 +148,35 @@ static void test_diagnose_bad_option_type_names_column(void **) {
     expect_text("number '1e999'");
 }
 
+static void test_dataset_writer_c_api_atomic(void **) {
+    const std::string p = g_dir + "/rec.csv", in = g_dir + "/dev.json";
+    put(p, "old");
+    put(in, kDevice);
+    cdm_dataset_writer *w = nullptr;
+    const char *protect[] = {in.c_str()};
+    assert_int_equal(cdm_dataset_writer_open(in.c_str(), protect, 1, &w), CDM_ERR_IO);
+    expect_text("an input of this command");
+    assert_int_equal(cdm_dataset_writer_open("/dev/null", nullptr, 0, &w), CDM_ERR_IO);
+    expect_text("character device");
+    assert_int_equal(cdm_dataset_writer_open(p.c_str(), protect, 1, &w), CDM_OK);
+    const double ref[3] = {50, 0, 0}, len[4] = {160, 161, 162, 163};
+    assert_int_equal(cdm_dataset_writer_add(w, 7, ref, len), CDM_OK);
+    cdm_dataset_writer_free(w); // no commit: the old file stays
+    int fd = ::open(p.c_str(), O_RDONLY);
+    char b[8] = {};
+    assert_int_equal(::read(fd, b, sizeof b), 3);
+    ::close(fd);
+    assert_int_equal(cdm_dataset_writer_open(p.c_str(), nullptr, 0, &w), CDM_OK);
+    assert_int_equal(cdm_dataset_writer_add(w, 7, ref, len), CDM_OK);
+    assert_int_equal(cdm_dataset_writer_commit(w), CDM_OK);
+    cdm_dataset_writer_free(w);
+    fd = ::open(p.c_str(), O_RDONLY);
+    char t[128] = {};
+    assert_true(::read(fd, t, sizeof t - 1) > 0);
+    ::close(fd);
+    assert_string_equal(t, "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n7,50.0000,0.0000,0.0000,160.0000,161.0000,162.0000,163.0000\n");
+}
+
 int main(void) {
     char t[] = "/tmp/cdm_api_XXXXXX";
     g_dir = mkdtemp(t);
@@ -160,6 +189,7 @@ int main(void) {
         cmocka_unit_test(test_diagnose_unsolvable_data_fails_with_count),
         cmocka_unit_test(test_diagnose_calibration_out_refuses_input_and_device_node),
         cmocka_unit_test(test_diagnose_bad_option_type_names_column),
+        cmocka_unit_test(test_dataset_writer_c_api_atomic),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -387,6 +387,22 @@ CDM_API int cdm_diagnose(const char *data_csv_path, const char *device_json_path
 /** Frees a string returned by libcdm. NULL is fine. */
 CDM_API void cdm_free_string(char *s);
 
+/* ------------------------------------------ since 1.1: the one dataset writer
+ * Writes a jig dataset CSV (point,x_ref,y_ref,z_ref,l1,l2,l3,l4) atomically:
+ * rows go to an exclusive temporary beside `path`; commit fsyncs it and
+ * renames it over `path`. Freed without commit: no file, the old one intact.
+ * `path` must not be a special file nor one of `protect_paths` (the caller's
+ * own inputs; n_protect may be 0). Errors carry the errno text
+ * (cdm_thread_error). One writer per thread at a time; free accepts NULL.
+ */
+typedef struct cdm_dataset_writer cdm_dataset_writer;
+CDM_API int cdm_dataset_writer_open(const char *path, const char *const *protect_paths, size_t n_protect,
+                                    cdm_dataset_writer **out);
+CDM_API int cdm_dataset_writer_add(cdm_dataset_writer *w, int point, const double ref_mm[3],
+                                   const double lengths_mm[4]);
+CDM_API int cdm_dataset_writer_commit(cdm_dataset_writer *w);
+CDM_API void cdm_dataset_writer_free(cdm_dataset_writer *w);
+
 #endif /* CDM_EXPERIMENTAL */
 
 #ifdef __cplusplus

@@ -1,89 +1,212 @@
 // extern "C": calibrations, user effects, the diagnosis. Thin: the logic is
-// in model/ and calib/.
+// in model/, io/ and calib/. Every entry point that can fail runs inside
+// cdm::guarded(), so no exception reaches a C caller.
 #include <dlfcn.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
-#include <fstream>
-#include <sstream>
+#include <memory>
+#include <vector>
 
 #include "api/calibration_handle.h"
 #include "api/errors.h"
 #include "calib/diagnose.h"
+#include "io/calibration_json.h"
+#include "io/device_json.h"
+#include "io/file.h"
 #include "model/effect.h"
-#include "model/model_json.h"
 
 namespace {
 
 int parse_calibration(const std::string &text, const std::string &source, cdm_calibration **out) {
-    nlohmann::json j;
     std::string err;
-    if (!cdm::parse_json_text(text, source, j, err)) return cdm::fail(CDM_ERR_PARSE, err);
     cdm::Model m{cdm::DeviceGeometry{}};
-    if (!cdm::model_from_json(j, source, m, err)) return cdm::fail(CDM_ERR_PARSE, err);
+    if (!cdm::io::parse_calibration_json(text, source, m, err)) return cdm::fail(CDM_ERR_PARSE, err);
     *out = new cdm_calibration{std::make_shared<const cdm::Model>(m)};
     return CDM_OK;
 }
 
-bool read_file(const char *path, std::string &text) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) return false;
-    std::ostringstream ss;
-    ss << in.rdbuf();
-    text = ss.str();
-    return true;
+struct DiagnoseArgs {
+    cdm::DiagnoseOptions opt;
+    std::string calib_out;
+};
+
+// Options text -> DiagnoseOptions, through the one JSON loader: types are
+// checked and errors name the option and its column.
+int parse_options(const char *text, DiagnoseArgs &a) {
+    const std::string src = "cdm_diagnose options";
+    cdm::io::JsonValue o;
+    std::string err;
+    if (!cdm::io::parse_json(text, src, o, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
+    if (o.type != cdm::io::JsonValue::Object)
+        return cdm::fail(CDM_ERR_INVALID_ARG, cdm::io::where(src, o) + "options must be a JSON object");
+    auto bad = [&](const cdm::io::JsonValue &v, const std::string &k, const char *want) {
+        return cdm::fail(CDM_ERR_INVALID_ARG, cdm::io::where(src, v) + "option \"" + k + "\" must be " + want +
+                                                  ", got " + v.type_name());
+    };
+    using J = cdm::io::JsonValue;
+    for (const auto &[k, v] : o.members) {
+        if (k == "effects") {
+            if (v.type != J::Array) return bad(v, k, "a list of effect names");
+            for (const auto &e : v.items) {
+                if (e.type != J::String) return bad(e, k, "a list of effect names");
+                a.opt.effects.push_back(e.str);
+            }
+        } else if (k == "jig_tolerance_mm") {
+            if (v.type == J::Null) continue;
+            if (v.type != J::Number || !(v.number >= 0) || v.number > cdm::kDatasetMaxRefMm)
+                return bad(v, k, "a number of mm in 0..5000");
+            a.opt.jig_tolerance_mm = v.number;
+        } else if (k == "candidates" || k == "validation" || k == "per_position") {
+            if (v.type != J::Bool) return bad(v, k, "true or false");
+            (k == "candidates" ? a.opt.candidates : k == "validation" ? a.opt.validation : a.opt.per_position) =
+                v.boolean;
+        } else if (k == "calibration_out") {
+            if (v.type == J::Null) continue;
+            if (v.type != J::String) return bad(v, k, "a path");
+            a.calib_out = v.str;
+        } else {
+            return cdm::fail(CDM_ERR_INVALID_ARG, cdm::io::where(src, v) + "unknown option \"" +
+                                                      cdm::io::quote_field(k) +
+                                                      "\" (known: effects, jig_tolerance_mm, candidates, "
+                                                      "validation, per_position, calibration_out)");
+        }
+    }
+    return CDM_OK;
+}
+
+// More than this fraction of positions whose mean readings the nominal
+// triangulation cannot place means the data does not describe this device
+// (wrong unit, wrong device file, overflowing means): no diagnosis of it is
+// meaningful. Below it, a few edge positions that effects push past the
+// nominal spheres are normal and the model's own solver handles them.
+constexpr double kMaxUnsolvableFraction = 0.5;
+
+int check_solvable(const cdm::Dataset &d, const cdm::DeviceGeometry &g) {
+    size_t bad = 0, nonfinite = 0;
+    for (const auto &h : d.pos) {
+        double p[3];
+        bool fin = true;
+        for (double m : h.mean) fin = fin && std::isfinite(m);
+        if (!fin) ++nonfinite;
+        if (!fin || !cdm::triangulate(g, h.mean, p)) ++bad;
+    }
+    if (double(bad) <= kMaxUnsolvableFraction * double(d.pos.size())) return CDM_OK;
+    return cdm::fail(CDM_ERR_NUMERIC,
+                     d.path + ": " + std::to_string(bad) + " of " + std::to_string(d.pos.size()) +
+                         " positions (" + std::to_string(d.rows) + " samples) cannot be placed by the nominal "
+                         "triangulation (" + std::to_string(nonfinite) + " with non-finite mean readings, the "
+                         "rest outside the workspace of this device: the four cable spheres do not meet); more "
+                         "than half unsolvable means the data does not match the device description, so no "
+                         "diagnosis is given");
+}
+
+// Reads and parses an input file, telling a file that cannot be read
+// (CDM_ERR_IO: missing, special, too large) from one that is malformed.
+int load_device(const char *path, cdm::DeviceGeometry &g) {
+    std::string text, err;
+    if (!cdm::io::read_file(path, cdm::io::kJsonMaxBytes, text, err, "device description"))
+        return cdm::fail(CDM_ERR_IO, err);
+    if (!cdm::io::parse_device_json(text, path, g, err)) return cdm::fail(CDM_ERR_PARSE, err);
+    return CDM_OK;
+}
+
+int diagnose_body(const char *data_csv_path, const char *device_json_path, const char *options_json,
+                  cdm_progress_fn progress, void *user, char **result_json) {
+    DiagnoseArgs a;
+    if (options_json && *options_json) {
+        if (int rc = parse_options(options_json, a)) return rc;
+    }
+    if (progress)
+        a.opt.progress = [&](const std::string &s, double f) { return progress(user, s.c_str(), f) == 0; };
+    std::string err;
+    // The output is checked (not a special file, not an input) and its
+    // temporary created before the work, committed only after it succeeded.
+    cdm::io::AtomicFile out_file;
+    if (!a.calib_out.empty() && !out_file.open(a.calib_out, {data_csv_path, device_json_path}, err))
+        return cdm::fail(CDM_ERR_IO, err);
+    cdm::Dataset data;
+    bool io_failure = false;
+    if (!cdm::load_dataset(data_csv_path, data, err, &io_failure))
+        return cdm::fail(io_failure ? CDM_ERR_IO : CDM_ERR_PARSE, err);
+    cdm::DeviceGeometry g;
+    if (int rc = load_device(device_json_path, g)) return rc;
+    if (int rc = check_solvable(data, g)) return rc;
+    nlohmann::json out;
+    cdm::Model fitted(g);
+    if (!cdm::diagnose(data, g, a.opt, out, fitted, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
+    const std::string s = out.dump();
+    if (out_file.is_open()) {
+        auto cj = cdm::io::model_to_json(fitted);
+        cj["fit"] = {{"data", data_csv_path}, {"error_mm", out["error_mm"]}};
+        if (!out_file.write(cj.dump(2) + "\n", err) || !out_file.commit(err)) return cdm::fail(CDM_ERR_IO, err);
+    }
+    char *r = static_cast<char *>(std::malloc(s.size() + 1));
+    if (!r) return cdm::fail(CDM_ERR_NO_MEM, "cdm_diagnose: out of memory");
+    std::memcpy(r, s.c_str(), s.size() + 1);
+    *result_json = r;
+    return CDM_OK;
 }
 
 } // namespace
 
+struct cdm_dataset_writer {
+    cdm::DatasetWriter w;
+};
+
 extern "C" {
 
 int cdm_calibration_load(const char *path, cdm_calibration **out) {
-    cdm::clear_thread_error();
-    if (!out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_load: out is NULL");
-    *out = nullptr;
-    if (!path) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_load: path is NULL");
-    try {
-        std::string text;
-        if (!read_file(path, text)) return cdm::fail(CDM_ERR_IO, std::string(path) + ": cannot open the calibration");
+    return cdm::guarded("cdm_calibration_load", [&]() -> int {
+        if (!out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_load: out is NULL");
+        *out = nullptr;
+        if (!path) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_load: path is NULL");
+        std::string text, err;
+        if (!cdm::io::read_file(path, cdm::io::kJsonMaxBytes, text, err, "calibration"))
+            return cdm::fail(CDM_ERR_IO, err);
         return parse_calibration(text, path, out);
-    } catch (const std::bad_alloc &) {
-        return cdm::fail(CDM_ERR_NO_MEM, "out of memory");
-    } catch (const std::exception &e) {
-        return cdm::fail(CDM_ERR_INTERNAL, e.what());
-    }
+    });
 }
 
 int cdm_calibration_parse(const char *json, size_t len, cdm_calibration **out) {
-    cdm::clear_thread_error();
-    if (!out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_parse: out is NULL");
-    *out = nullptr;
-    if (!json) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_parse: json is NULL");
-    try {
+    return cdm::guarded("cdm_calibration_parse", [&]() -> int {
+        if (!out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_parse: out is NULL");
+        *out = nullptr;
+        if (!json) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_parse: json is NULL");
+        if (len > cdm::io::kJsonMaxBytes)
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_parse: text of " + std::to_string(len) +
+                                                      " bytes is over the 64 MiB limit");
         return parse_calibration(std::string(json, len), "(calibration text)", out);
-    } catch (const std::exception &e) {
-        return cdm::fail(CDM_ERR_INTERNAL, e.what());
-    }
+    });
 }
 
 void cdm_calibration_free(cdm_calibration *cal) { delete cal; }
 
 int cdm_calibration_position(const cdm_calibration *cal, const double lengths_mm[4], double position_mm[3]) {
-    if (!cal || !lengths_mm || !position_mm) return CDM_ERR_INVALID_ARG;
-    double p[3];
-    if (cal->model->position(lengths_mm, p) != 0) return CDM_ERR_NUMERIC;
-    for (int k = 0; k < 3; ++k) position_mm[k] = p[k];
-    return CDM_OK;
+    return cdm::guarded("cdm_calibration_position", [&]() -> int {
+        if (!cal || !lengths_mm || !position_mm)
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_position: NULL argument");
+        double p[3];
+        if (cal->model->position(lengths_mm, p) != 0)
+            return cdm::fail(CDM_ERR_NUMERIC, "cdm_calibration_position: no position gives these lengths");
+        for (int k = 0; k < 3; ++k) position_mm[k] = p[k];
+        return CDM_OK;
+    });
 }
 
 int cdm_calibration_lengths(const cdm_calibration *cal, const double position_mm[3], double lengths_mm[4]) {
-    if (!cal || !lengths_mm || !position_mm) return CDM_ERR_INVALID_ARG;
-    double l[4];
-    cal->model->readings(position_mm, l);
-    for (int k = 0; k < 4; ++k)
-        if (!std::isfinite(l[k])) return CDM_ERR_NUMERIC;
-    for (int k = 0; k < 4; ++k) lengths_mm[k] = l[k];
-    return CDM_OK;
+    return cdm::guarded("cdm_calibration_lengths", [&]() -> int {
+        if (!cal || !lengths_mm || !position_mm)
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_lengths: NULL argument");
+        double l[4];
+        cal->model->readings(position_mm, l);
+        for (int k = 0; k < 4; ++k)
+            if (!std::isfinite(l[k]))
+                return cdm::fail(CDM_ERR_NUMERIC, "cdm_calibration_lengths: non-finite length at this position");
+        for (int k = 0; k < 4; ++k) lengths_mm[k] = l[k];
+        return CDM_OK;
+    });
 }
 
 size_t cdm_calibration_effect_count(const cdm_calibration *cal) { return cal ? cal->model->effect_count() : 0; }
@@ -94,22 +217,20 @@ const char *cdm_calibration_effect_name(const cdm_calibration *cal, size_t i) {
 }
 
 int cdm_effect_register(const cdm_effect_def *def) {
-    cdm::clear_thread_error();
-    try {
+    return cdm::guarded("cdm_effect_register", [&]() -> int {
         std::string err;
         int rc = cdm::register_user_effect(def, err);
         return rc == CDM_OK ? rc : cdm::fail(rc, err);
-    } catch (const std::exception &e) {
-        return cdm::fail(CDM_ERR_INTERNAL, e.what());
-    }
+    });
 }
 
 int cdm_effect_unregister(const char *name) {
-    cdm::clear_thread_error();
-    if (!name) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_effect_unregister: name is NULL");
-    std::string err;
-    int rc = cdm::unregister_user_effect(name, err);
-    return rc == CDM_OK ? rc : cdm::fail(rc, err);
+    return cdm::guarded("cdm_effect_unregister", [&]() -> int {
+        if (!name) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_effect_unregister: name is NULL");
+        std::string err;
+        int rc = cdm::unregister_user_effect(name, err);
+        return rc == CDM_OK ? rc : cdm::fail(rc, err);
+    });
 }
 
 int cdm_effect_load_plugin(const char *path) {
@@ -127,95 +248,74 @@ int cdm_effect_load_plugin(const char *path) {
     return CDM_OK;
 }
 
-size_t cdm_effect_count(void) { return cdm::all_effects().size(); }
+size_t cdm_effect_count(void) {
+    try {
+        return cdm::all_effects().size();
+    } catch (...) {
+        return 0; // no memory for the snapshot: report none rather than throw into C
+    }
+}
 
 const char *cdm_effect_name(size_t i) {
-    auto v = cdm::all_effects();
-    if (i >= v.size()) return nullptr;
-    // Descriptors are immutable and kept alive by the registry (built-ins
-    // forever; a user effect until it is unregistered).
-    return v[i]->name.c_str();
+    try {
+        auto v = cdm::all_effects();
+        if (i >= v.size()) return nullptr;
+        // Descriptors are immutable and kept alive by the registry (built-ins
+        // forever; a user effect until it is unregistered).
+        return v[i]->name.c_str();
+    } catch (...) {
+        return nullptr;
+    }
 }
 
 int cdm_diagnose(const char *data_csv_path, const char *device_json_path, const char *options_json,
                  cdm_progress_fn progress, void *user, char **result_json) {
-    cdm::clear_thread_error();
-    if (!result_json) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_diagnose: result_json is NULL");
-    *result_json = nullptr;
-    if (!data_csv_path || !device_json_path)
-        return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_diagnose: data and device paths are required");
-    try {
-        cdm::DiagnoseOptions opt;
-        std::string calib_out;
-        if (options_json && *options_json) {
-            nlohmann::json o;
-            try {
-                o = nlohmann::json::parse(options_json);
-            } catch (const nlohmann::json::parse_error &e) {
-                return cdm::fail(CDM_ERR_INVALID_ARG, std::string("cdm_diagnose: options are not JSON: ") + e.what());
-            }
-            for (auto it = o.begin(); it != o.end(); ++it) {
-                const std::string k = it.key();
-                if (k == "effects") {
-                    if (!it->is_array()) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_diagnose: \"effects\" must be a list");
-                    for (auto &e : *it) opt.effects.push_back(e.get<std::string>());
-                } else if (k == "jig_tolerance_mm") {
-                    if (!it->is_null()) opt.jig_tolerance_mm = it->get<double>();
-                } else if (k == "candidates") {
-                    opt.candidates = it->get<bool>();
-                } else if (k == "validation") {
-                    opt.validation = it->get<bool>();
-                } else if (k == "per_position") {
-                    opt.per_position = it->get<bool>();
-                } else if (k == "calibration_out") {
-                    if (!it->is_null()) calib_out = it->get<std::string>();
-                } else {
-                    return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_diagnose: unknown option \"" + k +
-                                                              "\" (known: effects, jig_tolerance_mm, candidates, "
-                                                              "validation, per_position, calibration_out)");
-                }
-            }
-        }
-        if (progress)
-            opt.progress = [&](const std::string &s, double f) { return progress(user, s.c_str(), f) == 0; };
-        cdm::Dataset data;
-        std::string err;
-        if (!cdm::load_dataset(data_csv_path, data, err)) return cdm::fail(CDM_ERR_PARSE, err);
-        std::string dtext;
-        if (!read_file(device_json_path, dtext))
-            return cdm::fail(CDM_ERR_IO, std::string(device_json_path) + ": cannot open the device description");
-        cdm::DeviceGeometry g;
-        if (!cdm::parse_device_json(dtext, device_json_path, g, err)) return cdm::fail(CDM_ERR_PARSE, err);
-        nlohmann::json out;
-        cdm::Model fitted(g);
-        if (!cdm::diagnose(data, g, opt, out, fitted, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
-        if (!calib_out.empty()) {
-            auto cj = cdm::model_to_json(fitted);
-            cj["fit"] = {{"data", data_csv_path}, {"error_mm", out["error_mm"]}};
-            const std::string tmp = calib_out + ".tmp";
-            {
-                std::ofstream f(tmp);
-                f << cj.dump(2) << "\n";
-                if (!f) return cdm::fail(CDM_ERR_IO, calib_out + ": cannot write the calibration");
-            }
-            if (std::rename(tmp.c_str(), calib_out.c_str()) != 0)
-                return cdm::fail(CDM_ERR_IO, calib_out + ": cannot write the calibration");
-        }
-        std::string s = out.dump();
-        char *r = static_cast<char *>(std::malloc(s.size() + 1));
-        if (!r) return cdm::fail(CDM_ERR_NO_MEM, "out of memory");
-        std::memcpy(r, s.c_str(), s.size() + 1);
-        *result_json = r;
-        return CDM_OK;
-    } catch (const nlohmann::json::exception &e) {
-        return cdm::fail(CDM_ERR_INVALID_ARG, std::string("cdm_diagnose: bad option value: ") + e.what());
-    } catch (const std::bad_alloc &) {
-        return cdm::fail(CDM_ERR_NO_MEM, "out of memory");
-    } catch (const std::exception &e) {
-        return cdm::fail(CDM_ERR_INTERNAL, e.what());
-    }
+    return cdm::guarded("cdm_diagnose", [&]() -> int {
+        if (!result_json) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_diagnose: result_json is NULL");
+        *result_json = nullptr;
+        if (!data_csv_path || !device_json_path)
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_diagnose: data and device paths are required");
+        return diagnose_body(data_csv_path, device_json_path, options_json, progress, user, result_json);
+    });
 }
 
 void cdm_free_string(char *s) { std::free(s); }
+
+int cdm_dataset_writer_open(const char *path, const char *const *protect_paths, size_t n_protect,
+                            cdm_dataset_writer **out) {
+    return cdm::guarded("cdm_dataset_writer_open", [&]() -> int {
+        if (!out || !path || (n_protect && !protect_paths))
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_dataset_writer_open: NULL argument");
+        *out = nullptr;
+        std::vector<std::string> protect;
+        for (size_t k = 0; k < n_protect; ++k)
+            if (protect_paths[k]) protect.emplace_back(protect_paths[k]);
+        auto w = std::make_unique<cdm_dataset_writer>();
+        std::string err;
+        if (!w->w.open(path, protect, err)) return cdm::fail(CDM_ERR_IO, err);
+        *out = w.release();
+        return CDM_OK;
+    });
+}
+
+int cdm_dataset_writer_add(cdm_dataset_writer *w, int point, const double ref_mm[3], const double lengths_mm[4]) {
+    return cdm::guarded("cdm_dataset_writer_add", [&]() -> int {
+        if (!w || !ref_mm || !lengths_mm) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_dataset_writer_add: NULL argument");
+        std::string err;
+        if (!w->w.add_row(long(point), ref_mm, lengths_mm, err)) return cdm::fail(CDM_ERR_IO, err);
+        return CDM_OK;
+    });
+}
+
+int cdm_dataset_writer_commit(cdm_dataset_writer *w) {
+    return cdm::guarded("cdm_dataset_writer_commit", [&]() -> int {
+        if (!w) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_dataset_writer_commit: NULL writer");
+        std::string err;
+        if (!w->w.commit(err)) return cdm::fail(CDM_ERR_IO, err);
+        return CDM_OK;
+    });
+}
+
+void cdm_dataset_writer_free(cdm_dataset_writer *w) { delete w; }
 
 } // extern "C"

@@ -1,4 +1,6 @@
 #include "api/errors.h"
+
+#include <string>
 #include "cdm/cdm.h"
 
 namespace {
@@ -11,6 +13,14 @@ int fail(int code, const std::string &detail) {
     return code;
 }
 void clear_thread_error() { t_error.clear(); }
+int fail_noexcept(int code, const char *fn, const char *what) noexcept {
+    try {
+        t_error = std::string(fn) + ": " + (code == CDM_ERR_INTERNAL ? "internal error: " : "") + what;
+    } catch (...) {
+        t_error.clear(); // no memory for the text: cdm_strerror(code) still says what
+    }
+    return code;
+}
 } // namespace cdm
 
 extern "C" {

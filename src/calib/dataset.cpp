@@ -5,9 +5,9 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <fstream>
-#include <sstream>
 #include <unordered_map>
+
+#include "io/json.h"
 
 namespace cdm {
 
@@ -34,6 +34,9 @@ std::string trim(const char *b, const char *e) {
     while (e > b && (e[-1] == ' ' || e[-1] == '\t' || e[-1] == '\r' || e[-1] == '"')) --e;
     return std::string(b, e);
 }
+
+// A field quoted in a message, cut to ~40 characters.
+std::string shown(const char *b, const char *e) { return io::quote_field(trim(b, e)); }
 
 bool to_double(const char *b, const char *e, double &v) {
     while (b < e && (*b == ' ' || *b == '\t')) ++b;
@@ -70,7 +73,16 @@ bool parse_dataset(const std::string &text, const std::string &src, Dataset &out
             header = true;
             ncols = f.size();
             std::vector<std::string> names;
-            for (auto &x : f) names.push_back(trim(x.first, x.second));
+            for (auto &x : f) {
+                std::string n = trim(x.first, x.second);
+                auto dup = std::find(names.begin(), names.end(), n);
+                if (dup != names.end()) {
+                    err = at(src, line, names.size() + 1) + "duplicate column \"" + io::quote_field(n) +
+                          "\" (also column " + std::to_string(dup - names.begin() + 1) + ")";
+                    return false;
+                }
+                names.push_back(std::move(n));
+            }
             for (int k = 0; k < 8; ++k) {
                 auto it = std::find(names.begin(), names.end(), required[k]);
                 if (it == names.end()) {
@@ -95,18 +107,25 @@ bool parse_dataset(const std::string &text, const std::string &src, Dataset &out
             auto &x = f[size_t(colidx[k])];
             if (!to_double(x.first, x.second, v[k]) || !std::isfinite(v[k])) {
                 err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " is not a finite number: '" +
-                      trim(x.first, x.second) + "'";
+                      shown(x.first, x.second) + "'";
                 return false;
             }
         }
         if (v[0] != std::floor(v[0]) || std::fabs(v[0]) > 9e15) {
             err = at(src, line, size_t(colidx[0]) + 1) + "point must be an integer id, got " +
-                  trim(f[size_t(colidx[0])].first, f[size_t(colidx[0])].second);
+                  shown(f[size_t(colidx[0])].first, f[size_t(colidx[0])].second);
             return false;
         }
+        for (int k = 1; k < 4; ++k)
+            if (std::fabs(v[k]) > kDatasetMaxRefMm) {
+                err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " = " + shown(f[size_t(colidx[k])].first, f[size_t(colidx[k])].second) +
+                      " mm is beyond the sane range of +-5000 mm (wrong unit?)";
+                return false;
+            }
         for (int k = 4; k < 8; ++k)
-            if (!(v[k] > 0)) {
-                err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " must be a positive length in mm";
+            if (!(v[k] > 0) || v[k] > kDatasetMaxLengthMm) {
+                err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " must be a positive length in mm, at most 10000 (got " +
+                      shown(f[size_t(colidx[k])].first, f[size_t(colidx[k])].second) + ")";
                 return false;
             }
         long id = long(v[0]);
@@ -126,7 +145,7 @@ bool parse_dataset(const std::string &text, const std::string &src, Dataset &out
             for (int k = 0; k < 3; ++k)
                 if (d.pos[g].ref[k] != v[1 + k]) {
                     err = at(src, line, size_t(colidx[1 + k]) + 1) + "point " + std::to_string(id) + " has " +
-                          required[1 + k] + " " + trim(f[size_t(colidx[1 + k])].first, f[size_t(colidx[1 + k])].second) +
+                          required[1 + k] + " " + shown(f[size_t(colidx[1 + k])].first, f[size_t(colidx[1 + k])].second) +
                           " but line " + std::to_string(first_line[g]) + " gave " + std::to_string(d.pos[g].ref[k]);
                     return false;
                 }
@@ -169,38 +188,53 @@ bool parse_dataset(const std::string &text, const std::string &src, Dataset &out
     return true;
 }
 
-bool load_dataset(const std::string &path, Dataset &out, std::string &err) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) {
-        err = path + ": cannot open the dataset";
+bool load_dataset(const std::string &path, Dataset &out, std::string &err, bool *io_failure) {
+    std::string text;
+    if (io_failure) *io_failure = false;
+    if (!io::read_file(path, io::kDatasetMaxBytes, text, err, "dataset")) {
+        if (io_failure) *io_failure = true;
         return false;
     }
-    std::ostringstream ss;
-    ss << in.rdbuf();
-    return parse_dataset(ss.str(), path, out, err);
+    return parse_dataset(text, path, out, err);
+}
+
+bool DatasetWriter::open(const std::string &path, const std::vector<std::string> &protect, std::string &err) {
+    buf_ = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n";
+    return f_.open(path, protect, err);
+}
+
+bool DatasetWriter::add_row(long point, const double ref[3], const double len[4], std::string &err) {
+    char line[256];
+    const int n = std::snprintf(line, sizeof line, "%ld,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f\n", point, ref[0], ref[1],
+                                ref[2], len[0], len[1], len[2], len[3]);
+    if (n < 0 || size_t(n) >= sizeof line) {
+        err = "dataset row for point " + std::to_string(point) + " does not fit a CSV line (non-sane values)";
+        f_.abandon();
+        return false;
+    }
+    buf_.append(line, size_t(n));
+    // Flush in 64 kB pieces: bounded memory for long recordings.
+    if (buf_.size() >= 65536) {
+        if (!f_.write(buf_, err)) return false;
+        buf_.clear();
+    }
+    return true;
+}
+
+bool DatasetWriter::commit(std::string &err) {
+    if (!buf_.empty() && !f_.write(buf_, err)) return false;
+    buf_.clear();
+    return f_.commit(err);
 }
 
 bool write_dataset_csv(const std::string &path, const std::vector<long> &point,
                        const std::vector<std::array<double, 3>> &ref,
                        const std::vector<std::array<double, 4>> &len, std::string &err) {
-    const std::string tmp = path + ".tmp";
-    FILE *f = std::fopen(tmp.c_str(), "w");
-    if (!f) {
-        err = tmp + ": cannot open for writing";
-        return false;
-    }
-    std::fputs("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n", f);
+    DatasetWriter w;
+    if (!w.open(path, {}, err)) return false;
     for (size_t k = 0; k < point.size(); ++k)
-        std::fprintf(f, "%ld,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f\n", point[k], ref[k][0], ref[k][1], ref[k][2],
-                     len[k][0], len[k][1], len[k][2], len[k][3]);
-    bool ok = std::ferror(f) == 0;
-    ok = (std::fclose(f) == 0) && ok;
-    if (!ok || std::rename(tmp.c_str(), path.c_str()) != 0) {
-        std::remove(tmp.c_str());
-        err = path + ": write failed";
-        return false;
-    }
-    return true;
+        if (!w.add_row(point[k], ref[k].data(), len[k].data(), err)) return false;
+    return w.commit(err);
 }
 
 } // namespace cdm

@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "io/file.h"
+
 namespace cdm {
 
 struct JigHole {
@@ -26,12 +28,36 @@ struct Dataset {
     std::vector<double> heights;                  // distinct x_ref, sorted
 };
 
+// Sane magnitudes (mm). A jig reference beyond 5 m from the origin, or a
+// cable length outside (0, 10 m], is a unit error or corrupt data, not a
+// master of this kind (frames of 10 mm..5 m, see io/device_json.h).
+constexpr double kDatasetMaxRefMm = 5000.0;
+constexpr double kDatasetMaxLengthMm = 10000.0;
+
 // Parses and groups. On error returns false with `err` naming the file,
 // line and column (1-based), e.g. "jig.csv:17:6: l2 is not a number: 'abc'".
-bool load_dataset(const std::string &path, Dataset &out, std::string &err);
+// Refuses duplicate columns, non-finite values and magnitudes outside the
+// ranges above; a field echoed in a message is cut to ~40 characters.
+// `io_failure` (optional) tells a file that could not be read (missing,
+// special, too large: CDM_ERR_IO) from one that does not parse.
+bool load_dataset(const std::string &path, Dataset &out, std::string &err, bool *io_failure = nullptr);
 bool parse_dataset(const std::string &text, const std::string &source, Dataset &out, std::string &err);
 
-// Writes a dataset CSV atomically (FILE.tmp then rename).
+// The one dataset writer: the header, then add_row() per sample, then
+// commit() (atomic: io::AtomicFile). Rows are written as they come, so a
+// recording need not be held in memory. Destroyed without commit(): no file.
+class DatasetWriter {
+public:
+    bool open(const std::string &path, const std::vector<std::string> &protect_paths, std::string &err);
+    bool add_row(long point, const double ref[3], const double lengths[4], std::string &err);
+    bool commit(std::string &err);
+
+private:
+    io::AtomicFile f_;
+    std::string buf_;
+};
+
+// Writes a whole dataset through DatasetWriter.
 bool write_dataset_csv(const std::string &path, const std::vector<long> &point,
                        const std::vector<std::array<double, 3>> &ref,
                        const std::vector<std::array<double, 4>> &lengths, std::string &err);

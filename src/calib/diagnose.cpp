@@ -12,7 +12,7 @@
 #include "calib/fit.h"
 #include "cdm/cdm.h"
 #include "model/effect.h"
-#include "model/model_json.h"
+#include "io/device_json.h"
 
 namespace cdm {
 
@@ -1010,7 +1010,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                    {"heights", data.heights},
                    {"ignored_columns", data.ignored_columns},
                    {"out_of_workspace_samples", nom.bad_samples}};
-    out["device"] = device_to_json(g);
+    out["device"] = io::device_to_json(g);
     json mlist = json::array(), params = json::object();
     for (size_t k = 0; k < model.effect_count(); ++k) {
         mlist.push_back(model.effect_name(k));

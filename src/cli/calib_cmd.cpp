@@ -16,7 +16,8 @@
 #include "cdm/cdm.h"
 #include "cli/commands.h"
 #include "model/effect.h"
-#include "model/model_json.h"
+#include "io/calibration_json.h"
+#include "io/device_json.h"
 
 namespace cdm::cli {
 
@@ -197,23 +198,15 @@ int cmd_simulate(SimArgs &a) {
         return 2;
     }
     if (!a.device.empty()) {
-        std::ifstream f(a.device);
-        std::stringstream ss;
-        ss << f.rdbuf();
-        if (!f || !parse_device_json(ss.str(), a.device, g, err)) {
-            std::fprintf(stderr, "cdm calib simulate: %s\n", err.empty() ? (a.device + ": cannot open").c_str() : err.c_str());
+        if (!io::load_device_json(a.device, g, err)) {
+            std::fprintf(stderr, "cdm calib simulate: %s\n", err.c_str());
             return 2;
         }
     }
     Model truth(g);
     if (!a.truth.empty()) {
-        std::ifstream f(a.truth);
-        std::stringstream ss;
-        ss << f.rdbuf();
-        try {
-            if (!model_from_json(nlohmann::json::parse(ss.str()), a.truth, truth, err)) throw std::runtime_error(err);
-        } catch (const std::exception &e) {
-            std::fprintf(stderr, "cdm calib simulate: %s\n", e.what());
+        if (!io::load_calibration(a.truth, truth, err)) {
+            std::fprintf(stderr, "cdm calib simulate: %s\n", err.c_str());
             return 2;
         }
     }
@@ -232,7 +225,7 @@ int cmd_simulate(SimArgs &a) {
         std::fprintf(stderr, "cdm calib simulate: %s\n", err.c_str());
         return 2;
     }
-    if (!a.truth_out.empty() && !write_atomic(a.truth_out, model_to_json(truth).dump(2) + "\n")) return 2;
+    if (!a.truth_out.empty() && !write_atomic(a.truth_out, io::model_to_json(truth).dump(2) + "\n")) return 2;
     std::printf("wrote %s (%zu positions x %d samples)\n", a.out.c_str(),
                 a.o.heights.size() * size_t(a.o.n) * size_t(a.o.n), a.o.samples);
     return 0;

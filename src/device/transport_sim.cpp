@@ -15,7 +15,9 @@
 #include "device/sim/sim_truth.h"
 #include "device/sim/simulator.h"
 #include "device/transport.h"
-#include "model/model_json.h"
+#include "io/calibration_json.h"
+#include "io/device_json.h"
+#include "io/file.h"
 
 namespace cdm {
 
@@ -29,18 +31,6 @@ constexpr const char *kSimOptions =
 // reports on Linux); beyond that the oldest are lost. A paced simulation
 // whose reader falls further behind than that skips, exactly like the device.
 constexpr uint64_t kHostQueueReports = 64;
-
-bool read_file(const std::string &path, std::string &text, std::string &err) {
-    std::ifstream f(path, std::ios::binary);
-    if (!f) {
-        err = "cannot open \"" + path + "\"";
-        return false;
-    }
-    std::ostringstream ss;
-    ss << f.rdbuf();
-    text = ss.str();
-    return true;
-}
 
 class SimTransport final : public Transport {
 public:
@@ -222,30 +212,23 @@ int open_sim(const Uri &u, TransportPtr &out, std::string &err) {
     std::shared_ptr<Model> model;
     if (!device_path.empty()) {
         std::string text;
-        if (!read_file(device_path, text, err)) {
+        if (!io::read_file(device_path, io::kJsonMaxBytes, text, err, "device description")) {
             err = "URI \"" + u.text + "\": option device: " + err;
             return CDM_ERR_INVALID_ARG;
         }
-        if (!parse_device_json(text, device_path, g, err)) {
+        if (!io::parse_device_json(text, device_path, g, err)) {
             err = "URI \"" + u.text + "\": option device: " + err;
             return CDM_ERR_PARSE;
         }
         model = std::make_shared<Model>(g);
     } else if (!truth_path.empty()) {
+        model = std::make_shared<Model>(g);
         std::string text;
-        if (!read_file(truth_path, text, err)) {
+        if (!io::read_file(truth_path, io::kJsonMaxBytes, text, err, "calibration")) {
             err = "URI \"" + u.text + "\": option truth: " + err;
             return CDM_ERR_INVALID_ARG;
         }
-        nlohmann::json j;
-        try {
-            j = nlohmann::json::parse(text);
-        } catch (const std::exception &e) {
-            err = "URI \"" + u.text + "\": option truth: " + truth_path + ": " + e.what();
-            return CDM_ERR_PARSE;
-        }
-        model = std::make_shared<Model>(g);
-        if (!model_from_json(j, truth_path, *model, err)) {
+        if (!io::parse_calibration_json(text, truth_path, *model, err)) {
             err = "URI \"" + u.text + "\": option truth: " + err;
             return CDM_ERR_PARSE;
         }

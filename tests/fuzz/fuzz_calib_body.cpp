@@ -7,7 +7,8 @@
 #include "calib/dataset.h"
 #include "cdm/cdm.h"
 #include "model/model.h"
-#include "model/model_json.h"
+#include "io/calibration_json.h"
+#include "io/device_json.h"
 
 void fuzz_calib_one(const uint8_t *data, size_t size) {
     const std::string text(reinterpret_cast<const char *>(data), size);
@@ -23,7 +24,7 @@ void fuzz_calib_one(const uint8_t *data, size_t size) {
         std::abort(); // a refusal always says why
     }
     cdm::DeviceGeometry g;
-    if (!cdm::parse_device_json(text, "fuzz.json", g, err) && err.empty()) std::abort();
+    if (!cdm::io::parse_device_json(text, "fuzz.json", g, err) && err.empty()) std::abort();
     cdm_calibration *cal = nullptr;
     if (cdm_calibration_parse(text.data(), text.size(), &cal) == CDM_OK) {
         const double L[4] = {200, 200, 200, 200};

@@ -180,6 +180,11 @@ PROTOTYPES = {
     # so that ctypes does not copy it away before cdm_free_string gets it.
     "cdm_diagnose": (_int, [_str, _str, _str, cdm_progress_fn, ctypes.c_void_p, _handle_p]),
     "cdm_free_string": (None, [ctypes.c_void_p]),
+    # since 1.1: the one dataset writer
+    "cdm_dataset_writer_open": (_int, [_str, ctypes.POINTER(ctypes.c_char_p), ctypes.c_size_t, _handle_p]),
+    "cdm_dataset_writer_add": (_int, [_handle, _int, c_double_p, c_double_p]),
+    "cdm_dataset_writer_commit": (_int, [_handle]),
+    "cdm_dataset_writer_free": (None, [_handle]),
 }
 
 
@@ -279,6 +284,18 @@ def lib():
             if _lib is None:
                 _lib = load()
     return _lib
+
+
+def c_path(value, what="path"):
+    """A str, bytes or os.PathLike as the NUL-terminated bytes C receives.
+
+    An embedded NUL would silently cut the string where C reads it ("a\\x00b"
+    would open "a"), so it is a ValueError naming `what`.
+    """
+    data = os.fsencode(value) if not isinstance(value, bytes) else value
+    if b"\x00" in data:
+        raise ValueError(f"{what} contains a NUL character: {value!r}")
+    return data
 
 
 def fail(code, function, detail=""):

@@ -35,7 +35,7 @@ class Calibration(_native.Closing):
         """Loads a calibration JSON file; errors name the file, line and column."""
         path = os.fspath(path)
         h = ctypes.c_void_p()
-        rc = _native.lib().cdm_calibration_load(path.encode("utf-8"), ctypes.byref(h))
+        rc = _native.lib().cdm_calibration_load(_native.c_path(path, "calibration path"), ctypes.byref(h))
         if rc < 0:
             raise _native.fail(rc, "cdm_calibration_load")
         return cls(h, path)

@@ -2,7 +2,6 @@
 import ctypes
 import json
 import numbers
-import os
 
 from . import _native
 from .constants import Error
@@ -65,7 +64,7 @@ def diagnose(data_csv, device_json, effects=None, jig_tolerance_mm=None, progres
     L = _native.lib()
     out = ctypes.c_void_p()
     _effects._take_errors()
-    rc = L.cdm_diagnose(os.fspath(data_csv).encode("utf-8"), os.fspath(device_json).encode("utf-8"),
+    rc = L.cdm_diagnose(_native.c_path(data_csv, "dataset path"), _native.c_path(device_json, "device path"),
                         options_json, cb, None, ctypes.byref(out))
     if rc < 0:
         err = _native.fail(rc, "cdm_diagnose")

@@ -108,7 +108,7 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
 def unregister_effect(name):
     """Removes a user effect registered with register_effect (or by a plugin)."""
     with _registry_lock:
-        rc = _native.lib().cdm_effect_unregister(name.encode("utf-8"))
+        rc = _native.lib().cdm_effect_unregister(_native.c_path(name, "effect name"))
         if rc < 0:
             raise _native.fail(rc, "cdm_effect_unregister")
         _registry.pop(name, None)

@@ -14,7 +14,8 @@
 #include "calib/simulate.h"
 #include "cdm/cdm.h"
 #include "device/sim/sim_truth.h"
-#include "model/model_json.h"
+#include "io/calibration_json.h"
+#include "io/device_json.h"
 
 extern "C" {
 #include <cmocka.h>
@@ -59,7 +60,7 @@ static void calibration_corrects_the_sim(void **) {
     nlohmann::json out;
     Model fitted{DeviceGeometry{}};
     assert_true(diagnose(d, truth.geometry(), opt, out, fitted, err));
-    const std::string text = cdm::model_to_json(fitted).dump();
+    const std::string text = cdm::io::model_to_json(fitted).dump();
     cdm_calibration *cal = nullptr;
     assert_int_equal(cdm_calibration_parse(text.c_str(), text.size(), &cal), CDM_OK);
 

@@ -55,6 +55,43 @@ static void errors_name_line_and_column(void **) {
     expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n", "no data rows");
 }
 
+static void test_dataset_duplicate_column_refused(void **) {
+    expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4,l2\n1,30,0,0,100,100,100,100,5\n",
+                 "bad.csv:1:9: duplicate column \"l2\" (also column 6)");
+}
+
+static void test_dataset_huge_field_not_echoed_whole(void **) {
+    std::string t = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,30,0,0,100,";
+    t += std::string(1000000, '7') + "x,100,100\n";
+    Dataset d;
+    std::string err;
+    assert_false(parse_dataset(t, "big.csv", d, err));
+    assert_non_null(strstr(err.c_str(), "big.csv:2:6: l2 is not a finite number"));
+    assert_non_null(strstr(err.c_str(), "more characters)"));
+    assert_true(err.size() < 200); // ~40 characters of the field, not 10^6
+}
+
+static void test_dataset_insane_magnitudes_refused(void **) {
+    // lengths of 1e-300 are "positive" but reach nothing; refused by the solvability check in
+    // cdm_diagnose (tests/unit/io/test_api_boundary.cpp); these are refused at parse time.
+    expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,1e300,0,0,100,100,100,100\n", "bad.csv:2:2: x_ref = 1e300 mm is beyond");
+    expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,30,0,0,1.7e308,100,100,100\n", "bad.csv:2:5: l1 must be a positive");
+    expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,30,0,0,100,100,inf,100\n", "bad.csv:2:7: l3 is not a finite number");
+    expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,30,0,0,100,100,100,0\n", "bad.csv:2:8: l4 must be a positive");
+}
+
+static void test_dataset_missing_file_is_io_failure(void **) {
+    Dataset d;
+    std::string err;
+    bool io = false;
+    assert_false(load_dataset("/nonexistent-dir/none.csv", d, err, &io));
+    assert_true(io);
+    assert_non_null(strstr(err.c_str(), "/nonexistent-dir/none.csv: cannot open the dataset: No such file or directory"));
+    assert_false(load_dataset("/dev/zero", d, err, &io));
+    assert_true(io);
+    assert_non_null(strstr(err.c_str(), "character device"));
+}
+
 static void write_is_atomic(void **) {
     std::string err;
     char path[] = "/tmp/cdm_ds_XXXXXX";
@@ -74,6 +111,10 @@ int main(void) {
         cmocka_unit_test(groups_and_ignores),
         cmocka_unit_test(errors_name_line_and_column),
         cmocka_unit_test(write_is_atomic),
+        cmocka_unit_test(test_dataset_duplicate_column_refused),
+        cmocka_unit_test(test_dataset_huge_field_not_echoed_whole),
+        cmocka_unit_test(test_dataset_insane_magnitudes_refused),
+        cmocka_unit_test(test_dataset_missing_file_is_io_failure),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -15,7 +15,8 @@
 #include "calib/fit.h"
 #include "model/effect.h"
 #include "model/model.h"
-#include "model/model_json.h"
+#include "io/calibration_json.h"
+#include "io/device_json.h"
 
 extern "C" {
 #include <cmocka.h>
@@ -128,7 +129,7 @@ static void json_round_trip_and_errors(void **) {
     assert_true(m.add_effect_random("cable_offset", 4, err));
     assert_true(m.add_effect_random("exit_pulley", 5, err));
     Model back{DeviceGeometry{}};
-    assert_true(model_from_json(model_to_json(m), "t", back, err));
+    assert_true(cdm::io::parse_calibration_json(cdm::io::model_to_json(m).dump(), "t", back, err));
     double p[3] = {40, 5, 5}, a[4], b[4];
     m.readings(p, a);
     back.readings(p, b);
@@ -138,9 +139,9 @@ static void json_round_trip_and_errors(void **) {
     assert_false(m.add_effect("cable_gain", {{"zzz", 1.0}}, err));
     assert_non_null(strstr(err.c_str(), "zzz"));
     DeviceGeometry g;
-    assert_false(parse_device_json("{\"a_mm\": 150,\n \"b_mm\": ,}", "dev.json", g, err));
+    assert_false(cdm::io::parse_device_json("{\"a_mm\": 150,\n \"b_mm\": ,}", "dev.json", g, err));
     assert_non_null(strstr(err.c_str(), "dev.json:2:"));
-    assert_false(parse_device_json("{\"a_mm\": 150, \"b_mm\": 150}", "dev.json", g, err));
+    assert_false(cdm::io::parse_device_json("{\"a_mm\": 150, \"b_mm\": 150}", "dev.json", g, err));
     assert_non_null(strstr(err.c_str(), "m_mm"));
 }
 

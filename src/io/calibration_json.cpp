@@ -1,0 +1,111 @@
+#include "io/calibration_json.h"
+
+#include <algorithm>
+
+#include "io/device_json.h"
+#include "model/effect.h"
+
+namespace cdm::io {
+
+namespace {
+bool effect_from_json(const JsonValue &e, size_t k, const std::string &source, Model &m, std::string &err) {
+    const std::string at = "effects[" + std::to_string(k) + "]";
+    const JsonValue *name = e.find("name");
+    if (e.type != JsonValue::Object || !name || name->type != JsonValue::String) {
+        err = where(source, e) + at + " needs a \"name\" string";
+        return false;
+    }
+    const EffectDescPtr d = find_effect(name->str);
+    if (!d) {
+        std::string known;
+        for (auto &x : all_effects()) known += (known.empty() ? "" : ", ") + x->name;
+        err = where(source, *name) + at + ": unknown effect \"" + quote_field(name->str) + "\" (known: " + known + ")";
+        return false;
+    }
+    const JsonValue *ps = e.find("params");
+    if (!ps || ps->type != JsonValue::Object) {
+        err = where(source, ps ? *ps : e) + at + " (\"" + d->name +
+              "\") needs \"params\": an object giving each of its parameters";
+        return false;
+    }
+    for (const auto &kv : ps->members)
+        if (std::none_of(d->params.begin(), d->params.end(), [&](const ParamDesc &p) { return p.name == kv.first; })) {
+            err = where(source, kv.second) + "effect \"" + d->name + "\" has no parameter \"" + quote_field(kv.first) + "\"";
+            return false;
+        }
+    ParamValues values;
+    for (const auto &p : d->params) {
+        const std::string unit = p.unit.empty() ? "" : p.unit;
+        double v = 0;
+        if (!get_number(*ps, p.name.c_str(), p.lower, p.upper, unit.c_str(), source, v, err, true,
+                        "effect \"" + d->name + "\": "))
+            return false;
+        values.emplace_back(p.name, v);
+    }
+    std::string e2;
+    if (!m.add_effect(d->name, values, e2)) {
+        err = where(source, e) + at + ": " + e2;
+        return false;
+    }
+    return true;
+}
+} // namespace
+
+bool model_from_json(const JsonValue &j, const std::string &source, Model &out, std::string &err) {
+    const JsonValue *fmt = j.find("format");
+    if (j.type != JsonValue::Object || !fmt || fmt->type != JsonValue::String || fmt->str != "cdm-calibration") {
+        err = where(source, j) + "not a cdm calibration (expected {\"format\": \"cdm-calibration\", ...})";
+        return false;
+    }
+    const JsonValue *ver = j.find("version");
+    if (!ver || ver->type != JsonValue::Number || ver->number != 1) {
+        err = where(source, ver ? *ver : j) + "unsupported calibration version (this library reads version 1)";
+        return false;
+    }
+    const JsonValue *dev = j.find("device");
+    if (!dev) {
+        err = where(source, j) + "missing \"device\"";
+        return false;
+    }
+    DeviceGeometry g;
+    if (!device_from_json(*dev, source, g, err)) return false;
+    Model m(g);
+    if (const JsonValue *ef = j.find("effects")) {
+        if (ef->type != JsonValue::Array) {
+            err = where(source, *ef) + "\"effects\" must be an array";
+            return false;
+        }
+        for (size_t k = 0; k < ef->items.size(); ++k)
+            if (!effect_from_json(ef->items[k], k, source, m, err)) return false;
+    }
+    out = m;
+    return true;
+}
+
+bool parse_calibration_json(const std::string &text, const std::string &source, Model &out, std::string &err) {
+    JsonValue j;
+    return parse_json(text, source, j, err) && model_from_json(j, source, out, err);
+}
+
+bool load_calibration(const std::string &path, Model &out, std::string &err) {
+    JsonValue j;
+    return load_json(path, j, err, "calibration") && model_from_json(j, path, out, err);
+}
+
+nlohmann::json model_to_json(const Model &m) {
+    nlohmann::json j;
+    j["format"] = "cdm-calibration";
+    j["version"] = 1;
+    j["device"] = io::device_to_json(m.geometry());
+    j["effects"] = nlohmann::json::array();
+    for (size_t i = 0; i < m.effect_count(); ++i) {
+        const EffectDesc &d = m.effect_desc(i);
+        const auto &p = m.effect_params(i);
+        nlohmann::json ps = nlohmann::json::object();
+        for (size_t k = 0; k < p.size(); ++k) ps[d.params[k].name] = p[k];
+        j["effects"].push_back({{"name", d.name}, {"params", ps}});
+    }
+    return j;
+}
+
+} // namespace cdm::io

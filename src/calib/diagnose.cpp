@@ -1,4 +1,5 @@
-// See diagnose.h. Statistics live here; docs/calibration.md explains each.
+// See diagnose.h. diagnose() orchestrates; the statistics are in diag_*.h and
+// docs/calibration.md explains each.
 #include "calib/diagnose.h"
 
 #include <algorithm>
@@ -12,553 +13,21 @@
 #include "calib/fit.h"
 #include "cdm/cdm.h"
 #include "model/effect.h"
-#include "model/model_impl.h"
+
+#include "calib/diag_eval.h"
+#include "calib/diag_residual.h"
+#include "calib/diag_spatial.h"
+#include "calib/diag_stats.h"
 
 namespace cdm {
 
 namespace {
 
 using nlohmann::json;
-using V3 = Eigen::Vector3d;
+using namespace diag;
 const char *kAxis[3] = {"x", "y", "z"};
 
-// ---------------------------------------------------------------- statistics
-
-double normal_sf(double z) { return 0.5 * std::erfc(z / std::sqrt(2.0)); }
-
-// Upper tail of chi-square (Wilson-Hilferty; good to a few % in the tail
-// for dof > 10, which is all we use it for besides chi2_3 below).
-double chi2_sf(double x, double dof) {
-    if (dof <= 0) return 1.0;
-    const double t = (std::cbrt(x / dof) - (1 - 2 / (9 * dof))) / std::sqrt(2 / (9 * dof));
-    return normal_sf(t);
-}
-double chi2_3_sf(double x) { // exact, 3 dof
-    return std::erfc(std::sqrt(x / 2)) + std::sqrt(2 * x / M_PI) * std::exp(-x / 2);
-}
-double chi2_3_isf(double p) {
-    double lo = 0, hi = 1e4;
-    for (int i = 0; i < 200; ++i) {
-        double mid = 0.5 * (lo + hi);
-        (chi2_3_sf(mid) > p ? lo : hi) = mid;
-    }
-    return 0.5 * (lo + hi);
-}
-// F distribution upper tail via the regularized incomplete beta (continued fraction).
-double betacf(double a, double b, double x) {
-    const int MAXIT = 300;
-    const double EPS = 1e-14, FPMIN = 1e-300;
-    double qab = a + b, qap = a + 1, qam = a - 1, c = 1, d = 1 - qab * x / qap;
-    if (std::fabs(d) < FPMIN) d = FPMIN;
-    d = 1 / d;
-    double h = d;
-    for (int m = 1; m <= MAXIT; ++m) {
-        int m2 = 2 * m;
-        double aa = m * (b - m) * x / ((qam + m2) * (a + m2));
-        d = 1 + aa * d;
-        if (std::fabs(d) < FPMIN) d = FPMIN;
-        c = 1 + aa / c;
-        if (std::fabs(c) < FPMIN) c = FPMIN;
-        d = 1 / d;
-        h *= d * c;
-        aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
-        d = 1 + aa * d;
-        if (std::fabs(d) < FPMIN) d = FPMIN;
-        c = 1 + aa / c;
-        if (std::fabs(c) < FPMIN) c = FPMIN;
-        d = 1 / d;
-        double del = d * c;
-        h *= del;
-        if (std::fabs(del - 1) < EPS) break;
-    }
-    return h;
-}
-double betai(double a, double b, double x) {
-    if (x <= 0) return 0;
-    if (x >= 1) return 1;
-    double bt = std::exp(std::lgamma(a + b) - std::lgamma(a) - std::lgamma(b) + a * std::log(x) + b * std::log(1 - x));
-    if (x < (a + 1) / (a + b + 2)) return bt * betacf(a, b, x) / a;
-    return 1 - bt * betacf(b, a, 1 - x) / b;
-}
-double f_sf(double F, double d1, double d2) {
-    if (!(F > 0)) return 1.0;
-    return betai(d2 / 2, d1 / 2, d2 / (d2 + d1 * F));
-}
-
-struct Acc {
-    double n = 0, s = 0, ss = 0, mx = 0;
-    void add(double v, double w = 1) {
-        n += w;
-        s += w * v;
-        ss += w * v * v;
-        mx = std::max(mx, std::fabs(v));
-    }
-    json to_json() const {
-        const double mean = n > 0 ? s / n : 0;
-        const double var = n > 1 ? std::max(0.0, (ss - n * mean * mean) / (n - 1)) : 0;
-        return {{"mean", mean}, {"std", std::sqrt(var)}, {"rms", n > 0 ? std::sqrt(ss / n) : 0}, {"max", mx}};
-    }
-};
-json stats3(const Acc a[3]) { return {{"x", a[0].to_json()}, {"y", a[1].to_json()}, {"z", a[2].to_json()}}; }
-
-// ------------------------------------------------------------- evaluation
-
-struct Eval {
-    std::vector<V3> res;                           // FK(mean) - T(ref), per position
-    std::vector<Eigen::Matrix<double, 3, 4>> Jp;   // d position / d readings at the estimate
-    std::vector<V3> var_mean;                      // noise variance of the position mean, per axis
-    std::vector<char> ok;                          // FK converged
-    std::vector<V3> est;                           // estimated position (device frame)
-    Acc err[3];                                    // per-sample error statistics
-    Acc within[3];                                 // per-sample deviation from the position mean
-    size_t bad_samples = 0;
-};
-
-Eigen::Matrix<double, 4, 3> reading_jacobian(const Model &m, const double p[3]) {
-    Eigen::Matrix<double, 4, 3> J;
-    for (int k = 0; k < 3; ++k) {
-        double pp[3] = {p[0], p[1], p[2]}, pm[3] = {p[0], p[1], p[2]};
-        pp[k] += 1e-4;
-        pm[k] -= 1e-4;
-        double yp[4], ym[4];
-        m.readings(pp, yp);
-        m.readings(pm, ym);
-        for (int i = 0; i < 4; ++i) J(i, k) = (yp[i] - ym[i]) / 2e-4;
-    }
-    return J;
-}
-
-// Per-position residuals by FK of the mean readings; per-sample statistics
-// through the local linearisation e_s = res + Jp (l_s - mean), exact to
-// second order in the noise (1e-4 mm at 0.05 mm noise).
-Eval evaluate(const Model &m, const Dataset &d, const std::vector<PreparedPos> &pos) {
-    Eval E;
-    const size_t P = pos.size();
-    E.res.assign(P, V3::Zero());
-    E.Jp.assign(P, Eigen::Matrix<double, 3, 4>::Zero());
-    E.var_mean.assign(P, V3::Constant(1e-6));
-    E.ok.assign(P, 0);
-    E.est.assign(P, V3::Zero());
-    for (size_t j = 0; j < P; ++j) {
-        double l[4] = {pos[j].mean(0), pos[j].mean(1), pos[j].mean(2), pos[j].mean(3)};
-        double p[3];
-        if (m.position(l, p) != 0) {
-            E.bad_samples += size_t(pos[j].n);
-            continue;
-        }
-        double t[3];
-        m.jig_to_device(pos[j].ref.data(), t);
-        E.est[j] = V3(p[0], p[1], p[2]);
-        E.res[j] = E.est[j] - V3(t[0], t[1], t[2]);
-        auto J = reading_jacobian(m, p);
-        Eigen::Matrix3d H = J.transpose() * J;
-        E.Jp[j] = H.inverse() * J.transpose();
-        // Covariance of the mean readings: the samples' (cross-cable terms
-        // included) over n, plus on the diagonal what prepare() added for
-        // quantisation and single samples.
-        Eigen::Matrix4d Cl = pos[j].cov / pos[j].n;
-        for (int c = 0; c < 4; ++c) Cl(c, c) = std::max(Cl(c, c), pos[j].var_mean(c));
-        Eigen::Matrix3d C = E.Jp[j] * Cl * E.Jp[j].transpose();
-        for (int a = 0; a < 3; ++a) E.var_mean[j](a) = std::max(C(a, a), 1e-10);
-        E.ok[j] = 1;
-        for (int s = 0; s < pos[j].n; ++s) {
-            const auto &ls = d.samples[pos[j].first + size_t(s)];
-            Eigen::Vector4d dl(ls[0] - l[0], ls[1] - l[1], ls[2] - l[2], ls[3] - l[3]);
-            V3 dev = E.Jp[j] * dl;
-            for (int a = 0; a < 3; ++a) {
-                E.err[a].add(E.res[j](a) + dev(a));
-                E.within[a].add(dev(a));
-            }
-        }
-    }
-    return E;
-}
-
-// The seed's procedure, per sample: triangulation (eq. 1-3), optionally the
-// ellipsoid (eq. 4) subtracted from x.
-Eval evaluate_seed(const DeviceGeometry &g, const Dataset &d, const std::vector<PreparedPos> &pos,
-                   const Ellipsoid *ell) {
-    Eval E;
-    const size_t P = pos.size();
-    E.res.assign(P, V3::Zero());
-    E.ok.assign(P, 0);
-    E.est.assign(P, V3::Zero());
-    E.var_mean.assign(P, V3::Constant(1e-6));
-    E.Jp.assign(P, Eigen::Matrix<double, 3, 4>::Zero());
-    for (size_t j = 0; j < P; ++j) {
-        V3 sum = V3::Zero();
-        int n = 0;
-        for (int s = 0; s < pos[j].n; ++s) {
-            const auto &ls = d.samples[pos[j].first + size_t(s)];
-            double p[3];
-            if (!triangulate(g, ls.data(), p)) {
-                ++E.bad_samples;
-                continue;
-            }
-            if (ell) p[0] -= ell->xc(p[1], p[2]);
-            for (int a = 0; a < 3; ++a) E.err[a].add(p[a] - pos[j].ref(a));
-            sum += V3(p[0], p[1], p[2]);
-            ++n;
-        }
-        if (n == 0) continue;
-        E.est[j] = sum / n;
-        E.res[j] = E.est[j] - pos[j].ref;
-        E.ok[j] = 1;
-    }
-    return E;
-}
-
-// The seed's eq. 5: the ellipsoid fitted to the x error of an evaluation
-// over its estimated y, z, each position weighted by its sample count.
-Ellipsoid ellipsoid_on(const Eval &E, const std::vector<PreparedPos> &pos) {
-    std::vector<double> y, z, x, w;
-    for (size_t j = 0; j < pos.size(); ++j)
-        if (E.ok[j]) {
-            y.push_back(E.est[j](1));
-            z.push_back(E.est[j](2));
-            x.push_back(E.res[j](0));
-            w.push_back(pos[j].n);
-        }
-    return fit_ellipsoid(y, z, x, w);
-}
-
-// ------------------------------------------------------------ grid helpers
-
-struct Grid {
-    std::vector<std::vector<int>> nb;                 // neighbours (same height)
-    std::vector<std::array<int, 2>> ypair, zpair;     // second-difference triples: centre j, (l, r)
-    std::vector<int> ycentre, zcentre;
-    std::vector<int> height_index;
-    double pitch = 5;
-    bool layered = true; // positions on a few fixture heights (the seed's jig)
-};
-
-Grid make_grid(const std::vector<PreparedPos> &pos, const std::vector<double> &heights) {
-    Grid G;
-    const size_t P = pos.size();
-    G.nb.resize(P);
-    G.height_index.assign(P, 0);
-    // The seed's jig puts every position on one of a few fixture heights.
-    // Positions scattered in x (a free-hand or robot-arm reference) form one
-    // layer, and their neighbours are found in 3-D.
-    G.layered = heights.size() <= std::min<size_t>(50, std::max<size_t>(1, P / 4));
-    if (G.layered)
-        for (size_t j = 0; j < P; ++j) {
-            int best = 0;
-            for (size_t h = 0; h < heights.size(); ++h)
-                if (std::fabs(heights[h] - pos[j].ref(0)) < std::fabs(heights[size_t(best)] - pos[j].ref(0)))
-                    best = int(h);
-            G.height_index[j] = best;
-        }
-    // pitch: the smallest positive spacing in y or z among positions
-    double pitch = INFINITY;
-    std::vector<double> ys;
-    for (auto &p : pos) ys.push_back(p.ref(1));
-    std::sort(ys.begin(), ys.end());
-    for (size_t k = 1; k < ys.size(); ++k)
-        if (ys[k] - ys[k - 1] > 1e-6) pitch = std::min(pitch, ys[k] - ys[k - 1]);
-    if (!std::isfinite(pitch)) pitch = 5;
-    G.pitch = pitch;
-    std::map<std::array<long, 3>, int> key;
-    auto K = [&](int hi, double y, double z) {
-        return std::array<long, 3>{hi, std::lround(y / pitch), std::lround(z / pitch)};
-    };
-    for (size_t j = 0; j < P; ++j) key[K(G.height_index[j], pos[j].ref(1), pos[j].ref(2))] = int(j);
-    auto find = [&](int hi, double y, double z) {
-        auto it = key.find(K(hi, y, z));
-        return it == key.end() ? -1 : it->second;
-    };
-    for (size_t j = 0; j < P; ++j) {
-        const int h = G.height_index[j];
-        const double y = pos[j].ref(1), z = pos[j].ref(2);
-        int l = find(h, y - pitch, z), r = find(h, y + pitch, z), dn = find(h, y, z - pitch), up = find(h, y, z + pitch);
-        for (int q : {l, r, dn, up})
-            if (q >= 0) G.nb[j].push_back(q);
-        if (l >= 0 && r >= 0) {
-            G.ycentre.push_back(int(j));
-            G.ypair.push_back({l, r});
-        }
-        if (dn >= 0 && up >= 0) {
-            G.zcentre.push_back(int(j));
-            G.zpair.push_back({dn, up});
-        }
-    }
-    // Irregular layouts: the nearest positions of the same layer (4 in a
-    // plane, 6 in 3-D), then made symmetric (Moran's I takes w_jk = w_kj).
-    const size_t knn = G.layered ? 4 : 6;
-    for (size_t j = 0; j < P; ++j) {
-        if (!G.nb[j].empty()) continue;
-        std::vector<std::pair<double, int>> dist;
-        for (size_t k = 0; k < P; ++k)
-            if (k != j && G.height_index[k] == G.height_index[j])
-                dist.push_back({(pos[k].ref - pos[j].ref).squaredNorm(), int(k)});
-        std::sort(dist.begin(), dist.end());
-        for (size_t k = 0; k < std::min(knn, dist.size()); ++k) G.nb[j].push_back(dist[k].second);
-    }
-    std::vector<std::vector<int>> sym(P);
-    for (size_t j = 0; j < P; ++j)
-        for (int k : G.nb[j]) {
-            sym[j].push_back(k);
-            sym[size_t(k)].push_back(int(j));
-        }
-    for (auto &v : sym) {
-        std::sort(v.begin(), v.end());
-        v.erase(std::unique(v.begin(), v.end()), v.end());
-    }
-    G.nb = std::move(sym);
-    return G;
-}
-
-// White (position-to-position) scatter beyond the noise, per axis, from
-// second differences along the plate's rows and columns: a smooth error
-// (an effect) nearly cancels in them, the jig's hole errors do not.
-// E[(r_j - (r_l + r_r)/2)^2] = v_j + (v_l + v_r)/4 + 1.5 s^2.
-V3 estimate_nugget(const Eval &E, const Grid &G) {
-    V3 out;
-    for (int a = 0; a < 3; ++a) {
-        double num = 0, noise = 0;
-        int cnt = 0;
-        auto add = [&](const std::vector<int> &cen, const std::vector<std::array<int, 2>> &pr) {
-            for (size_t k = 0; k < cen.size(); ++k) {
-                int j = cen[k], l = pr[k][0], r = pr[k][1];
-                if (!E.ok[j] || !E.ok[l] || !E.ok[r]) continue;
-                double dd = E.res[j](a) - 0.5 * (E.res[l](a) + E.res[r](a));
-                num += dd * dd;
-                noise += E.var_mean[j](a) + 0.25 * (E.var_mean[l](a) + E.var_mean[r](a));
-                ++cnt;
-            }
-        };
-        add(G.ycentre, G.ypair);
-        add(G.zcentre, G.zpair);
-        if (cnt >= 20) {
-            out(a) = std::sqrt(std::max(0.0, (num - noise) / (1.5 * cnt)));
-            continue;
-        }
-        // No plate rows (an irregular layout): first differences between
-        // nearest neighbours, E[(r_j - r_k)^2] = v_j + v_k + 2 s^2, which a
-        // smooth error biases more (its gradient times the spacing).
-        num = noise = 0;
-        cnt = 0;
-        for (size_t j = 0; j < G.nb.size(); ++j)
-            for (int k : G.nb[j]) {
-                if (size_t(k) <= j || !E.ok[j] || !E.ok[size_t(k)]) continue;
-                const double dd = E.res[j](a) - E.res[size_t(k)](a);
-                num += dd * dd;
-                noise += E.var_mean[j](a) + E.var_mean[size_t(k)](a);
-                ++cnt;
-            }
-        out(a) = cnt > 0 ? std::sqrt(std::max(0.0, (num - noise) / (2.0 * cnt))) : 0.0;
-    }
-    return out;
-}
-
-struct Verdict {
-    double chi2 = 0, chi2_p = 1;
-    int dof = 1;
-    double moran_z = 0, moran_p = 1;
-    bool explained = false;
-    std::vector<char> failing;
-    int n_failing = 0;
-};
-
-// Moran's I of the standardised residuals over the plate's neighbour graph,
-// per axis, with each height's mean removed (a per-height offset is the
-// height fixture's, and the chi-square sees it). Positive I = neighbours
-// alike = smooth structure that noise does not make.
-double moran_z(const std::vector<double> &zv, const std::vector<char> &ok, const Grid &G) {
-    const size_t P = zv.size();
-    std::map<int, std::pair<double, int>> hm;
-    for (size_t j = 0; j < P; ++j)
-        if (ok[j]) {
-            hm[G.height_index[j]].first += zv[j];
-            hm[G.height_index[j]].second += 1;
-        }
-    std::vector<double> c(P, 0);
-    double n = 0, m2 = 0;
-    for (size_t j = 0; j < P; ++j)
-        if (ok[j]) {
-            auto &h = hm[G.height_index[j]];
-            c[j] = zv[j] - h.first / h.second;
-            m2 += c[j] * c[j];
-            n += 1;
-        }
-    double S0 = 0, S1 = 0, S2 = 0, num = 0;
-    for (size_t j = 0; j < P; ++j) {
-        if (!ok[j]) continue;
-        double rowsum = 0;
-        for (int k : G.nb[j]) {
-            if (!ok[size_t(k)]) continue;
-            // symmetric weights: 1 for each direction listed
-            num += c[j] * c[size_t(k)];
-            S0 += 1;
-            S1 += 2; // (w_jk + w_kj)^2 / 2 summed over ordered pairs with symmetric w = 1
-            rowsum += 1;
-        }
-        S2 += 4 * rowsum * rowsum;
-    }
-    if (S0 == 0 || m2 == 0 || n < 5) return 0;
-    const double I = (n / S0) * num / m2;
-    const double EI = -1.0 / (n - 1);
-    const double VI = (n * n * S1 / 2 - n * S2 / 4 + 3 * S0 * S0) / ((n * n - 1) * S0 * S0) - EI * EI;
-    return VI > 0 ? (I - EI) / std::sqrt(VI) : 0;
-}
-
-Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free) {
-    Verdict v;
-    const size_t P = E.res.size();
-    v.failing.assign(P, 0);
-    size_t used = 0;
-    std::vector<double> z[3];
-    for (auto &zz : z) zz.assign(P, 0);
-    for (size_t j = 0; j < P; ++j)
-        if (E.ok[j]) ++used;
-    const double q = chi2_3_isf(0.01 / std::max<size_t>(1, used)); // 1 % family-wise
-    // The height fixture's own error: one constant per height (the same at
-    // every hole), like the holes' error a property of the jig, not of the
-    // model. Per-height mean residuals up to 0.15 mm (3x a machined 0.05 mm
-    // tolerance) are taken as the fixture's and removed before the
-    // chi-square, at the cost of their degrees of freedom; larger ones stay.
-    std::map<std::pair<int, int>, std::pair<double, double>> hmean; // (height, axis) -> (sum w r, sum w)
-    for (size_t j = 0; j < P; ++j)
-        if (E.ok[j])
-            for (int a = 0; a < 3; ++a) {
-                const double w = 1.0 / (E.var_mean[j](a) + jig(a) * jig(a));
-                auto &h = hmean[{G.height_index[j], a}];
-                h.first += w * E.res[j](a);
-                h.second += w;
-            }
-    int nuisance = 0;
-    std::map<std::pair<int, int>, double> fixture;
-    for (auto &kv : hmean) {
-        const double m = kv.second.first / kv.second.second;
-        if (std::fabs(m) <= 0.15) {
-            fixture[kv.first] = m;
-            ++nuisance;
-        }
-    }
-    for (size_t j = 0; j < P; ++j) {
-        if (!E.ok[j]) continue;
-        double c = 0;
-        for (int a = 0; a < 3; ++a) {
-            const double s2 = E.var_mean[j](a) + jig(a) * jig(a);
-            auto it = fixture.find({G.height_index[j], a});
-            const double off = it == fixture.end() ? 0.0 : it->second;
-            z[a][j] = (E.res[j](a) - off) / std::sqrt(s2);
-            c += z[a][j] * z[a][j];
-        }
-        v.chi2 += c;
-        if (c > q) {
-            v.failing[j] = 1;
-            ++v.n_failing;
-        }
-    }
-    v.dof = std::max(1, int(3 * used) - n_free - nuisance);
-    v.chi2_p = chi2_sf(v.chi2, v.dof);
-    double best = -INFINITY;
-    for (int a = 0; a < 3; ++a) best = std::max(best, moran_z(z[a], E.ok, G));
-    v.moran_z = best;
-    v.moran_p = std::min(1.0, 3 * normal_sf(best)); // Bonferroni over the three axes
-    v.explained = v.chi2_p >= 1e-3 && v.moran_p >= 1e-3;
-    return v;
-}
-
 json vec3(const V3 &v) { return json::array({v(0), v(1), v(2)}); }
-
-// Lomb-Scargle periodogram of y(t) (mean removed), normalised by the variance.
-std::vector<double> lomb(const std::vector<double> &t, const std::vector<double> &y, const std::vector<double> &freqs) {
-    const size_t n = t.size();
-    double mean = 0, var = 0;
-    for (double v : y) mean += v;
-    mean /= double(n);
-    for (double v : y) var += (v - mean) * (v - mean);
-    var /= double(n - 1);
-    std::vector<double> P(freqs.size(), 0);
-    for (size_t f = 0; f < freqs.size(); ++f) {
-        const double w = 2 * M_PI * freqs[f];
-        double s2 = 0, c2 = 0;
-        for (size_t k = 0; k < n; ++k) {
-            s2 += std::sin(2 * w * t[k]);
-            c2 += std::cos(2 * w * t[k]);
-        }
-        const double tau = std::atan2(s2, c2) / (2 * w);
-        double yc = 0, ys = 0, cc = 0, ss = 0;
-        for (size_t k = 0; k < n; ++k) {
-            const double c = std::cos(w * (t[k] - tau)), s = std::sin(w * (t[k] - tau));
-            yc += (y[k] - mean) * c;
-            ys += (y[k] - mean) * s;
-            cc += c * c;
-            ss += s * s;
-        }
-        P[f] = var > 0 ? 0.5 * (yc * yc / cc + ys * ys / ss) / var : 0;
-    }
-    return P;
-}
-
-void detrend_quadratic(const std::vector<double> &t, std::vector<double> &y) {
-    const size_t n = t.size();
-    if (n < 4) return;
-    double lo = *std::min_element(t.begin(), t.end()), hi = *std::max_element(t.begin(), t.end());
-    const double span = hi > lo ? hi - lo : 1.0;
-    Eigen::MatrixXd A(n, 3);
-    Eigen::VectorXd b(n);
-    for (size_t k = 0; k < n; ++k) {
-        const double u = (t[k] - lo) / span;
-        A(long(k), 0) = 1;
-        A(long(k), 1) = u;
-        A(long(k), 2) = u * u;
-        b(long(k)) = y[k];
-    }
-    Eigen::VectorXd c = A.colPivHouseholderQr().solve(b);
-    Eigen::VectorXd r = b - A * c;
-    for (size_t k = 0; k < n; ++k) y[k] = r(long(k));
-}
-
-// Least-squares polynomial fit of degree deg; returns the F-test p-value
-// against a constant and the fitted curve's range.
-struct Trend {
-    double p = 1, range = 0, r2 = 0;
-};
-Trend poly_trend(const std::vector<double> &x, const std::vector<double> &y, const std::vector<double> &w, int deg) {
-    const size_t n = x.size();
-    Trend t;
-    if (n < size_t(deg + 3)) return t;
-    double xm = 0, sw = 0;
-    for (size_t k = 0; k < n; ++k) {
-        xm += w[k] * x[k];
-        sw += w[k];
-    }
-    xm /= sw;
-    double xs = 0;
-    for (size_t k = 0; k < n; ++k) xs = std::max(xs, std::fabs(x[k] - xm));
-    if (xs == 0) return t;
-    Eigen::MatrixXd A(n, deg + 1);
-    Eigen::VectorXd b(n), sq(n);
-    for (size_t k = 0; k < n; ++k) {
-        const double u = (x[k] - xm) / xs, s = std::sqrt(w[k]);
-        for (int d = 0; d <= deg; ++d) A(long(k), d) = s * std::pow(u, d);
-        b(long(k)) = s * y[k];
-    }
-    Eigen::VectorXd c = A.colPivHouseholderQr().solve(b);
-    const double rss = (A * c - b).squaredNorm();
-    double mean = 0;
-    for (size_t k = 0; k < n; ++k) mean += w[k] * y[k];
-    mean /= sw;
-    double tss = 0;
-    for (size_t k = 0; k < n; ++k) tss += w[k] * (y[k] - mean) * (y[k] - mean);
-    if (tss <= 0) return t;
-    const double F = ((tss - rss) / deg) / (rss / double(n - size_t(deg) - 1));
-    t.p = f_sf(F, deg, double(n) - deg - 1);
-    t.r2 = 1 - rss / tss;
-    double lo = INFINITY, hi = -INFINITY;
-    for (size_t k = 0; k < n; ++k) {
-        double u = (x[k] - xm) / xs, v = 0;
-        for (int d = 0; d <= deg; ++d) v += c(d) * std::pow(u, d);
-        lo = std::min(lo, v);
-        hi = std::max(hi, v);
-    }
-    t.range = hi - lo;
-    return t;
-}
 
 } // namespace
 
@@ -622,7 +91,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     if (model_has_ellipsoid) {
         Ellipsoid e2 = ellipsoid_on(cur, pos);
         std::string e3;
-        model.add_effect("ellipsoid", {{"L", e2.L}, {"M", e2.M}, {"N", e2.N}}, e3);
+        model.add_effect("ellipsoid", Model::ParamValues{{"L", e2.L}, {"M", e2.M}, {"N", e2.N}}, e3);
         cur = evaluate(model, data, pos);
         rep.n_free += 3;
     }
@@ -728,21 +197,21 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     // (anchors for a jig tilt plus a gain error); this catches it.
     json review = json::array();
     {
-        auto &I = model.impl();
         const double bic_cur = chi2_cur + rep.n_free * std::log(n_obs);
         auto rebuild = [&](const std::string &skip, const std::string &add, Model &m2) {
             std::string e2;
-            for (auto &e : I.effects) {
-                if (e.desc->name == skip || e.desc->stage == Stage::Position) continue;
-                json pj = json::object();
-                for (size_t q = 0; q < e.p.size(); ++q) pj[e.desc->params[q].name] = e.p[q];
-                m2.add_effect(e.desc->name, pj, e2);
+            for (size_t k = 0; k < model.effect_count(); ++k) {
+                const EffectDesc &d = model.effect_desc(k);
+                if (d.name == skip || d.stage == Stage::Position) continue;
+                Model::ParamValues pv;
+                for (size_t q = 0; q < d.params.size(); ++q) pv.push_back({d.params[q].name, model.effect_params(k)[q]});
+                m2.add_effect(d.name, pv, e2);
             }
             if (!add.empty()) m2.add_effect(add, nullptr, e2);
         };
-        for (auto &e : I.effects) {
-            if (e.desc->stage == Stage::Position) continue;
-            const std::string name = e.desc->name;
+        for (size_t k = 0; k < model.effect_count(); ++k) {
+            if (model.effect_desc(k).stage == Stage::Position) continue;
+            const std::string name = model.effect_desc(k).name;
             Model without{g};
             rebuild(name, "", without);
             FitReport rw;
@@ -1013,11 +482,12 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     json mlist = json::array(), params = json::object();
     for (size_t k = 0; k < model.effect_count(); ++k) {
         mlist.push_back(model.effect_name(k));
-        const auto &inst = model.impl().effects[k];
+        const EffectDesc &d = model.effect_desc(k);
+        const auto &pv = model.effect_params(k);
         json pj = json::object();
-        for (size_t q = 0; q < inst.p.size(); ++q) {
+        for (size_t q = 0; q < pv.size(); ++q) {
             double sd = (k < rep.std.size() && q < rep.std[k].size()) ? rep.std[k][q] : 0.0;
-            pj[inst.desc->params[q].name] = {{"value", inst.p[q]}, {"std", sd}, {"unit", inst.desc->params[q].unit}};
+            pj[d.params[q].name] = {{"value", pv[q]}, {"std", sd}, {"unit", d.params[q].unit}};
         }
         params[model.effect_name(k)] = pj;
     }

@@ -3,4 +3,8 @@ list(APPEND CDM_SOURCES
   calib/dataset.cpp
   calib/fit.cpp
   calib/simulate.cpp
-  calib/diagnose.cpp)
+  calib/diagnose.cpp
+  calib/diag_stats.cpp
+  calib/diag_eval.cpp
+  calib/diag_spatial.cpp
+  calib/diag_residual.cpp)

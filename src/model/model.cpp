@@ -123,6 +123,39 @@ bool Model::add_effect(const std::string &name, const nlohmann::json &params, st
     return true;
 }
 
+bool Model::add_effect(const std::string &name, const ParamValues &params, std::string &err) {
+    nlohmann::json j = nlohmann::json::object();
+    for (auto &kv : params) j[kv.first] = kv.second;
+    return add_effect(name, j, err);
+}
+
+const EffectDesc &Model::effect_desc(size_t i) const { return *impl_->effects.at(i).desc; }
+
+const std::vector<double> &Model::effect_params(size_t i) const { return impl_->effects.at(i).p; }
+
+bool Model::set_effect_params(size_t i, const std::vector<double> &v, std::string &err) {
+    if (i >= impl_->effects.size()) {
+        err = "effect index " + std::to_string(i) + " out of range";
+        return false;
+    }
+    auto &e = impl_->effects[i];
+    if (v.size() != e.p.size()) {
+        err = "effect \"" + e.desc->name + "\" takes " + std::to_string(e.p.size()) + " parameters, got " +
+              std::to_string(v.size());
+        return false;
+    }
+    for (size_t k = 0; k < v.size(); ++k) {
+        const auto &pd = e.desc->params[k];
+        if (!std::isfinite(v[k]) || v[k] < pd.lower || v[k] > pd.upper) {
+            err = "effect \"" + e.desc->name + "\" parameter \"" + pd.name + "\" = " + std::to_string(v[k]) +
+                  " is outside [" + std::to_string(pd.lower) + ", " + std::to_string(pd.upper) + "]";
+            return false;
+        }
+    }
+    e.p = v;
+    return true;
+}
+
 bool Model::add_effect_random(const std::string &name, uint64_t seed, std::string &err) {
     if (!add_effect(name, nullptr, err)) return false;
     std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ull + 12345);

@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -52,6 +53,7 @@ bool triangulate(const DeviceGeometry &g, const double lengths[4], double p[3]);
 // Ideal cable lengths at holder centre p (nominal geometry, no effects).
 void nominal_lengths(const DeviceGeometry &g, const double p[3], double lengths[4]);
 
+struct EffectDesc; // model/effect.h
 class Model; // model/model_impl: geometry + effects with parameters
 
 // Shared, immutable once built: the driver swaps whole models.
@@ -74,6 +76,13 @@ public:
     // name or parameter.
     bool add_effect(const std::string &name, const nlohmann::json &params, std::string &err);
     bool has_effect(const std::string &name) const;
+    // Contract accessors (docs: /work/notes/common.md); the effects branch
+    // owns the real ones, these are minimal bodies for the diagnosis.
+    using ParamValues = std::vector<std::pair<std::string, double>>;
+    bool add_effect(const std::string &name, const ParamValues &params, std::string &err);
+    const EffectDesc &effect_desc(size_t i) const;
+    const std::vector<double> &effect_params(size_t i) const; // in effect_desc(i).params order
+    bool set_effect_params(size_t i, const std::vector<double> &v, std::string &err);
     // Adds an effect with parameters drawn at random within the realistic
     // ranges its doc states (the simulator's hidden effects).
     bool add_effect_random(const std::string &name, uint64_t seed, std::string &err);

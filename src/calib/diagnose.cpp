@@ -18,6 +18,7 @@
 #include "calib/diag_residual.h"
 #include "calib/diag_spatial.h"
 #include "calib/diag_stats.h"
+#include "calib/fit_calibration.h"
 
 namespace cdm {
 
@@ -37,64 +38,33 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
               std::string &err) {
     auto t0 = std::chrono::steady_clock::now();
     auto progress = [&](const std::string &s, double f) { return !opt.progress || opt.progress(s, f); };
-    const auto pos = prepare(data);
+    FitCalibrationOptions fopt;
+    fopt.effects = opt.effects;
+    fopt.jig_tolerance_mm = opt.jig_tolerance_mm;
+    fopt.progress = opt.progress;
+    CalibrationFit cf(g);
+    if (!fit_calibration(data, g, fopt, cf, err)) return false;
+    const auto &pos = cf.pos;
     const size_t P = pos.size();
-    if (P < 4) {
-        err = data.path + ": " + std::to_string(P) + " jig positions; a diagnosis needs at least 4";
-        return false;
-    }
-    const Grid G = make_grid(pos, data.heights);
-    // A machined plate is within ~0.05 mm: white scatter beyond that is not
-    // the jig's and must not hide an effect. Without repeated samples the
-    // pots' noise is white scatter too, and there is nothing to cap against.
-    const bool repeats = std::any_of(pos.begin(), pos.end(), [](const PreparedPos &p) { return p.n > 1; });
-    const double jig_cap = repeats ? 0.05 : INFINITY;
-
-    // --- the seed's procedure: nominal triangulation, then the ellipsoid
-    progress("nominal model", 0.0);
-    Eval nom = evaluate_seed(g, data, pos, nullptr);
+    const Grid &G = cf.grid;
+    Model &model = cf.model;
+    FitReport &rep = cf.report;
+    FitOptions &fo = cf.fit_options;
+    V3 jig = cf.jig;
+    const Eval &nom = cf.nominal;
     Ellipsoid ell = ellipsoid_on(nom, pos);
     Eval ellE = evaluate_seed(g, data, pos, &ell);
-
-    // --- the model
-    Model model(g);
-    for (auto &e : opt.effects) {
-        if (e == "ellipsoid") continue; // fitted in position space below
-        if (!model.add_effect(e, nullptr, err)) return false;
-    }
+    Eval cur = cf.fitted;
     const bool user_jig = opt.jig_tolerance_mm >= 0;
-    V3 jig = V3::Constant(user_jig ? opt.jig_tolerance_mm : 0.03);
-    FitOptions fo;
-    fo.jig_sigma = jig;
-    FitReport rep;
+    // Candidates' own jig tolerance is capped as in fit_calibration().
+    const bool repeats = std::any_of(pos.begin(), pos.end(), [](const PreparedPos &p) { return p.n > 1; });
+    const double jig_cap = repeats ? 0.05 : INFINITY;
+    const bool model_has_ellipsoid =
+        std::find(opt.effects.begin(), opt.effects.end(), "ellipsoid") != opt.effects.end();
     auto fit_with_progress = [&](Model &m, FitOptions f, const std::string &stage, FitReport &r) {
         f.progress = [&](double fr) { return progress(stage, fr); };
         return fit_model(m, pos, f, r);
     };
-    if (!fit_with_progress(model, fo, "fitting the model", rep)) {
-        err = "fit cancelled";
-        return false;
-    }
-    Eval cur = evaluate(model, data, pos);
-    // Jig tolerance from the white part of the residual, then refit with it.
-    if (!user_jig) {
-        V3 est = estimate_nugget(cur, G);
-        for (int a = 0; a < 3; ++a) jig(a) = std::min(est(a), jig_cap);
-        fo.jig_sigma = jig;
-        if (model.effect_count() > 0) {
-            fit_with_progress(model, fo, "fitting the model", rep);
-            cur = evaluate(model, data, pos);
-        }
-    }
-    // The ellipsoid on top of the physical model, when asked for.
-    bool model_has_ellipsoid = std::find(opt.effects.begin(), opt.effects.end(), "ellipsoid") != opt.effects.end();
-    if (model_has_ellipsoid) {
-        Ellipsoid e2 = ellipsoid_on(cur, pos);
-        std::string e3;
-        model.add_effect("ellipsoid", Model::ParamValues{{"L", e2.L}, {"M", e2.M}, {"N", e2.N}}, e3);
-        cur = evaluate(model, data, pos);
-        rep.n_free += 3;
-    }
     Verdict vcur = judge(cur, G, jig, rep.n_free);
     const double n_obs = 4.0 * double(P);
     // The fitted model's reading-space chi-square, the reference every
@@ -352,8 +322,9 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                 amp += std::hypot(s(1), s(2)) / 4;
             }
             if (fap < 1e-3)
-                findings.push_back({{"variable", "cable length"}, {"kind", "periodic"}, {"axis", "length"},
-                                    {"period_mm", 1.0 / freqs[bf]}, {"amplitude_mm", amp}, {"p_value", fap},
+                findings.push_back({{"variable", "cable length"}, {"variable_kind", "length"}, {"cable", nullptr},
+                                    {"kind", "periodic"}, {"axis", "length"}, {"period_mm", 1.0 / freqs[bf]},
+                                    {"amplitude_mm", amp}, {"p_value", fap}, {"r2", nullptr},
                                     {"text", "the cable-length residual repeats every " +
                                                  std::to_string(1.0 / freqs[bf]).substr(0, 6) + " mm of cable (amplitude " +
                                                  std::to_string(amp).substr(0, 6) +
@@ -361,12 +332,15 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                                                  "drum or shaft, pot track ripple)"}});
         }
         // Trends of the position residual against physical variables.
+        // kind and cable travel in the finding beside the English name, so
+        // that the report routes it without parsing the text.
         struct Var {
-            std::string name;
+            std::string name, kind;
+            json cable;
             std::vector<double> v;
         };
         std::vector<Var> vars;
-        Var h{"height", {}}, rho{"distance from centre", {}};
+        Var h{"height", "height", nullptr, {}}, rho{"distance from centre", "radius", nullptr, {}};
         for (size_t j = 0; j < P; ++j) {
             h.v.push_back(pos[j].ref(0));
             rho.v.push_back(std::hypot(pos[j].ref(1), pos[j].ref(2)));
@@ -374,7 +348,8 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
         vars.push_back(h);
         vars.push_back(rho);
         for (int c = 0; c < 4; ++c) {
-            Var l{"l" + std::to_string(c + 1), {}}, an{"angle of cable " + std::to_string(c + 1), {}};
+            Var l{"l" + std::to_string(c + 1), "length", c + 1, {}},
+                an{"angle of cable " + std::to_string(c + 1), "angle", c + 1, {}};
             for (size_t j = 0; j < P; ++j) {
                 l.v.push_back(lmean[j][size_t(c)]);
                 an.v.push_back(angle[j][size_t(c)]);
@@ -394,7 +369,8 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                     }
                 Trend t = poly_trend(x, y, w, 2);
                 if (t.p < 1e-3)
-                    tr.push_back({{"variable", var.name}, {"kind", "trend"}, {"axis", kAxis[a]}, {"period_mm", nullptr},
+                    tr.push_back({{"variable", var.name}, {"variable_kind", var.kind}, {"cable", var.cable},
+                                  {"kind", "trend"}, {"axis", kAxis[a]}, {"period_mm", nullptr},
                                   {"amplitude_mm", t.range}, {"p_value", t.p}, {"r2", t.r2},
                                   {"text", std::string(kAxis[a]) + " residual varies with " + var.name + " by " +
                                                std::to_string(t.range).substr(0, 6) + " mm (R^2 " +

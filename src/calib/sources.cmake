@@ -7,4 +7,5 @@ list(APPEND CDM_SOURCES
   calib/diag_stats.cpp
   calib/diag_eval.cpp
   calib/diag_spatial.cpp
-  calib/diag_residual.cpp)
+  calib/diag_residual.cpp
+  calib/fit_calibration.cpp)

@@ -8,4 +8,5 @@ list(APPEND CDM_SOURCES
   calib/diag_eval.cpp
   calib/diag_spatial.cpp
   calib/diag_residual.cpp
-  calib/fit_calibration.cpp)
+  calib/fit_calibration.cpp
+  calib/diag_findings.cpp)

@@ -384,6 +384,20 @@ CDM_API int cdm_diagnose(const char *data_csv_path, const char *device_json_path
                          const char *options_json, cdm_progress_fn progress, void *user,
                          char **result_json);
 
+/* ---- cdm_fit (experimental, since 1.1) ----
+ * Fits the calibration only: the effects in options_json fitted to the jig
+ * data, without the diagnosis's candidates, review or validation (what
+ * `cdm calib fit` needs). options_json: {"effects": [...] (required, not
+ * empty: CDM_ERR_INVALID_ARG otherwise), "jig_tolerance_mm": mm (default:
+ * estimated from the data), "calibration_out": path (written atomically)}.
+ * *result_json (free with cdm_free_string): {"effects": [{"name", "params":
+ * {p: {value, std, unit}}}], "fit": {converged, chi2, dof, n_free,
+ * evaluations, seconds, algorithm, message}, "jig_tolerance_mm": [x,y,z],
+ * "nominal_error_mm" and "error_mm": {x,y,z} x {mean,std,rms,max}}.
+ * Errors as cdm_diagnose's. Any thread. */
+CDM_API int cdm_fit(const char *data_csv_path, const char *device_json_path, const char *options_json,
+                    cdm_progress_fn progress, void *user, char **result_json);
+
 /** Frees a string returned by libcdm. NULL is fine. */
 CDM_API void cdm_free_string(char *s);
 

@@ -11,6 +11,7 @@
 
 #include "api/calibration_handle.h"
 #include "api/errors.h"
+#include "api/jobs.h"
 #include "calib/diagnose.h"
 #include "io/calibration_json.h"
 #include "io/device_json.h"
@@ -27,126 +28,25 @@ int parse_calibration(const std::string &text, const std::string &source, cdm_ca
     return CDM_OK;
 }
 
-struct DiagnoseArgs {
-    cdm::DiagnoseOptions opt;
-    std::string calib_out;
-};
-
-// Options text -> DiagnoseOptions, through the one JSON loader: types are
-// checked and errors name the option and its column.
-int parse_options(const char *text, DiagnoseArgs &a) {
-    const std::string src = "cdm_diagnose options";
-    cdm::io::JsonValue o;
-    std::string err;
-    if (!cdm::io::parse_json(text, src, o, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
-    if (o.type != cdm::io::JsonValue::Object)
-        return cdm::fail(CDM_ERR_INVALID_ARG, cdm::io::where(src, o) + "options must be a JSON object");
-    auto bad = [&](const cdm::io::JsonValue &v, const std::string &k, const char *want) {
-        return cdm::fail(CDM_ERR_INVALID_ARG, cdm::io::where(src, v) + "option \"" + k + "\" must be " + want +
-                                                  ", got " + v.type_name());
-    };
-    using J = cdm::io::JsonValue;
-    for (const auto &[k, v] : o.members) {
-        if (k == "effects") {
-            if (v.type != J::Array) return bad(v, k, "a list of effect names");
-            for (const auto &e : v.items) {
-                if (e.type != J::String) return bad(e, k, "a list of effect names");
-                a.opt.effects.push_back(e.str);
-            }
-        } else if (k == "jig_tolerance_mm") {
-            if (v.type == J::Null) continue;
-            if (v.type != J::Number || !(v.number >= 0) || v.number > cdm::kDatasetMaxRefMm)
-                return bad(v, k, "a number of mm in 0..5000");
-            a.opt.jig_tolerance_mm = v.number;
-        } else if (k == "candidates" || k == "validation" || k == "per_position") {
-            if (v.type != J::Bool) return bad(v, k, "true or false");
-            (k == "candidates" ? a.opt.candidates : k == "validation" ? a.opt.validation : a.opt.per_position) =
-                v.boolean;
-        } else if (k == "calibration_out") {
-            if (v.type == J::Null) continue;
-            if (v.type != J::String) return bad(v, k, "a path");
-            a.calib_out = v.str;
-        } else {
-            return cdm::fail(CDM_ERR_INVALID_ARG, cdm::io::where(src, v) + "unknown option \"" +
-                                                      cdm::io::quote_field(k) +
-                                                      "\" (known: effects, jig_tolerance_mm, candidates, "
-                                                      "validation, per_position, calibration_out)");
-        }
-    }
-    return CDM_OK;
-}
-
-// More than this fraction of positions whose mean readings the nominal
-// triangulation cannot place means the data does not describe this device
-// (wrong unit, wrong device file, overflowing means): no diagnosis of it is
-// meaningful. Below it, a few edge positions that effects push past the
-// nominal spheres are normal and the model's own solver handles them.
-constexpr double kMaxUnsolvableFraction = 0.5;
-
-int check_solvable(const cdm::Dataset &d, const cdm::DeviceGeometry &g) {
-    size_t bad = 0, nonfinite = 0;
-    for (const auto &h : d.pos) {
-        double p[3];
-        bool fin = true;
-        for (double m : h.mean) fin = fin && std::isfinite(m);
-        if (!fin) ++nonfinite;
-        if (!fin || !cdm::triangulate(g, h.mean, p)) ++bad;
-    }
-    if (double(bad) <= kMaxUnsolvableFraction * double(d.pos.size())) return CDM_OK;
-    return cdm::fail(CDM_ERR_NUMERIC,
-                     d.path + ": " + std::to_string(bad) + " of " + std::to_string(d.pos.size()) +
-                         " positions (" + std::to_string(d.rows) + " samples) cannot be placed by the nominal "
-                         "triangulation (" + std::to_string(nonfinite) + " with non-finite mean readings, the "
-                         "rest outside the workspace of this device: the four cable spheres do not meet); more "
-                         "than half unsolvable means the data does not match the device description, so no "
-                         "diagnosis is given");
-}
-
-// Reads and parses an input file, telling a file that cannot be read
-// (CDM_ERR_IO: missing, special, too large) from one that is malformed.
-int load_device(const char *path, cdm::DeviceGeometry &g) {
-    std::string text, err;
-    if (!cdm::io::read_file(path, cdm::io::kJsonMaxBytes, text, err, "device description"))
-        return cdm::fail(CDM_ERR_IO, err);
-    if (!cdm::io::parse_device_json(text, path, g, err)) return cdm::fail(CDM_ERR_PARSE, err);
-    return CDM_OK;
-}
-
 int diagnose_body(const char *data_csv_path, const char *device_json_path, const char *options_json,
                   cdm_progress_fn progress, void *user, char **result_json) {
-    DiagnoseArgs a;
-    if (options_json && *options_json) {
-        if (int rc = parse_options(options_json, a)) return rc;
-    }
-    if (progress)
-        a.opt.progress = [&](const std::string &s, double f) { return progress(user, s.c_str(), f) == 0; };
-    std::string err;
-    // The output is checked (not a special file, not an input) and its
-    // temporary created before the work, committed only after it succeeded.
-    cdm::io::AtomicFile out_file;
-    if (!a.calib_out.empty() && !out_file.open(a.calib_out, {data_csv_path, device_json_path}, err))
-        return cdm::fail(CDM_ERR_IO, err);
-    cdm::Dataset data;
-    bool io_failure = false;
-    if (!cdm::load_dataset(data_csv_path, data, err, &io_failure))
-        return cdm::fail(io_failure ? CDM_ERR_IO : CDM_ERR_PARSE, err);
-    cdm::DeviceGeometry g;
-    if (int rc = load_device(device_json_path, g)) return rc;
-    if (int rc = check_solvable(data, g)) return rc;
+    cdm::api::JobArgs a;
+    if (int rc = cdm::api::parse_job_options(options_json, "cdm_diagnose", true, a)) return rc;
+    cdm::DiagnoseOptions opt;
+    opt.effects = a.effects;
+    opt.jig_tolerance_mm = a.jig_tolerance_mm;
+    opt.candidates = a.candidates;
+    opt.validation = a.validation;
+    opt.per_position = a.per_position;
+    if (progress) opt.progress = [&](const std::string &s, double f) { return progress(user, s.c_str(), f) == 0; };
+    cdm::api::JobInputs in;
+    if (int rc = cdm::api::open_job(data_csv_path, device_json_path, a, in)) return rc;
     nlohmann::json out;
-    cdm::Model fitted(g);
-    if (!cdm::diagnose(data, g, a.opt, out, fitted, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
-    const std::string s = out.dump();
-    if (out_file.is_open()) {
-        auto cj = cdm::io::model_to_json(fitted);
-        cj["fit"] = {{"data", data_csv_path}, {"error_mm", out["error_mm"]}};
-        if (!out_file.write(cj.dump(2) + "\n", err) || !out_file.commit(err)) return cdm::fail(CDM_ERR_IO, err);
-    }
-    char *r = static_cast<char *>(std::malloc(s.size() + 1));
-    if (!r) return cdm::fail(CDM_ERR_NO_MEM, "cdm_diagnose: out of memory");
-    std::memcpy(r, s.c_str(), s.size() + 1);
-    *result_json = r;
-    return CDM_OK;
+    cdm::Model fitted(in.geometry);
+    std::string err;
+    if (!cdm::diagnose(in.data, in.geometry, opt, out, fitted, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
+    if (int rc = cdm::api::commit_calibration(in, fitted, data_csv_path, out["error_mm"])) return rc;
+    return cdm::api::return_json(out, "cdm_diagnose", result_json);
 }
 
 } // namespace

@@ -144,13 +144,14 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     o["effects"] = split_list(a.effects);
     if (a.jig >= 0) o["jig_tolerance_mm"] = a.jig;
     if (!a.calib_out.empty()) o["calibration_out"] = a.calib_out;
-    if (fit_only || a.no_candidates) {
+    if (!fit_only && a.no_candidates) {
         o["candidates"] = false;
-        o["validation"] = !fit_only;
+        o["validation"] = true;
     }
     char *res = nullptr;
-    int rc = cdm_diagnose(a.data.c_str(), a.device.c_str(), o.dump().c_str(), a.quiet ? nullptr : progress_cb,
-                          nullptr, &res);
+    // fit: cdm_fit (the fit alone, no candidates/review/validation)
+    int rc = (fit_only ? cdm_fit : cdm_diagnose)(a.data.c_str(), a.device.c_str(), o.dump().c_str(),
+                                                 a.quiet ? nullptr : progress_cb, nullptr, &res);
     if (rc != CDM_OK) {
         std::fprintf(stderr, "cdm calib: %s: %s\n", cdm_strerror(rc), cdm_thread_error());
         return 2;
@@ -158,9 +159,9 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     auto r = nlohmann::json::parse(res);
     cdm_free_string(res);
     if (fit_only) {
-        std::printf("fitted %s on %s: x rms %.4f y %.4f z %.4f mm (noise floor x %.4f)\n", o["effects"].dump().c_str(),
+        std::printf("fitted %s on %s: x rms %.4f y %.4f z %.4f mm (jig tolerance x %.4f)\n", o["effects"].dump().c_str(),
                     a.data.c_str(), r["error_mm"]["x"]["rms"].get<double>(), r["error_mm"]["y"]["rms"].get<double>(),
-                    r["error_mm"]["z"]["rms"].get<double>(), r["noise_floor_mm"]["x"]["rms"].get<double>());
+                    r["error_mm"]["z"]["rms"].get<double>(), r["jig_tolerance_mm"][0].get<double>());
         std::printf("calibration written to %s\n", a.calib_out.c_str());
     } else {
         print_summary(r);

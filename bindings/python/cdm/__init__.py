@@ -15,7 +15,7 @@ from .calibration import Calibration
 from .constants import *  # noqa: F401,F403 - the header's constants
 from .constants import Button, Error, PoseFlag
 from .device import Device, DeviceInfo, Pose, Raw, Sample, Stats, enumerate_devices, open  # noqa: A004
-from .diagnosis import diagnose
+from .diagnosis import diagnose, fit
 from .effects import effect_names, load_plugin, register_effect, unregister_effect
 from .errors import CdmError, LibraryNotFoundError
 

@@ -179,6 +179,7 @@ PROTOTYPES = {
     # result_json is a char** the library allocates: received as a void pointer
     # so that ctypes does not copy it away before cdm_free_string gets it.
     "cdm_diagnose": (_int, [_str, _str, _str, cdm_progress_fn, ctypes.c_void_p, _handle_p]),
+    "cdm_fit": (_int, [_str, _str, _str, cdm_progress_fn, ctypes.c_void_p, _handle_p]),
     "cdm_free_string": (None, [ctypes.c_void_p]),
     # since 1.1: the one dataset writer
     "cdm_dataset_writer_open": (_int, [_str, ctypes.POINTER(ctypes.c_char_p), ctypes.c_size_t, _handle_p]),

@@ -2,6 +2,7 @@
 import ctypes
 import json
 import numbers
+import os
 
 from . import _native
 from .constants import Error
@@ -42,6 +43,22 @@ def diagnose(data_csv, device_json, effects=None, jig_tolerance_mm=None, progres
     progress          progress(stage: str, fraction: float) -> truthy to cancel
     **options         any other option of cdm_diagnose (candidates=True,
                       per_position=True, calibration_out="calib.json", ...)"""
+    return _run("cdm_diagnose", data_csv, device_json, effects, jig_tolerance_mm, progress, options)
+
+
+def fit(data_csv, device_json, effects, jig_tolerance_mm=None, calibration_out=None, progress=None):
+    """Runs cdm_fit (experimental, since 1.1): the calibration fit alone,
+    without the diagnosis's candidates, review and validation. Returns
+    {"effects": [{"name", "params": {p: {value, std, unit}}}], "fit": {...},
+    "jig_tolerance_mm", "nominal_error_mm", "error_mm"}; writes the
+    calibration atomically to calibration_out when given."""
+    options = {}
+    if calibration_out is not None:
+        options["calibration_out"] = os.fspath(calibration_out)
+    return _run("cdm_fit", data_csv, device_json, effects, jig_tolerance_mm, progress, options)
+
+
+def _run(fn, data_csv, device_json, effects, jig_tolerance_mm, progress, options):
     if effects is not None:
         if isinstance(effects, str):
             effects = [effects]
@@ -64,10 +81,10 @@ def diagnose(data_csv, device_json, effects=None, jig_tolerance_mm=None, progres
     L = _native.lib()
     out = ctypes.c_void_p()
     _effects._take_errors()
-    rc = L.cdm_diagnose(_native.c_path(data_csv, "dataset path"), _native.c_path(device_json, "device path"),
+    rc = getattr(L, fn)(_native.c_path(data_csv, "dataset path"), _native.c_path(device_json, "device path"),
                         options_json, cb, None, ctypes.byref(out))
     if rc < 0:
-        err = _native.fail(rc, "cdm_diagnose")
+        err = _native.fail(rc, fn)
         L.cdm_free_string(out)
         if raised:
             raise raised[0]
@@ -77,8 +94,8 @@ def diagnose(data_csv, device_json, effects=None, jig_tolerance_mm=None, progres
         raise err
     try:
         if not out.value:
-            raise CdmError(Error.CDM_ERR_INTERNAL, "cdm_diagnose returned CDM_OK and no result",
-                                   function="cdm_diagnose")
+            raise CdmError(Error.CDM_ERR_INTERNAL, "%s returned CDM_OK and no result" % fn,
+                                   function=fn)
         text = ctypes.string_at(out.value).decode("utf-8")
     finally:
         L.cdm_free_string(out)
@@ -91,7 +108,7 @@ def diagnose(data_csv, device_json, effects=None, jig_tolerance_mm=None, progres
         name, exc = effect_errors[0]
         raise CdmError(Error.CDM_ERR_INVALID_ARG, "user effect %r raised %s: %s (%d failed call(s)); the result "
                        "is not trustworthy" % (name, type(exc).__name__, exc, len(effect_errors)),
-                       function="cdm_diagnose") from exc
+                       function=fn) from exc
     result = json.loads(text)
     if _np is not None and isinstance(result, dict) and "positions" in result:
         result["positions"] = _arrays(result["positions"])

@@ -823,8 +823,27 @@ def section_fingerprints(diag, page, tmp, figs, P):
         page.add("<p>No usable fingerprints.</p>")
 
 
-def _finding_target(var):
-    """Map a finding's variable name to (panel kind, cable number or None)."""
+_VARIABLE_KINDS = ("height", "radius", "length", "angle")
+
+
+def _finding_target(f):
+    """Map a finding to (panel kind, cable number or None).
+
+    A diagnosis carries the structured fields "variable_kind" and "cable"
+    (docs/calibration.md); files written before they existed only name the
+    variable in English, which is read as a fallback.
+    """
+    if not isinstance(f, dict):  # a bare variable name
+        return _finding_target_from_name(f)
+    vk = f.get("variable_kind")
+    if vk in _VARIABLE_KINDS:
+        c = f.get("cable")
+        cable = int(c) if isinstance(c, (int, float)) and not isinstance(c, bool) and 1 <= c <= 4 else None
+        return vk, cable if vk in ("length", "angle") else None
+    return _finding_target_from_name(f.get("variable"))
+
+
+def _finding_target_from_name(var):
     v = str(var).lower()
     m = re.search(r"([1-4])", v)
     cable = int(m.group(1)) if m else None
@@ -892,7 +911,7 @@ def _route_findings(findings):
     """
     pos_notes, len_notes, periods = {}, {}, []
     for f in findings:
-        kind, cable = _finding_target(f.get("variable"))
+        kind, cable = _finding_target(f)
         axis = str(f.get("axis", "")).strip().lower()
         text = _finding_text(f)
         if axis in AXES and kind is not None:

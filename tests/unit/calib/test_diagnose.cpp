@@ -125,7 +125,7 @@ static void effect_outside_catalogue(void **) {
     register_ripple();
     Model truth{DeviceGeometry{}};
     std::string err;
-    assert_true(truth.add_effect("drum_ripple", {{"s_mm", 0.08}, {"c_mm", 0.05}}, err));
+    assert_true(truth.add_effect("drum_ripple", ParamValues{{"s_mm", 0.08}, {"c_mm", 0.05}}, err));
     assert_int_equal(cdm_effect_unregister("drum_ripple"), CDM_OK); // the catalogue does not know it
     auto r = run(truth, 77, {}, true);
     assert_false(r["explained"].get<bool>());

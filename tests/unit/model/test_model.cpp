@@ -103,13 +103,13 @@ static void forward_kinematics_inverts_each_effect(void **) {
 static void pulley_limits(void **) {
     Model straight{DeviceGeometry{}}, pulley{DeviceGeometry{}};
     std::string err;
-    assert_true(pulley.add_effect("exit_pulley", {{"radius_mm", 0.0}}, err));
+    assert_true(pulley.add_effect("exit_pulley", ParamValues{{"radius_mm", 0.0}}, err));
     double p[3] = {50, 10, -20}, a[4], b[4];
     straight.readings(p, a);
     pulley.readings(p, b);
     for (int i = 0; i < 4; ++i) assert_true(std::fabs(a[i] - b[i]) < 1e-12);
     Model small{DeviceGeometry{}};
-    assert_true(small.add_effect("exit_pulley", {{"radius_mm", 1e-4}}, err));
+    assert_true(small.add_effect("exit_pulley", ParamValues{{"radius_mm", 1e-4}}, err));
     double c[4];
     small.readings(p, c);
     DeviceGeometry g;
@@ -136,7 +136,7 @@ static void json_round_trip_and_errors(void **) {
     for (int i = 0; i < 4; ++i) assert_true(a[i] == b[i]);
     assert_false(m.add_effect("no_such_effect", {}, err));
     assert_non_null(strstr(err.c_str(), "no_such_effect"));
-    assert_false(m.add_effect("cable_gain", {{"zzz", 1.0}}, err));
+    assert_false(m.add_effect("cable_gain", ParamValues{{"zzz", 1.0}}, err));
     assert_non_null(strstr(err.c_str(), "zzz"));
     DeviceGeometry g;
     assert_false(cdm::io::parse_device_json("{\"a_mm\": 150,\n \"b_mm\": ,}", "dev.json", g, err));

@@ -1,0 +1,64 @@
+// extern "C" cdm_fit: the calibration fit without the diagnosis (no
+// candidates, no review, no validation). Thin: the logic is fit_calibration().
+#include <algorithm>
+
+#include "api/errors.h"
+#include "api/jobs.h"
+#include "calib/fit_calibration.h"
+#include "cdm/cdm.h"
+#include "model/effect.h"
+
+namespace {
+
+using nlohmann::json;
+
+json result_json(const cdm::CalibrationFit &cf) {
+    json eff = json::array();
+    for (size_t k = 0; k < cf.model.effect_count(); ++k) {
+        const auto &d = cf.model.effect_desc(k);
+        const auto &pv = cf.model.effect_params(k);
+        json pj = json::object();
+        for (size_t q = 0; q < pv.size(); ++q) {
+            const auto &sd = cf.report.std;
+            const double s = (k < sd.size() && q < sd[k].size()) ? sd[k][q] : 0.0;
+            pj[d.params[q].name] = {{"value", pv[q]}, {"std", s}, {"unit", d.params[q].unit}};
+        }
+        eff.push_back({{"name", d.name}, {"params", pj}});
+    }
+    const int dof = std::max(1, cf.report.n_obs - cf.report.n_free);
+    return {{"effects", eff},
+            {"fit",
+             {{"converged", cf.report.converged}, {"chi2", cf.report.chi2}, {"dof", dof},
+              {"n_free", cf.report.n_free}, {"evaluations", cf.report.evals}, {"seconds", cf.report.seconds},
+              {"algorithm", cf.report.algorithm}, {"message", cf.report.message}}},
+            {"jig_tolerance_mm", {cf.jig(0), cf.jig(1), cf.jig(2)}},
+            {"nominal_error_mm", cdm::diag::stats3(cf.nominal.err)},
+            {"error_mm", cdm::diag::stats3(cf.fitted.err)}};
+}
+
+} // namespace
+
+extern "C" int cdm_fit(const char *data_csv_path, const char *device_json_path, const char *options_json,
+                       cdm_progress_fn progress, void *user, char **result_json_out) {
+    return cdm::guarded("cdm_fit", [&]() -> int {
+        if (!result_json_out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_fit: result_json is NULL");
+        *result_json_out = nullptr;
+        if (!data_csv_path || !device_json_path)
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_fit: data and device paths are required");
+        cdm::api::JobArgs a;
+        if (int rc = cdm::api::parse_job_options(options_json, "cdm_fit", false, a)) return rc;
+        cdm::FitCalibrationOptions opt;
+        opt.effects = a.effects;
+        opt.jig_tolerance_mm = a.jig_tolerance_mm;
+        if (progress)
+            opt.progress = [&](const std::string &s, double f) { return progress(user, s.c_str(), f) == 0; };
+        cdm::api::JobInputs in;
+        if (int rc = cdm::api::open_job(data_csv_path, device_json_path, a, in)) return rc;
+        cdm::CalibrationFit cf(in.geometry);
+        std::string err;
+        if (!cdm::fit_calibration(in.data, in.geometry, opt, cf, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
+        const json out = result_json(cf);
+        if (int rc = cdm::api::commit_calibration(in, cf.model, data_csv_path, out["error_mm"])) return rc;
+        return cdm::api::return_json(out, "cdm_fit", result_json_out);
+    });
+}

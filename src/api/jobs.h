@@ -1,0 +1,47 @@
+// The steps cdm_diagnose and cdm_fit share: their options (one parser, errors
+// with the option's column), their inputs (the dataset and the device
+// description, told apart as unreadable or malformed, and checked to describe
+// each other), the calibration they may write (its temporary created before
+// the work, committed only after it succeeded) and the JSON they hand back.
+#pragma once
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "calib/dataset.h"
+#include "io/file.h"
+#include "model/model.h"
+
+namespace cdm::api {
+
+struct JobArgs {
+    std::vector<std::string> effects;
+    double jig_tolerance_mm = -1; // < 0: estimated from the data
+    bool candidates = true, validation = true, per_position = true; // DiagnoseOptions defaults
+    std::string calib_out;
+};
+
+// Parses `text` (NULL or empty: defaults). `diagnosis`: the diagnosis's own
+// options (candidates, validation, per_position) are accepted; cdm_fit
+// refuses them and requires a non-empty "effects".
+int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs &out);
+
+struct JobInputs {
+    Dataset data;
+    DeviceGeometry geometry;
+    io::AtomicFile calib_out; // open when the options asked for a calibration
+};
+
+// Opens the output first (a special file or one of the inputs is refused
+// before any work), then reads the dataset and the device description and
+// checks that most positions can be placed by the nominal triangulation.
+int open_job(const char *data_path, const char *device_path, const JobArgs &a, JobInputs &in);
+
+// Writes the fitted model as a calibration, if one was asked for.
+int commit_calibration(JobInputs &in, const Model &fitted, const char *data_path, const nlohmann::json &error_mm);
+
+// A malloc'ed copy of j.dump() into *out (freed with cdm_free_string).
+int return_json(const nlohmann::json &j, const char *fn, char **out);
+
+} // namespace cdm::api

@@ -1,0 +1,232 @@
+// See diag_spatial.h. docs/calibration.md explains each statistic.
+#include "calib/diag_spatial.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+namespace cdm {
+namespace diag {
+
+Grid make_grid(const std::vector<PreparedPos> &pos, const std::vector<double> &heights) {
+    Grid G;
+    const size_t P = pos.size();
+    G.nb.resize(P);
+    G.height_index.assign(P, 0);
+    // The seed's jig puts every position on one of a few fixture heights.
+    // Positions scattered in x (a free-hand or robot-arm reference) form one
+    // layer, and their neighbours are found in 3-D.
+    G.layered = heights.size() <= std::min<size_t>(50, std::max<size_t>(1, P / 4));
+    if (G.layered)
+        for (size_t j = 0; j < P; ++j) {
+            int best = 0;
+            for (size_t h = 0; h < heights.size(); ++h)
+                if (std::fabs(heights[h] - pos[j].ref(0)) < std::fabs(heights[size_t(best)] - pos[j].ref(0)))
+                    best = int(h);
+            G.height_index[j] = best;
+        }
+    // pitch: the smallest positive spacing in y or z among positions
+    double pitch = INFINITY;
+    std::vector<double> ys;
+    for (auto &p : pos) ys.push_back(p.ref(1));
+    std::sort(ys.begin(), ys.end());
+    for (size_t k = 1; k < ys.size(); ++k)
+        if (ys[k] - ys[k - 1] > 1e-6) pitch = std::min(pitch, ys[k] - ys[k - 1]);
+    if (!std::isfinite(pitch)) pitch = 5;
+    G.pitch = pitch;
+    std::map<std::array<long, 3>, int> key;
+    auto K = [&](int hi, double y, double z) {
+        return std::array<long, 3>{hi, std::lround(y / pitch), std::lround(z / pitch)};
+    };
+    for (size_t j = 0; j < P; ++j) key[K(G.height_index[j], pos[j].ref(1), pos[j].ref(2))] = int(j);
+    auto find = [&](int hi, double y, double z) {
+        auto it = key.find(K(hi, y, z));
+        return it == key.end() ? -1 : it->second;
+    };
+    for (size_t j = 0; j < P; ++j) {
+        const int h = G.height_index[j];
+        const double y = pos[j].ref(1), z = pos[j].ref(2);
+        int l = find(h, y - pitch, z), r = find(h, y + pitch, z), dn = find(h, y, z - pitch), up = find(h, y, z + pitch);
+        for (int q : {l, r, dn, up})
+            if (q >= 0) G.nb[j].push_back(q);
+        if (l >= 0 && r >= 0) {
+            G.ycentre.push_back(int(j));
+            G.ypair.push_back({l, r});
+        }
+        if (dn >= 0 && up >= 0) {
+            G.zcentre.push_back(int(j));
+            G.zpair.push_back({dn, up});
+        }
+    }
+    // Irregular layouts: the nearest positions of the same layer (4 in a
+    // plane, 6 in 3-D), then made symmetric (Moran's I takes w_jk = w_kj).
+    const size_t knn = G.layered ? 4 : 6;
+    for (size_t j = 0; j < P; ++j) {
+        if (!G.nb[j].empty()) continue;
+        std::vector<std::pair<double, int>> dist;
+        for (size_t k = 0; k < P; ++k)
+            if (k != j && G.height_index[k] == G.height_index[j])
+                dist.push_back({(pos[k].ref - pos[j].ref).squaredNorm(), int(k)});
+        std::sort(dist.begin(), dist.end());
+        for (size_t k = 0; k < std::min(knn, dist.size()); ++k) G.nb[j].push_back(dist[k].second);
+    }
+    std::vector<std::vector<int>> sym(P);
+    for (size_t j = 0; j < P; ++j)
+        for (int k : G.nb[j]) {
+            sym[j].push_back(k);
+            sym[size_t(k)].push_back(int(j));
+        }
+    for (auto &v : sym) {
+        std::sort(v.begin(), v.end());
+        v.erase(std::unique(v.begin(), v.end()), v.end());
+    }
+    G.nb = std::move(sym);
+    return G;
+}
+
+// White (position-to-position) scatter beyond the noise, per axis, from
+// second differences along the plate's rows and columns: a smooth error
+// (an effect) nearly cancels in them, the jig's hole errors do not.
+// E[(r_j - (r_l + r_r)/2)^2] = v_j + (v_l + v_r)/4 + 1.5 s^2.
+V3 estimate_nugget(const Eval &E, const Grid &G) {
+    V3 out;
+    for (int a = 0; a < 3; ++a) {
+        double num = 0, noise = 0;
+        int cnt = 0;
+        auto add = [&](const std::vector<int> &cen, const std::vector<std::array<int, 2>> &pr) {
+            for (size_t k = 0; k < cen.size(); ++k) {
+                int j = cen[k], l = pr[k][0], r = pr[k][1];
+                if (!E.ok[j] || !E.ok[l] || !E.ok[r]) continue;
+                double dd = E.res[j](a) - 0.5 * (E.res[l](a) + E.res[r](a));
+                num += dd * dd;
+                noise += E.var_mean[j](a) + 0.25 * (E.var_mean[l](a) + E.var_mean[r](a));
+                ++cnt;
+            }
+        };
+        add(G.ycentre, G.ypair);
+        add(G.zcentre, G.zpair);
+        if (cnt >= 20) {
+            out(a) = std::sqrt(std::max(0.0, (num - noise) / (1.5 * cnt)));
+            continue;
+        }
+        // No plate rows (an irregular layout): first differences between
+        // nearest neighbours, E[(r_j - r_k)^2] = v_j + v_k + 2 s^2, which a
+        // smooth error biases more (its gradient times the spacing).
+        num = noise = 0;
+        cnt = 0;
+        for (size_t j = 0; j < G.nb.size(); ++j)
+            for (int k : G.nb[j]) {
+                if (size_t(k) <= j || !E.ok[j] || !E.ok[size_t(k)]) continue;
+                const double dd = E.res[j](a) - E.res[size_t(k)](a);
+                num += dd * dd;
+                noise += E.var_mean[j](a) + E.var_mean[size_t(k)](a);
+                ++cnt;
+            }
+        out(a) = cnt > 0 ? std::sqrt(std::max(0.0, (num - noise) / (2.0 * cnt))) : 0.0;
+    }
+    return out;
+}
+
+// Moran's I of the standardised residuals over the plate's neighbour graph,
+// per axis, with each height's mean removed (a per-height offset is the
+// height fixture's, and the chi-square sees it). Positive I = neighbours
+// alike = smooth structure that noise does not make.
+double moran_z(const std::vector<double> &zv, const std::vector<char> &ok, const Grid &G) {
+    const size_t P = zv.size();
+    std::map<int, std::pair<double, int>> hm;
+    for (size_t j = 0; j < P; ++j)
+        if (ok[j]) {
+            hm[G.height_index[j]].first += zv[j];
+            hm[G.height_index[j]].second += 1;
+        }
+    std::vector<double> c(P, 0);
+    double n = 0, m2 = 0;
+    for (size_t j = 0; j < P; ++j)
+        if (ok[j]) {
+            auto &h = hm[G.height_index[j]];
+            c[j] = zv[j] - h.first / h.second;
+            m2 += c[j] * c[j];
+            n += 1;
+        }
+    double S0 = 0, S1 = 0, S2 = 0, num = 0;
+    for (size_t j = 0; j < P; ++j) {
+        if (!ok[j]) continue;
+        double rowsum = 0;
+        for (int k : G.nb[j]) {
+            if (!ok[size_t(k)]) continue;
+            // symmetric weights: 1 for each direction listed
+            num += c[j] * c[size_t(k)];
+            S0 += 1;
+            S1 += 2; // (w_jk + w_kj)^2 / 2 summed over ordered pairs with symmetric w = 1
+            rowsum += 1;
+        }
+        S2 += 4 * rowsum * rowsum;
+    }
+    if (S0 == 0 || m2 == 0 || n < 5) return 0;
+    const double I = (n / S0) * num / m2;
+    const double EI = -1.0 / (n - 1);
+    const double VI = (n * n * S1 / 2 - n * S2 / 4 + 3 * S0 * S0) / ((n * n - 1) * S0 * S0) - EI * EI;
+    return VI > 0 ? (I - EI) / std::sqrt(VI) : 0;
+}
+
+Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free) {
+    Verdict v;
+    const size_t P = E.res.size();
+    v.failing.assign(P, 0);
+    size_t used = 0;
+    std::vector<double> z[3];
+    for (auto &zz : z) zz.assign(P, 0);
+    for (size_t j = 0; j < P; ++j)
+        if (E.ok[j]) ++used;
+    const double q = chi2_isf(0.01 / double(std::max<size_t>(1, used)), 3); // 1 % family-wise
+    // The height fixture's own error: one constant per height (the same at
+    // every hole), like the holes' error a property of the jig, not of the
+    // model. Per-height mean residuals up to 0.15 mm (3x a machined 0.05 mm
+    // tolerance) are taken as the fixture's and removed before the
+    // chi-square, at the cost of their degrees of freedom; larger ones stay.
+    std::map<std::pair<int, int>, std::pair<double, double>> hmean; // (height, axis) -> (sum w r, sum w)
+    for (size_t j = 0; j < P; ++j)
+        if (E.ok[j])
+            for (int a = 0; a < 3; ++a) {
+                const double w = 1.0 / (E.var_mean[j](a) + jig(a) * jig(a));
+                auto &h = hmean[{G.height_index[j], a}];
+                h.first += w * E.res[j](a);
+                h.second += w;
+            }
+    int nuisance = 0;
+    std::map<std::pair<int, int>, double> fixture;
+    for (auto &kv : hmean) {
+        const double m = kv.second.first / kv.second.second;
+        if (std::fabs(m) <= 0.15) {
+            fixture[kv.first] = m;
+            ++nuisance;
+        }
+    }
+    for (size_t j = 0; j < P; ++j) {
+        if (!E.ok[j]) continue;
+        double c = 0;
+        for (int a = 0; a < 3; ++a) {
+            const double s2 = E.var_mean[j](a) + jig(a) * jig(a);
+            auto it = fixture.find({G.height_index[j], a});
+            const double off = it == fixture.end() ? 0.0 : it->second;
+            z[a][j] = (E.res[j](a) - off) / std::sqrt(s2);
+            c += z[a][j] * z[a][j];
+        }
+        v.chi2 += c;
+        if (c > q) {
+            v.failing[j] = 1;
+            ++v.n_failing;
+        }
+    }
+    v.dof = std::max(1, int(3 * used) - n_free - nuisance);
+    v.chi2_p = chi2_sf(v.chi2, v.dof);
+    double best = -INFINITY;
+    for (int a = 0; a < 3; ++a) best = std::max(best, moran_z(z[a], E.ok, G));
+    v.moran_z = best;
+    v.moran_p = std::min(1.0, 3 * normal_sf(best)); // Bonferroni over the three axes
+    v.explained = v.chi2_p >= 1e-3 && v.moran_p >= 1e-3;
+    return v;
+}
+
+} // namespace diag
+} // namespace cdm

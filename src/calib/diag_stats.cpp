@@ -1,0 +1,36 @@
+// See diag_stats.h. Boost.Math raises on domain errors by default; the
+// callers pass checked arguments, and the guards below turn the degenerate
+// cases (no degrees of freedom, a non-positive statistic) into p = 1.
+#include "calib/diag_stats.h"
+
+#include <boost/math/distributions/chi_squared.hpp>
+#include <boost/math/distributions/fisher_f.hpp>
+#include <boost/math/distributions/normal.hpp>
+
+namespace cdm {
+namespace diag {
+
+double normal_sf(double z) {
+    if (!std::isfinite(z)) return z > 0 ? 0.0 : 1.0;
+    return boost::math::cdf(boost::math::complement(boost::math::normal_distribution<double>(), z));
+}
+
+double chi2_sf(double x, double dof) {
+    if (!(dof > 0) || !(x > 0)) return 1.0;
+    if (!std::isfinite(x)) return 0.0;
+    return boost::math::cdf(boost::math::complement(boost::math::chi_squared_distribution<double>(dof), x));
+}
+
+double chi2_isf(double p, double dof) {
+    p = std::min(std::max(p, 1e-300), 1.0);
+    return boost::math::quantile(boost::math::complement(boost::math::chi_squared_distribution<double>(dof), p));
+}
+
+double f_sf(double F, double d1, double d2) {
+    if (!(F > 0) || !(d1 > 0) || !(d2 > 0)) return 1.0;
+    if (!std::isfinite(F)) return 0.0;
+    return boost::math::cdf(boost::math::complement(boost::math::fisher_f_distribution<double>(d1, d2), F));
+}
+
+} // namespace diag
+} // namespace cdm

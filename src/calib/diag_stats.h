@@ -1,0 +1,39 @@
+// Distribution tails and running moments for the diagnosis. The tails come
+// from Boost.Math's complementary functions, so a tiny p-value is exact (down
+// to the smallest double) and never printed as 0 from cancellation in 1 - cdf.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+
+#include <nlohmann/json.hpp>
+
+namespace cdm {
+namespace diag {
+
+double normal_sf(double z);             // P(Z > z), Z standard normal
+double chi2_sf(double x, double dof);   // P(X > x), X ~ chi-square(dof)
+double chi2_isf(double p, double dof);  // x with P(X > x) = p
+double f_sf(double F, double d1, double d2); // P(X > F), X ~ F(d1, d2)
+
+// Weighted running moments of one error component.
+struct Acc {
+    double n = 0, s = 0, ss = 0, mx = 0;
+    void add(double v, double w = 1) {
+        n += w;
+        s += w * v;
+        ss += w * v * v;
+        mx = std::max(mx, std::fabs(v));
+    }
+    nlohmann::json to_json() const {
+        const double mean = n > 0 ? s / n : 0;
+        const double var = n > 1 ? std::max(0.0, (ss - n * mean * mean) / (n - 1)) : 0;
+        return {{"mean", mean}, {"std", std::sqrt(var)}, {"rms", n > 0 ? std::sqrt(ss / n) : 0}, {"max", mx}};
+    }
+};
+inline nlohmann::json stats3(const Acc a[3]) {
+    return {{"x", a[0].to_json()}, {"y", a[1].to_json()}, {"z", a[2].to_json()}};
+}
+
+} // namespace diag
+} // namespace cdm

@@ -1,0 +1,72 @@
+// See fit_calibration.h.
+#include "calib/fit_calibration.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace cdm {
+
+using diag::V3;
+
+bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCalibrationOptions &opt,
+                     CalibrationFit &out, std::string &err) {
+    auto progress = [&](const std::string &s, double f) { return !opt.progress || opt.progress(s, f); };
+    out.pos = prepare(data);
+    const auto &pos = out.pos;
+    if (pos.size() < 4) {
+        err = data.path + ": " + std::to_string(pos.size()) + " jig positions; a fit needs at least 4";
+        return false;
+    }
+    out.grid = diag::make_grid(pos, data.heights);
+    // A machined plate is within ~0.05 mm: white scatter beyond that is not
+    // the jig's and must not hide an effect. Without repeated samples the
+    // pots' noise is white scatter too, and there is nothing to cap against.
+    const bool repeats = std::any_of(pos.begin(), pos.end(), [](const PreparedPos &p) { return p.n > 1; });
+    const double jig_cap = repeats ? 0.05 : INFINITY;
+    progress("nominal model", 0.0);
+    out.nominal = diag::evaluate_seed(g, data, pos, nullptr);
+
+    Model &model = out.model;
+    model = Model(g);
+    for (auto &e : opt.effects) {
+        if (e == "ellipsoid") continue; // fitted in position space below
+        if (!model.add_effect(e, {}, err)) return false;
+    }
+    const bool user_jig = opt.jig_tolerance_mm >= 0;
+    out.jig = V3::Constant(user_jig ? opt.jig_tolerance_mm : 0.03);
+    out.fit_options.jig_sigma = out.jig;
+    auto fit = [&]() {
+        FitOptions f = out.fit_options;
+        f.progress = [&](double fr) { return progress("fitting the model", fr); };
+        return fit_model(model, pos, f, out.report);
+    };
+    if (!fit()) {
+        err = out.report.message.empty() ? "fit cancelled" : out.report.message;
+        return false;
+    }
+    out.fitted = diag::evaluate(model, data, pos);
+    // Jig tolerance from the white part of the residual, then refit with it.
+    if (!user_jig) {
+        V3 est = diag::estimate_nugget(out.fitted, out.grid);
+        for (int a = 0; a < 3; ++a) out.jig(a) = std::min(est(a), jig_cap);
+        out.fit_options.jig_sigma = out.jig;
+        if (model.effect_count() > 0) {
+            if (!fit()) {
+                err = out.report.message.empty() ? "fit cancelled" : out.report.message;
+                return false;
+            }
+            out.fitted = diag::evaluate(model, data, pos);
+        }
+    }
+    // The ellipsoid on top of the physical model, when asked for.
+    if (std::find(opt.effects.begin(), opt.effects.end(), "ellipsoid") != opt.effects.end()) {
+        Ellipsoid e2 = diag::ellipsoid_on(out.fitted, pos);
+        if (!model.add_effect("ellipsoid", ParamValues{{"L", e2.L}, {"M", e2.M}, {"N", e2.N}}, err))
+            return false;
+        out.fitted = diag::evaluate(model, data, pos);
+        out.report.n_free += 3;
+    }
+    return true;
+}
+
+} // namespace cdm

@@ -1,0 +1,38 @@
+// Fitting a calibration without diagnosing it: the model with the requested
+// effects fitted to jig data, the jig tolerance estimated from the data's
+// white scatter, and the error statistics before and after. This is the
+// first stage of diagnose(), and all of what `cdm calib fit` needs.
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "calib/diag_eval.h"
+#include "calib/diag_spatial.h"
+
+namespace cdm {
+
+struct FitCalibrationOptions {
+    std::vector<std::string> effects; // "ellipsoid" is fitted in position space on top
+    double jig_tolerance_mm = -1;     // < 0: estimated from the data
+    std::function<bool(const std::string &stage, double fraction)> progress;
+};
+
+struct CalibrationFit {
+    explicit CalibrationFit(const DeviceGeometry &g) : model(g) {}
+    Model model;
+    FitReport report;
+    FitOptions fit_options;         // with the jig tolerance used
+    diag::V3 jig = diag::V3::Zero(); // per axis, mm
+    std::vector<PreparedPos> pos;
+    diag::Grid grid;
+    diag::Eval nominal, fitted;     // the nominal triangulation and the fitted model
+};
+
+// False + err (naming what is wrong) on too few positions, an unknown
+// effect, or cancellation through progress.
+bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCalibrationOptions &opt,
+                     CalibrationFit &out, std::string &err);
+
+} // namespace cdm

@@ -1,0 +1,75 @@
+"""cdm_fit (experimental, since 1.1): the calibration fit without the
+diagnosis. Same fitted parameters as cdm_diagnose's, without its candidates."""
+import ctypes
+import json
+import os
+import subprocess
+import time
+
+import pytest
+
+import cdm
+from cdm import _native
+
+DEVICE_JSON = os.path.join(os.path.dirname(__file__), "..", "..", "docs", "examples", "device.json")
+CDM_ERR_INVALID_ARG = -1
+
+
+@pytest.fixture(scope="module")
+def jig(tmp_path_factory):
+    cli = os.environ.get("CDM_CLI")
+    if not cli:
+        pytest.skip("CDM_CLI (the built `cdm` program) is not set; ctest sets it")
+    d = tmp_path_factory.mktemp("fitjig")
+    subprocess.run([cli, "calib", "simulate", str(d / "ds.csv"), "--effects", "exit_pulley", "--effect-seed", "1",
+                    "--holes", "5", "--heights", "40,60", "--samples", "5"], check=True, capture_output=True)
+    return d
+
+
+def _fit(data, options):
+    """cdm_fit through the bindings' prototype, options passed verbatim (the
+    refusals below are of options cdm.fit() would never build)."""
+    L = _native.lib()
+    out = ctypes.c_void_p()
+    rc = L.cdm_fit(os.fspath(data).encode(), DEVICE_JSON.encode(),
+                   None if options is None else json.dumps(options).encode(), _native.cdm_progress_fn(), None,
+                   ctypes.byref(out))
+    r = None
+    if out.value:
+        r = json.loads(ctypes.string_at(out.value).decode())
+        L.cdm_free_string(out)
+    return rc, r
+
+
+def test_fit_from_python_writes_the_calibration(jig, tmp_path):
+    r = cdm.fit(jig / "ds.csv", DEVICE_JSON, ["exit_pulley"], calibration_out=tmp_path / "c.json")
+    assert [e["name"] for e in r["effects"]] == ["exit_pulley"] and r["fit"]["converged"]
+    assert json.loads((tmp_path / "c.json").read_text())["effects"][0]["name"] == "exit_pulley"
+
+
+def test_fit_gives_the_diagnosis_parameters_without_the_candidates(jig, tmp_path):
+    t0 = time.perf_counter()
+    rc, r = _fit(jig / "ds.csv", {"effects": ["exit_pulley"], "calibration_out": str(tmp_path / "c.json")})
+    t_fit = time.perf_counter() - t0
+    assert rc == 0, r
+    t0 = time.perf_counter()
+    d = cdm.diagnose(jig / "ds.csv", DEVICE_JSON, effects=["exit_pulley"])
+    t_diag = time.perf_counter() - t0
+    print(f"cdm_fit {t_fit:.3f} s, cdm_diagnose {t_diag:.3f} s, ratio {t_diag / t_fit:.1f}")
+    assert [e["name"] for e in r["effects"]] == ["exit_pulley"]
+    # Both run fit_calibration() on the same data: deterministic, so equal to
+    # rounding (the JSON round trip keeps 17 digits).
+    for name, p in r["effects"][0]["params"].items():
+        assert p["value"] == pytest.approx(d["params"]["exit_pulley"][name]["value"], rel=1e-12, abs=1e-15)
+        assert p["std"] == pytest.approx(d["params"]["exit_pulley"][name]["std"], rel=1e-12, abs=1e-15)
+    assert r["error_mm"]["x"]["rms"] == pytest.approx(d["error_mm"]["x"]["rms"], rel=1e-12)
+    assert r["fit"]["converged"] and r["fit"]["dof"] > 0
+    assert "candidates" not in r and "model_review" not in r
+    assert json.loads((tmp_path / "c.json").read_text())["effects"][0]["name"] == "exit_pulley"
+
+
+def test_fit_requires_effects(jig):
+    for opts in (None, {}, {"effects": []}):
+        rc, r = _fit(jig / "ds.csv", opts)
+        assert rc == CDM_ERR_INVALID_ARG and r is None
+    assert _fit(jig / "ds.csv", {"effects": ["exit_pulley"], "candidates": True})[0] == CDM_ERR_INVALID_ARG

@@ -3,6 +3,7 @@ list(APPEND CDM_SOURCES
   device/protocol.cpp
   device/transport_registry.cpp
   device/transport_hidapi.cpp
+  device/hidraw_check.cpp
   device/transport_sim.cpp
   device/transport_replay.cpp
   device/replay_format.cpp

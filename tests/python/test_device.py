@@ -174,3 +174,22 @@ def test_enumerate_without_devices_is_a_list():
     devs = cdm.enumerate()
     assert isinstance(devs, list)
     assert all(isinstance(d, cdm.DeviceInfo) for d in devs)
+
+
+def test_wait_pose_after_returns_at_once_when_newer_exists():
+    # No lost wake-up: a pose published while the caller was busy is handed
+    # over at once by wait_pose(after=last.host_sequence).
+    with cdm.open("sim:?rate=20") as dev:  # a report every 50 ms
+        first = dev.wait_pose(2.0)
+        assert first.host_sequence >= 1
+        time.sleep(0.3)  # several poses published meanwhile
+        t0 = time.monotonic()
+        p = dev.wait_pose(2.0, after=first.host_sequence)
+        assert time.monotonic() - t0 < 0.03, "waited although a newer pose existed"
+        assert p.host_sequence > first.host_sequence
+        q = dev.wait_pose(2.0, after=p.host_sequence)
+        assert q.host_sequence > p.host_sequence
+        with pytest.raises(ValueError, match="after"):
+            dev.wait_pose(1.0, after=-1)
+        s = dev.stats()
+        assert s.sequence_jumps == 0 and s.out_of_order == 0 and s.replay_truncated_bytes == 0

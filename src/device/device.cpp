@@ -160,6 +160,7 @@ cdm_device::Conversion cdm_device::conversion_from(const proto::DeviceInfoReport
     c.hall_open = r.hall_open;
     c.grip_open_rad = r.grip_open_rad;
     c.rate_hz = r.report_rate_hz;
+    c.adc_full_scale = (1u << r.adc_bits) - 1u;
     return c;
 }
 
@@ -269,17 +270,20 @@ bool cdm_device::try_reconnect() {
 // batching) is a reset or a corrupted counter: counted in sequence_jumps,
 // not in dropped, and the count restarts from it. One flipped bit thus costs
 // two jumps (there and back), never 4e9 dropped reports.
-bool cdm_device::account_sequence(uint32_t seq, uint64_t host_ns) {
+bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t host_ns) {
     if (!have_last_) {
         have_last_ = true;
         last_seq_ = seq;
+        last_device_us_ = device_us;
         last_host_ns_ = host_ns;
         after_reconnect_ = false;
         return true;
     }
     const uint32_t d = seq - last_seq_; // wraps at 2^32 by design
     const uint32_t back = last_seq_ - seq;
-    if (back <= kReorderWindow && !after_reconnect_) {
+    // A duplicate or a late report was also sampled no later than the last
+    // one; a counter restarted soon after power-up has a newer sample time.
+    if (back <= kReorderWindow && device_us <= last_device_us_ && !after_reconnect_) {
         n_out_of_order_.fetch_add(1, std::memory_order_relaxed);
         return false;
     }
@@ -296,6 +300,7 @@ bool cdm_device::account_sequence(uint32_t seq, uint64_t host_ns) {
     }
     after_reconnect_ = false;
     last_seq_ = seq;
+    last_device_us_ = device_us;
     last_host_ns_ = host_ns;
     return true;
 }
@@ -316,7 +321,7 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len) {
     }
     const uint64_t host_ns = monotonic_ns();
 
-    if (!account_sequence(r.sequence, host_ns)) return;
+    if (!account_sequence(r.sequence, r.device_time_us, host_ns)) return;
 
     if (model_changed_.load(std::memory_order_acquire)) {
         std::lock_guard<std::mutex> lock(model_mu_);
@@ -343,7 +348,11 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len) {
     cdm_pose &pose = s.pose;
     pose.struct_size = sizeof(cdm_pose);
     double p[3];
-    if (model_->position(raw.lengths_mm, p) == 0 && std::isfinite(p[0]) && std::isfinite(p[1]) &&
+    // A saturated pot ADC (at full scale) reads a clipped count, not the
+    // cable's length: no position from it.
+    bool saturated = false;
+    for (int i = 0; i < 4; ++i) saturated = saturated || r.pot_adc[i] >= conv_.adc_full_scale;
+    if (!saturated && model_->position(raw.lengths_mm, p) == 0 && std::isfinite(p[0]) && std::isfinite(p[1]) &&
         std::isfinite(p[2])) {
         std::memcpy(last_good_p_, p, sizeof p);
         have_good_p_ = true;

@@ -36,7 +36,8 @@ constexpr uint32_t kDefaultStaleTimeoutUs = 50000;
 // Read timeout of the reader thread: bounds how long cdm_close waits.
 constexpr int kReaderPollMs = 50;
 // A report whose sequence number is the last one's or behind it by at most
-// this many is a duplicate or arrived late (reordered): it is discarded
+// this many, and whose device time is not newer, is a duplicate or arrived
+// late (reordered): it is discarded
 // (an older sample must not replace a newer one) and counted in
 // cdm_stats.out_of_order. A larger backward step is a counter reset.
 constexpr uint32_t kReorderWindow = 64;
@@ -96,12 +97,14 @@ private:
     struct Conversion {
         double scale[4], offset[4];
         double hall_closed, hall_open, grip_open_rad, rate_hz;
+        uint32_t adc_full_scale; // 2^adc_bits - 1: a pot reading there is clipped, not a length
     };
 
     void run();
     bool try_reconnect();
     void handle_report(const uint8_t *buf, size_t len);
-    bool account_sequence(uint32_t seq, uint64_t host_ns); // false: discard (duplicate or late)
+    // false: discard (duplicate or late)
+    bool account_sequence(uint32_t seq, uint64_t device_us, uint64_t host_ns);
     bool wait_until(const std::function<bool()> &ready, int timeout_ms);
     void set_state_flag(uint32_t flag, bool on);
     void notify_waiters();
@@ -150,6 +153,7 @@ private:
     bool have_last_ = false;
     uint32_t last_seq_ = 0;
     uint64_t last_host_ns_ = 0;
+    uint64_t last_device_us_ = 0;
     bool after_reconnect_ = false;
     double last_good_p_[3] = {0, 0, 0};
     bool have_good_p_ = false;

@@ -10,4 +10,5 @@ list(APPEND CDM_SOURCES
   device/device.cpp
   device/sim/firmware.cpp
   device/sim/motion.cpp
-  device/sim/simulator.cpp)
+  device/sim/simulator.cpp
+  device/sim/faults.cpp)

@@ -8,6 +8,7 @@ list(APPEND CDM_SOURCES
   device/transport_replay.cpp
   device/replay_format.cpp
   device/device.cpp
+  device/device_calibration.cpp
   device/sim/firmware.cpp
   device/sim/motion.cpp
   device/sim/simulator.cpp

@@ -193,3 +193,25 @@ def test_wait_pose_after_returns_at_once_when_newer_exists():
             dev.wait_pose(1.0, after=-1)
         s = dev.stats()
         assert s.sequence_jumps == 0 and s.out_of_order == 0 and s.replay_truncated_bytes == 0
+
+
+def test_wait_pose_without_limit_is_interrupted_by_ctrl_c():
+    # wait_pose(None) on a silent device waits in 100 ms slices, so SIGINT
+    # (Ctrl-C) raises KeyboardInterrupt promptly instead of hanging in C.
+    import signal
+    import threading
+
+    with cdm.open("sim:?stall_after=3") as dev:
+        last = 0
+        while last < 3:  # all the reports the stalled device will ever send
+            last = dev.wait_pose(2.0, after=last).host_sequence
+        timer = threading.Timer(0.3, lambda: signal.pthread_kill(threading.main_thread().ident, signal.SIGINT))
+        t0 = time.monotonic()
+        timer.start()
+        try:
+            with pytest.raises(KeyboardInterrupt):
+                dev.wait_pose(None, after=last)
+        finally:
+            timer.cancel()
+        waited = time.monotonic() - t0
+        assert 0.25 < waited < 0.3 + 0.1 + 0.2, waited  # interrupt + one slice + scheduling

@@ -72,5 +72,10 @@ extern "C" int cdm_hidraw_node_check(const char *path, char *why, size_t cap) {
     ::close(fd);
     if (rc < 0)
         return fail(why, cap, CDM_ERR_NO_DEVICE, p + ": does not answer HIDIOCGRDESCSIZE: " + std::strerror(e));
+    // The kernel caps report descriptors at HID_MAX_DESCRIPTOR_SIZE (4096):
+    // anything else is a node that only pretends to be hidraw.
+    if (size <= 0 || size > HID_MAX_DESCRIPTOR_SIZE)
+        return fail(why, cap, CDM_ERR_NO_DEVICE,
+                    p + ": HIDIOCGRDESCSIZE answered " + std::to_string(size) + ", not a report descriptor size 1..4096");
     return CDM_OK;
 }

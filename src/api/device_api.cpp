@@ -59,7 +59,7 @@ int guarded(F &&f) {
 
 int bad_size(const char *fn, const char *type, uint32_t got, uint32_t need) {
     return cdm::fail(CDM_ERR_INVALID_ARG, std::string(fn) + ": " + type + ".struct_size is " + std::to_string(got) +
-                                              ", at least " + std::to_string(need) + " (sizeof in cdm.h 1.0) needed");
+                                              ", at least " + std::to_string(need) + " needed");
 }
 
 } // namespace

@@ -55,6 +55,18 @@ void expect_refused(const std::string &path, const char *reason, bool via_env = 
 void test_hid_dev_null_refused(void **) { expect_refused("/dev/null", "not a hidraw device"); }
 void test_hid_dev_zero_refused(void **) { expect_refused("/dev/zero", "not a hidraw device"); }
 void test_hid_env_dev_null_refused(void **) { expect_refused("/dev/null", "not a hidraw device", true); }
+// $CDM_DEVICE=/dev/null, a bare path (which means hid:PATH).
+void test_hid_env_bare_dev_null_refused(void **) {
+    setenv("CDM_DEVICE", "/dev/null", 1);
+    cdm_device *dev = nullptr;
+    const int rc = cdm_open(nullptr, &dev);
+    unsetenv("CDM_DEVICE");
+    print_message("CDM_DEVICE=/dev/null -> %d \"%s\"\n", rc, cdm_thread_error());
+    assert_int_equal(rc, CDM_ERR_NO_DEVICE);
+    assert_null(dev);
+    assert_non_null(std::strstr(cdm_thread_error(), "/dev/null"));
+}
+
 void test_hid_missing_path_refused(void **) { expect_refused("/nonexistent/hidraw0", "No such file"); }
 void test_hid_directory_refused(void **) { expect_refused("/tmp", "a directory"); }
 
@@ -82,6 +94,7 @@ int main(void) {
         cmocka_unit_test(test_hid_env_dev_null_refused), cmocka_unit_test(test_hid_missing_path_refused),
         cmocka_unit_test(test_hid_directory_refused),    cmocka_unit_test(test_hid_regular_file_refused),
         cmocka_unit_test(test_hid_fifo_without_writer_refused),
+        cmocka_unit_test(test_hid_env_bare_dev_null_refused),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

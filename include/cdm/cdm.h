@@ -96,7 +96,11 @@ enum cdm_pose_flag {
     CDM_POSE_DISCONNECTED = 1u << 1,     /**< device gone: last good pose, held */
     CDM_POSE_COMPENSATED = 1u << 2,      /**< a loaded calibration was applied */
     CDM_POSE_OUT_OF_WORKSPACE = 1u << 3, /**< lengths had no real solution: last good position, held */
-    CDM_POSE_END_OF_STREAM = 1u << 4     /**< replay or scripted simulation finished */
+    CDM_POSE_END_OF_STREAM = 1u << 4,    /**< replay or scripted simulation finished */
+    /** since 1.1: no position was ever computed (every report so far was out
+     *  of the workspace); position is (0,0,0) and meaningless, the call
+     *  returns CDM_ERR_NO_DATA. Orientation, grip and buttons are the newest. */
+    CDM_POSE_NO_POSITION = 1u << 5
 };
 
 /** Button bits (cdm_pose.buttons). */
@@ -107,7 +111,8 @@ enum cdm_button {
 };
 
 /**
- * The master's state, as a generic haptic input device. Size 104 (1.0).
+ * The master's state, as a generic haptic input device. Size 104 (1.0),
+ * 112 (1.1).
  * Set struct_size = sizeof(cdm_pose) before the call.
  */
 typedef struct cdm_pose {
@@ -122,6 +127,10 @@ typedef struct cdm_pose {
     uint64_t host_time_ns;     /**< CLOCK_MONOTONIC when the report was received */
     uint32_t dropped;          /**< reports lost so far (sequence gaps, disconnections) */
     uint32_t reserved0;        /**< zero */
+    /** since 1.1 (size 112): poses this handle has published so far, counted
+     *  on the host (1 for the first); monotonic, never reset by the device or
+     *  a reconnection. 0: no pose yet. Pass it to cdm_wait_pose_after. */
+    uint64_t host_sequence;
 } cdm_pose;
 
 /** Raw sensor values of the newest report. Size 80 (1.0). */
@@ -231,7 +240,10 @@ CDM_API void cdm_close(cdm_device *dev);
  * CDM_ERR_STALE (flag STALE: older than the stale deadline). Returns
  * CDM_ERR_NO_DATA, *out zeroed but for struct_size, before the first report.
  * Never hands out a NaN: an unsolvable report keeps the last good position
- * and sets OUT_OF_WORKSPACE.
+ * and sets OUT_OF_WORKSPACE; before the first solvable report there is none
+ * to keep: CDM_ERR_NO_DATA with OUT_OF_WORKSPACE | NO_POSITION (since 1.1).
+ * The orientation is always a unit quaternion (identity before the first
+ * report).
  */
 CDM_API int cdm_get_pose(cdm_device *dev, cdm_pose *out);
 
@@ -242,6 +254,18 @@ CDM_API int cdm_get_pose(cdm_device *dev, cdm_pose *out);
  */
 CDM_API int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out);
 
+/**
+ * since 1.1. Waits for a pose whose host_sequence is greater than
+ * after_host_sequence: returns at once if one was already published (no
+ * wake-up is lost between two calls), else blocks until one is or
+ * timeout_ms passes (CDM_ERR_TIMEOUT, *out the newest pose). timeout_ms < 0
+ * waits without limit; 0 only looks. Pass 0 to get the first pose. Returns
+ * at once with CDM_ERR_END_OF_STREAM once a replay has ended. Same other
+ * returns as cdm_get_pose. out->struct_size must cover host_sequence (112).
+ * Any thread.
+ */
+CDM_API int cdm_wait_pose_after(cdm_device *dev, uint64_t after_host_sequence, int timeout_ms, cdm_pose *out);
+
 /** Raw values of the newest report. Same returns as cdm_get_pose. Any thread; does not block. */
 CDM_API int cdm_get_raw(cdm_device *dev, cdm_raw *out);
 
@@ -251,7 +275,7 @@ CDM_API int cdm_get_info(cdm_device *dev, cdm_device_info *out);
 /** A pose older than this (host clock) is flagged stale. 0 restores the default (50 ms). Any thread. */
 CDM_API int cdm_set_stale_timeout(cdm_device *dev, uint32_t timeout_us);
 
-/** Counters of the reader thread. Size 48 (1.0). */
+/** Counters of the reader thread. Size 48 (1.0), 72 (1.1). */
 typedef struct cdm_stats {
     uint32_t struct_size;
     uint32_t reserved0;
@@ -260,6 +284,17 @@ typedef struct cdm_stats {
     uint64_t dropped;          /**< sequence gaps */
     uint64_t out_of_workspace; /**< reports whose lengths had no solution */
     uint64_t reconnects;       /**< successful reconnections after an unplug */
+    /** since 1.1: sequence-counter discontinuities (a backward
+     *  jump, or a forward jump larger than the reports the device could have
+     *  sent since the last one, docs/protocol.md): a reset or a corrupted
+     *  counter. Not counted in dropped. */
+    uint64_t sequence_jumps;
+    /** since 1.1: reports discarded because their sequence number was the
+     *  newest one's (duplicate) or up to 64 behind it (arrived late). */
+    uint64_t out_of_order;
+    /** since 1.1: bytes of an incomplete last record a replay dropped (a
+     *  recording cut by a kill or a full disk); 0 otherwise. */
+    uint64_t replay_truncated_bytes;
 } cdm_stats;
 
 /** Any thread. */

@@ -3,6 +3,7 @@
 // cdm::guarded(), so no exception reaches a C caller.
 #include <dlfcn.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -136,15 +137,39 @@ int cdm_effect_unregister(const char *name) {
 int cdm_effect_load_plugin(const char *path) {
     cdm::clear_thread_error();
     if (!path) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_effect_load_plugin: path is NULL");
-    // The plugin stays loaded for the life of the process: its effects'
-    // apply functions live in it.
+    // A name without a slash would be looked up along LD_LIBRARY_PATH, the
+    // rpath and the system directories: whoever controls those picks the
+    // code. Only a path (./x.so, /opt/x.so) names one file.
+    if (!std::strchr(path, '/'))
+        return cdm::fail(CDM_ERR_INVALID_ARG, std::string("cdm_effect_load_plugin: \"") + path +
+                                                  "\" is a bare name; give a path (e.g. ./" + path +
+                                                  "), the dynamic linker's search path is not used");
     void *h = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     if (!h) return cdm::fail(CDM_ERR_IO, std::string(path) + ": cannot load plugin: " + dlerror());
     using init_fn = int (*)(int (*)(const cdm_effect_def *));
     auto init = reinterpret_cast<init_fn>(dlsym(h, "cdm_plugin_init"));
-    if (!init) return cdm::fail(CDM_ERR_INVALID_ARG, std::string(path) + ": no symbol cdm_plugin_init");
-    int rc = init(cdm_effect_register);
-    if (rc != CDM_OK) return cdm::fail(rc, std::string(path) + ": cdm_plugin_init failed: " + cdm_thread_error());
+    if (!init) {
+        dlclose(h);
+        return cdm::fail(CDM_ERR_INVALID_ARG, std::string(path) + ": no symbol cdm_plugin_init");
+    }
+    auto effect_names = [] {
+        std::vector<std::string> v;
+        for (const auto &e : cdm::all_effects()) v.push_back(e->name);
+        return v;
+    };
+    const std::vector<std::string> before = effect_names();
+    const int rc = init(cdm_effect_register);
+    if (rc != CDM_OK) {
+        const std::string why = cdm_thread_error();
+        // Effects a failed init registered point into the library: remove
+        // them before it goes.
+        for (const std::string &name : effect_names())
+            if (std::find(before.begin(), before.end(), name) == before.end()) cdm_effect_unregister(name.c_str());
+        dlclose(h);
+        return cdm::fail(rc, std::string(path) + ": cdm_plugin_init failed (library unloaded): " + why);
+    }
+    // A successful plugin stays loaded for the life of the process: its
+    // effects' apply functions live in it.
     return CDM_OK;
 }
 

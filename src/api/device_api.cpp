@@ -2,6 +2,7 @@
 // exception fences around the device layer (src/device/). No logic of their
 // own.
 #include <algorithm>
+#include <cstddef>
 #include <cstring>
 #include <new>
 #include <string>
@@ -15,10 +16,12 @@
 
 // The 1.0 sizes are part of the ABI: a caller passing less is refused, a
 // newer caller passing more gets the 1.0 fields and the rest untouched.
-static_assert(sizeof(cdm_pose) == 104, "cdm_pose 1.0 is 104 bytes");
+static_assert(offsetof(cdm_pose, host_sequence) == 104, "cdm_pose 1.0 is 104 bytes");
+static_assert(sizeof(cdm_pose) == 112, "cdm_pose 1.1 is 112 bytes");
 static_assert(sizeof(cdm_raw) == 80, "cdm_raw 1.0 is 80 bytes");
 static_assert(sizeof(cdm_device_info) == 456, "cdm_device_info 1.0 is 456 bytes");
-static_assert(sizeof(cdm_stats) == 48, "cdm_stats 1.0 is 48 bytes");
+static_assert(offsetof(cdm_stats, sequence_jumps) == 48, "cdm_stats 1.0 is 48 bytes");
+static_assert(sizeof(cdm_stats) == 72, "cdm_stats 1.1 is 72 bytes");
 static_assert(sizeof(cdm_open_options) == 24, "cdm_open_options 1.0 is 24 bytes");
 static_assert(sizeof(cdm_sample) == 32, "cdm_sample 1.0 is 32 bytes");
 
@@ -28,6 +31,7 @@ struct cdm_device_list {
 
 namespace {
 
+constexpr uint32_t kPoseSize11 = 112;
 constexpr uint32_t kPoseSize10 = 104, kRawSize10 = 80, kInfoSize10 = 456, kStatsSize10 = 48,
                    kOptionsSize10 = 24;
 
@@ -55,7 +59,7 @@ int guarded(F &&f) {
 
 int bad_size(const char *fn, const char *type, uint32_t got, uint32_t need) {
     return cdm::fail(CDM_ERR_INVALID_ARG, std::string(fn) + ": " + type + ".struct_size is " + std::to_string(got) +
-                                              ", at least " + std::to_string(need) + " (sizeof in cdm.h 1.0) needed");
+                                              ", at least " + std::to_string(need) + " needed");
 }
 
 } // namespace
@@ -137,6 +141,19 @@ int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out) {
         if (out->struct_size < kPoseSize10) return bad_size("cdm_wait_pose", "cdm_pose", out->struct_size, kPoseSize10);
         cdm_pose p;
         const int rc = dev->wait_pose(timeout_ms, p);
+        copy_out(p, out);
+        return rc;
+    });
+}
+
+int cdm_wait_pose_after(cdm_device *dev, uint64_t after_host_sequence, int timeout_ms, cdm_pose *out) {
+    return guarded([&] {
+        if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_wait_pose_after: NULL argument");
+        // The caller must be able to see host_sequence, or it cannot ask again.
+        if (out->struct_size < kPoseSize11)
+            return bad_size("cdm_wait_pose_after", "cdm_pose", out->struct_size, kPoseSize11);
+        cdm_pose p;
+        const int rc = dev->wait_pose_after(after_host_sequence, timeout_ms, p);
         copy_out(p, out);
         return rc;
     });

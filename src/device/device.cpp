@@ -8,6 +8,7 @@
 #include <ctime>
 #include <vector>
 
+#include "device/replay_format.h"
 #include "device/transport_hidapi.h"
 
 namespace cdm {
@@ -118,8 +119,10 @@ int open_device(const char *uri_c, const cdm_open_options *opts, cdm_device **ou
         return rc;
     }
     const uint32_t stale = opts && opts->stale_timeout_us ? opts->stale_timeout_us : kDefaultStaleTimeoutUs;
+    const std::string warning = t->open_warning();
     auto *dev = new cdm_device(std::move(t), info, stale, opts ? opts->on_sample : nullptr,
                                opts ? opts->user : nullptr);
+    if (!warning.empty()) dev->set_error("warning: " + warning);
     dev->start();
     *out = dev;
     return CDM_OK;
@@ -132,6 +135,7 @@ using namespace cdm;
 cdm_device::cdm_device(TransportPtr t, const proto::DeviceInfoReport &info, uint32_t stale_timeout_us,
                        cdm_sample_fn on_sample, void *user)
     : transport_(std::move(t)), on_sample_(on_sample), user_(user), stale_timeout_us_(stale_timeout_us) {
+    truncated_bytes_ = transport_->truncated_bytes();
     device_info_from_report(info, transport_->name(), transport_->uri(), info_);
     conv_ = conversion_from(info);
     nominal_ = nominal_model(info);
@@ -156,6 +160,7 @@ cdm_device::Conversion cdm_device::conversion_from(const proto::DeviceInfoReport
     c.hall_open = r.hall_open;
     c.grip_open_rad = r.grip_open_rad;
     c.rate_hz = r.report_rate_hz;
+    c.adc_full_scale = (1u << r.adc_bits) - 1u;
     return c;
 }
 
@@ -195,7 +200,9 @@ void cdm_device::set_model(const ModelPtr &model) {
 }
 
 void cdm_device::run() {
-    uint8_t buf[512];
+    // Any report the replay format can hold (kMaxReport): a longer one
+    // from a newer firmware is parsed for its first 64 bytes.
+    uint8_t buf[replay::kMaxReport];
     while (!stop_.load(std::memory_order_relaxed)) {
         try {
             if (state_flags_.load(std::memory_order_relaxed) & CDM_POSE_DISCONNECTED) {
@@ -257,6 +264,47 @@ bool cdm_device::try_reconnect() {
     return true;
 }
 
+// The sequence number's bound (docs/protocol.md, "Sequence numbers"): a
+// device cannot send more reports than rate x elapsed time. A forward jump
+// beyond twice that (plus 64 for reports queued in the kernel and USB
+// batching) is a reset or a corrupted counter: counted in sequence_jumps,
+// not in dropped, and the count restarts from it. One flipped bit thus costs
+// two jumps (there and back), never 4e9 dropped reports.
+bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t host_ns) {
+    if (!have_last_) {
+        have_last_ = true;
+        last_seq_ = seq;
+        last_device_us_ = device_us;
+        last_host_ns_ = host_ns;
+        after_reconnect_ = false;
+        return true;
+    }
+    const uint32_t d = seq - last_seq_; // wraps at 2^32 by design
+    const uint32_t back = last_seq_ - seq;
+    // A duplicate or a late report was also sampled no later than the last
+    // one; a counter restarted soon after power-up has a newer sample time.
+    if (back <= kReorderWindow && device_us <= last_device_us_ && !after_reconnect_) {
+        n_out_of_order_.fetch_add(1, std::memory_order_relaxed);
+        return false;
+    }
+    const double elapsed_reports = double(host_ns - last_host_ns_) * 1e-9 * conv_.rate_hz;
+    const double bound = 2.0 * elapsed_reports + 64.0;
+    if (d >= 1 && d < 0x80000000u && double(d - 1) <= bound) {
+        n_dropped_.fetch_add(d - 1, std::memory_order_relaxed);
+    } else {
+        n_seq_jumps_.fetch_add(1, std::memory_order_relaxed);
+        // After an unplug the device may have restarted its counter (it lost
+        // power): what was missed is estimated from the host clock instead.
+        if (after_reconnect_ && elapsed_reports > 1.0)
+            n_dropped_.fetch_add(uint64_t(std::llround(elapsed_reports - 1.0)), std::memory_order_relaxed);
+    }
+    after_reconnect_ = false;
+    last_seq_ = seq;
+    last_device_us_ = device_us;
+    last_host_ns_ = host_ns;
+    return true;
+}
+
 void cdm_device::handle_report(const uint8_t *buf, size_t len) {
     proto::InputReport r;
     const proto::Reject rej = proto::parse_input(buf, len, r);
@@ -273,24 +321,7 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len) {
     }
     const uint64_t host_ns = monotonic_ns();
 
-    if (have_last_) {
-        const uint32_t d = r.sequence - last_seq_; // wraps at 2^32 by design
-        uint64_t gap = 0;
-        if (d >= 1 && d < 0x80000000u) {
-            gap = d - 1;
-        } else if (after_reconnect_) {
-            // The device restarted its counter (it lost power while
-            // unplugged): estimate the reports missed from the host-side
-            // gap and the nominal rate.
-            const double est = double(host_ns - last_host_ns_) * 1e-9 * conv_.rate_hz - 1.0;
-            gap = est > 0 ? uint64_t(std::llround(est)) : 0;
-        }
-        n_dropped_.fetch_add(gap, std::memory_order_relaxed);
-    }
-    after_reconnect_ = false;
-    have_last_ = true;
-    last_seq_ = r.sequence;
-    last_host_ns_ = host_ns;
+    if (!account_sequence(r.sequence, r.device_time_us, host_ns)) return;
 
     if (model_changed_.load(std::memory_order_acquire)) {
         std::lock_guard<std::mutex> lock(model_mu_);
@@ -317,11 +348,18 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len) {
     cdm_pose &pose = s.pose;
     pose.struct_size = sizeof(cdm_pose);
     double p[3];
-    if (model_->position(raw.lengths_mm, p) == 0 && std::isfinite(p[0]) && std::isfinite(p[1]) &&
+    // A saturated pot ADC (at full scale) reads a clipped count, not the
+    // cable's length: no position from it.
+    bool saturated = false;
+    for (int i = 0; i < 4; ++i) saturated = saturated || r.pot_adc[i] >= conv_.adc_full_scale;
+    if (!saturated && model_->position(raw.lengths_mm, p) == 0 && std::isfinite(p[0]) && std::isfinite(p[1]) &&
         std::isfinite(p[2])) {
         std::memcpy(last_good_p_, p, sizeof p);
+        have_good_p_ = true;
     } else {
         pose.flags |= CDM_POSE_OUT_OF_WORKSPACE;
+        // Nothing to hold yet: (0,0,0) is no position the holder ever had.
+        if (!have_good_p_) pose.flags |= CDM_POSE_NO_POSITION;
         n_oow_.fetch_add(1, std::memory_order_relaxed);
     }
     std::memcpy(pose.position, last_good_p_, sizeof last_good_p_);
@@ -337,8 +375,10 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len) {
     pose.device_time_us = r.device_time_us;
     pose.host_time_ns = host_ns;
     pose.dropped = uint32_t(n_dropped_.load(std::memory_order_relaxed));
+    pose.host_sequence = published_.load(std::memory_order_relaxed) + 1;
 
     snap_.store(s);
+    published_.store(pose.host_sequence); // seq-cst: pairs with the waiter count (notify_waiters)
     n_reports_.fetch_add(1, std::memory_order_relaxed);
     notify_waiters();
 
@@ -360,6 +400,7 @@ int cdm_device::finish(cdm_pose &pose, bool have) const {
     if (!have) {
         pose = cdm_pose{};
         pose.struct_size = sizeof(cdm_pose);
+        pose.orientation[0] = 1.0; // identity: never the zero quaternion
         pose.flags = st;
         if (st & CDM_POSE_DISCONNECTED) return CDM_ERR_DISCONNECTED;
         if (st & CDM_POSE_END_OF_STREAM) return CDM_ERR_END_OF_STREAM;
@@ -371,6 +412,7 @@ int cdm_device::finish(cdm_pose &pose, bool have) const {
     if (now > pose.host_time_ns && now - pose.host_time_ns > limit) pose.flags |= CDM_POSE_STALE;
     if (st & CDM_POSE_DISCONNECTED) return CDM_ERR_DISCONNECTED;
     if (st & CDM_POSE_END_OF_STREAM) return CDM_ERR_END_OF_STREAM;
+    if (pose.flags & CDM_POSE_NO_POSITION) return CDM_ERR_NO_DATA;
     if (pose.flags & CDM_POSE_STALE) return CDM_ERR_STALE;
     return CDM_OK;
 }
@@ -397,22 +439,47 @@ int cdm_device::get_raw(cdm_raw &out) const {
     return rc;
 }
 
+// Sleeps until ready() or timeout (< 0: none); returns whether ready()
+// held. The waiter count lets the reader skip the mutex when nobody waits.
+bool cdm_device::wait_until(const std::function<bool()> &ready, int timeout_ms) {
+    if (ready()) return true;
+    waiters_.fetch_add(1);
+    bool ok;
+    {
+        std::unique_lock<std::mutex> lock(wait_mu_);
+        auto pred = [&] { return ready() || stop_.load(); };
+        if (timeout_ms < 0) {
+            wait_cv_.wait(lock, pred);
+            ok = true;
+        } else {
+            ok = wait_cv_.wait_for(lock, std::chrono::milliseconds(timeout_ms), pred);
+        }
+    }
+    waiters_.fetch_sub(1);
+    return ok && ready();
+}
+
 int cdm_device::wait_pose(int timeout_ms, cdm_pose &out) {
     const uint64_t start = events_.load();
     bool woke = true;
-    if (!(state_flags_.load() & CDM_POSE_END_OF_STREAM)) {
-        waiters_.fetch_add(1);
-        std::unique_lock<std::mutex> lock(wait_mu_);
-        auto pred = [&] { return events_.load() != start || stop_.load(); };
-        if (timeout_ms < 0)
-            wait_cv_.wait(lock, pred);
-        else
-            woke = wait_cv_.wait_for(lock, std::chrono::milliseconds(timeout_ms), pred);
-        lock.unlock();
-        waiters_.fetch_sub(1);
-    }
+    if (!(state_flags_.load() & CDM_POSE_END_OF_STREAM))
+        woke = wait_until([&] { return events_.load() != start; }, timeout_ms);
     const int rc = get_pose(out);
     if (!woke && rc != CDM_ERR_NO_DATA && rc != CDM_ERR_DISCONNECTED) return CDM_ERR_TIMEOUT;
+    return rc;
+}
+
+int cdm_device::wait_pose_after(uint64_t after, int timeout_ms, cdm_pose &out) {
+    // Ready on a newer pose, or once no newer pose can ever come.
+    const bool woke = wait_until(
+        [&] {
+            return published_.load() > after ||
+                   (state_flags_.load() & CDM_POSE_END_OF_STREAM);
+        },
+        timeout_ms);
+    const int rc = get_pose(out);
+    if (rc == CDM_ERR_END_OF_STREAM) return rc;
+    if (!woke || out.host_sequence <= after) return rc == CDM_ERR_DISCONNECTED ? rc : CDM_ERR_TIMEOUT;
     return rc;
 }
 
@@ -429,119 +496,8 @@ void cdm_device::get_stats(cdm_stats &out) const {
     s.dropped = n_dropped_.load(std::memory_order_relaxed);
     s.out_of_workspace = n_oow_.load(std::memory_order_relaxed);
     s.reconnects = n_reconnects_.load(std::memory_order_relaxed);
+    s.sequence_jumps = n_seq_jumps_.load(std::memory_order_relaxed);
+    s.out_of_order = n_out_of_order_.load(std::memory_order_relaxed);
+    s.replay_truncated_bytes = truncated_bytes_;
     out = s;
-}
-
-// ------------------------------------------------------------ calibration I/O
-
-namespace {
-int feature_get(Transport &t, uint8_t id, uint8_t *buf, size_t len, std::string &err) {
-    std::memset(buf, 0, len);
-    buf[0] = id;
-    const int n = t.get_feature(buf, len, err);
-    if (n >= 0 && size_t(n) < len) {
-        err = "feature report 0x0" + std::to_string(id) + ": device returned " + std::to_string(n) + " of " +
-              std::to_string(len) + " bytes";
-        return CDM_ERR_PROTOCOL;
-    }
-    return n < 0 ? n : CDM_OK;
-}
-} // namespace
-
-int cdm_device::calibration_read(char *out, size_t cap, size_t *len) {
-    using namespace cdm::proto;
-    std::lock_guard<std::mutex> lock(cal_mu_);
-    std::string err;
-    uint8_t buf[kCalChunkReportSize];
-    auto fail_with = [&](int code, const std::string &text) {
-        set_error("reading the stored calibration: " + text);
-        return code;
-    };
-    int rc = feature_get(*transport_, kCalHeaderReportId, buf, kCalHeaderReportSize, err);
-    if (rc != CDM_OK) return fail_with(rc, err);
-    CalHeader h;
-    if (parse_cal_header(buf, kCalHeaderReportSize, h) != Reject::None)
-        return fail_with(CDM_ERR_PROTOCOL, "malformed calibration header (feature report 0x03)");
-    *len = 0;
-    if (h.state == CalState::Empty) return fail_with(CDM_ERR_NO_DATA, "the device stores no calibration");
-    if (h.state == CalState::Writing)
-        return fail_with(CDM_ERR_NO_DATA, "a calibration write is in progress or was interrupted");
-    if (h.state == CalState::CommitFailed)
-        return fail_with(CDM_ERR_CRC, "the last calibration write failed the device's CRC check");
-    if (h.length > kCalMaxLength)
-        return fail_with(CDM_ERR_PROTOCOL, "device claims " + std::to_string(h.length) + " bytes (max 16384)");
-    *len = h.length;
-    if (h.length > cap)
-        return fail_with(CDM_ERR_NO_MEM, "buffer of " + std::to_string(cap) + " bytes, " +
-                                             std::to_string(h.length) + " needed");
-    CalChunk seek;
-    seek.op = CalChunkOp::SeekRead;
-    seek.offset = 0;
-    serialize_cal_chunk(seek, buf);
-    rc = transport_->send_feature(buf, kCalChunkReportSize, err);
-    if (rc != CDM_OK) return fail_with(rc, err);
-    std::vector<uint8_t> data;
-    data.reserve(h.length);
-    while (data.size() < h.length) {
-        rc = feature_get(*transport_, kCalChunkReportId, buf, kCalChunkReportSize, err);
-        if (rc != CDM_OK) return fail_with(rc, err);
-        CalChunk c;
-        if (parse_cal_chunk(buf, kCalChunkReportSize, c) != Reject::None || c.offset != data.size() ||
-            c.length == 0 || data.size() + c.length > h.length)
-            return fail_with(CDM_ERR_PROTOCOL, "unexpected calibration chunk at offset " + std::to_string(data.size()));
-        data.insert(data.end(), c.data.begin(), c.data.begin() + c.length);
-    }
-    if (h.length) std::memcpy(out, data.data(), h.length);
-    if (crc32(data.data(), data.size()) != h.crc32)
-        return fail_with(CDM_ERR_CRC, "stored calibration (" + std::to_string(h.length) +
-                                          " bytes) does not match its CRC-32");
-    return CDM_OK;
-}
-
-int cdm_device::calibration_write(const char *data, size_t len) {
-    using namespace cdm::proto;
-    std::lock_guard<std::mutex> lock(cal_mu_);
-    std::string err;
-    auto fail_with = [&](int code, const std::string &text) {
-        set_error("writing the calibration: " + text);
-        return code;
-    };
-    if (len > kCalMaxLength)
-        return fail_with(CDM_ERR_INVALID_ARG,
-                         std::to_string(len) + " bytes do not fit the device's 16384-byte store");
-    const uint8_t *bytes = reinterpret_cast<const uint8_t *>(data);
-    uint8_t buf[kCalChunkReportSize];
-    CalHeader h;
-    h.op = CalHeaderOp::BeginWrite;
-    h.length = uint32_t(len);
-    h.crc32 = crc32(bytes, len);
-    serialize_cal_header(h, buf);
-    int rc = transport_->send_feature(buf, kCalHeaderReportSize, err);
-    if (rc != CDM_OK) return fail_with(rc, err);
-    for (size_t off = 0; off < len; off += kCalChunkMaxData) {
-        CalChunk c;
-        c.op = CalChunkOp::WriteData;
-        c.offset = uint16_t(off);
-        c.length = uint8_t(std::min(kCalChunkMaxData, len - off));
-        std::memcpy(c.data.data(), bytes + off, c.length);
-        serialize_cal_chunk(c, buf);
-        rc = transport_->send_feature(buf, kCalChunkReportSize, err);
-        if (rc != CDM_OK) return fail_with(rc, "chunk at offset " + std::to_string(off) + ": " + err);
-    }
-    CalHeader commit;
-    commit.op = CalHeaderOp::Commit;
-    commit.length = uint32_t(len);
-    commit.crc32 = h.crc32;
-    serialize_cal_header(commit, buf);
-    rc = transport_->send_feature(buf, kCalHeaderReportSize, err);
-    if (rc != CDM_OK) return fail_with(rc, "commit: " + err);
-    rc = feature_get(*transport_, kCalHeaderReportId, buf, kCalHeaderReportSize, err);
-    if (rc != CDM_OK) return fail_with(rc, err);
-    CalHeader after;
-    if (parse_cal_header(buf, kCalHeaderReportSize, after) != Reject::None)
-        return fail_with(CDM_ERR_PROTOCOL, "malformed calibration header after commit");
-    if (after.state != CalState::Valid || after.length != len || after.crc32 != h.crc32)
-        return fail_with(CDM_ERR_CRC, "the device did not accept the data (state " +
-                                          std::to_string(int(after.state)) + ", CRC check failed)");
-    return CDM_OK;
 }

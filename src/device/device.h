@@ -19,6 +19,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -34,6 +35,12 @@ namespace cdm {
 constexpr uint32_t kDefaultStaleTimeoutUs = 50000;
 // Read timeout of the reader thread: bounds how long cdm_close waits.
 constexpr int kReaderPollMs = 50;
+// A report whose sequence number is the last one's or behind it by at most
+// this many, and whose device time is not newer, is a duplicate or arrived
+// late (reordered): it is discarded
+// (an older sample must not replace a newer one) and counted in
+// cdm_stats.out_of_order. A larger backward step is a counter reset.
+constexpr uint32_t kReorderWindow = 64;
 // Retry interval while disconnected.
 constexpr int kReconnectIntervalMs = 250;
 
@@ -63,6 +70,7 @@ public:
     // caller's struct_size.
     int get_pose(cdm_pose &out) const;
     int wait_pose(int timeout_ms, cdm_pose &out);
+    int wait_pose_after(uint64_t after, int timeout_ms, cdm_pose &out);
     int get_raw(cdm_raw &out) const;
     void get_info(cdm_device_info &out) const;
     void get_stats(cdm_stats &out) const;
@@ -89,11 +97,15 @@ private:
     struct Conversion {
         double scale[4], offset[4];
         double hall_closed, hall_open, grip_open_rad, rate_hz;
+        uint32_t adc_full_scale; // 2^adc_bits - 1: a pot reading there is clipped, not a length
     };
 
     void run();
     bool try_reconnect();
     void handle_report(const uint8_t *buf, size_t len);
+    // false: discard (duplicate or late)
+    bool account_sequence(uint32_t seq, uint64_t device_us, uint64_t host_ns);
+    bool wait_until(const std::function<bool()> &ready, int timeout_ms);
     void set_state_flag(uint32_t flag, bool on);
     void notify_waiters();
     int finish(cdm_pose &pose, bool have) const;
@@ -109,6 +121,10 @@ private:
     std::atomic<uint32_t> stale_timeout_us_;
     std::atomic<uint64_t> events_{0}; // bumped on every publication and state change
     std::atomic<uint64_t> n_reports_{0}, n_malformed_{0}, n_dropped_{0}, n_oow_{0}, n_reconnects_{0};
+    std::atomic<uint64_t> n_seq_jumps_{0}, n_out_of_order_{0};
+    uint64_t truncated_bytes_ = 0; // set before start(), read-only after
+    // host_sequence of the newest published pose (0: none yet).
+    std::atomic<uint64_t> published_{0};
 
     // Waiters of cdm_wait_pose.
     std::atomic<int> waiters_{0};
@@ -137,8 +153,10 @@ private:
     bool have_last_ = false;
     uint32_t last_seq_ = 0;
     uint64_t last_host_ns_ = 0;
+    uint64_t last_device_us_ = 0;
     bool after_reconnect_ = false;
     double last_good_p_[3] = {0, 0, 0};
+    bool have_good_p_ = false;
     uint64_t malformed_by_kind_[8] = {};
 
     std::atomic<bool> stop_{false};

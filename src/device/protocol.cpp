@@ -1,6 +1,7 @@
 #include "device/protocol.h"
 
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 
 namespace cdm::proto {
@@ -108,6 +109,12 @@ Reject bad(std::string *detail, const std::string &what) {
     return Reject::BadValue;
 }
 bool positive_finite(float v) { return std::isfinite(v) && v > 0; }
+bool in_range(float v, double lo, double hi) { return std::isfinite(v) && double(v) >= lo && double(v) <= hi; }
+std::string range_text(const std::string &field, float v, double lo, double hi) {
+    char b[200];
+    std::snprintf(b, sizeof b, "%s = %g outside [%g, %g]", field.c_str(), double(v), lo, hi);
+    return b;
+}
 } // namespace
 
 Reject parse_device_info(const uint8_t *buf, size_t len, DeviceInfoReport &out, std::string *detail) {
@@ -135,26 +142,34 @@ Reject parse_device_info(const uint8_t *buf, size_t len, DeviceInfoReport &out, 
     }
     r.serial[16] = 0;
     r.report_rate_hz = get_f32(buf + 24);
-    if (!positive_finite(r.report_rate_hz)) return bad(detail, "report_rate_hz (bytes 24..27) must be positive");
+    if (!in_range(r.report_rate_hz, kRateMinHz, kRateMaxHz))
+        return bad(detail, range_text("report_rate_hz (bytes 24..27)", r.report_rate_hz, kRateMinHz, kRateMaxHz));
     for (int i = 0; i < 4; ++i) {
+        const std::string k = "[" + std::to_string(i) + "]";
         r.pot_scale_mm[i] = get_f32(buf + 28 + 4 * i);
         r.pot_offset_mm[i] = get_f32(buf + 44 + 4 * i);
-        if (!positive_finite(r.pot_scale_mm[i]))
-            return bad(detail, "pot_scale_mm[" + std::to_string(i) + "] must be positive and finite");
-        if (!std::isfinite(r.pot_offset_mm[i]))
-            return bad(detail, "pot_offset_mm[" + std::to_string(i) + "] must be finite");
+        if (!in_range(r.pot_scale_mm[i], kPotScaleMinMm, kPotScaleMaxMm))
+            return bad(detail, range_text("pot_scale_mm" + k, r.pot_scale_mm[i], kPotScaleMinMm, kPotScaleMaxMm));
+        if (!in_range(r.pot_offset_mm[i], -kPotOffsetMaxMm, kPotOffsetMaxMm))
+            return bad(detail, range_text("pot_offset_mm" + k, r.pot_offset_mm[i], -kPotOffsetMaxMm, kPotOffsetMaxMm));
     }
     r.a_mm = get_f32(buf + 60);
     r.b_mm = get_f32(buf + 64);
     r.m_mm = get_f32(buf + 68);
-    if (!positive_finite(r.a_mm) || !positive_finite(r.b_mm) || !positive_finite(r.m_mm) ||
-        r.m_mm >= 2 * r.a_mm || r.m_mm >= 2 * r.b_mm)
-        return bad(detail, "geometry a,b,m (bytes 60..71) must be positive with m < 2a and m < 2b");
+    const char *names[3] = {"a_mm (bytes 60..63)", "b_mm (bytes 64..67)", "m_mm (bytes 68..71)"};
+    const float geo[3] = {r.a_mm, r.b_mm, r.m_mm};
+    for (int i = 0; i < 3; ++i)
+        if (!in_range(geo[i], kGeometryMinMm, kGeometryMaxMm))
+            return bad(detail, range_text(names[i], geo[i], kGeometryMinMm, kGeometryMaxMm));
+    if (r.m_mm >= 2 * r.a_mm || r.m_mm >= 2 * r.b_mm)
+        return bad(detail, "geometry a,b,m (bytes 60..71) must have m < 2a and m < 2b");
     r.hall_closed = get_u16(buf + 72);
     r.hall_open = get_u16(buf + 74);
     if (r.hall_closed == r.hall_open) return bad(detail, "hall_closed equals hall_open (bytes 72..75)");
     r.grip_open_rad = get_f32(buf + 76);
-    if (!positive_finite(r.grip_open_rad)) return bad(detail, "grip_open_rad (bytes 76..79) must be positive");
+    if (!positive_finite(r.grip_open_rad) || double(r.grip_open_rad) > kGripOpenMaxRad)
+        return bad(detail, range_text("grip_open_rad (bytes 76..79)", r.grip_open_rad, 0, kGripOpenMaxRad) +
+                               " (0 excluded)");
     out = r;
     return Reject::None;
 }

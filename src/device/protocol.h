@@ -99,9 +99,21 @@ struct DeviceInfoReport {
     uint16_t hall_closed = 0, hall_open = 0;
     float grip_open_rad = 0;
 };
-// Rejects Short, WrongReportId, WrongVersion and BadValue (non-finite or
-// non-positive scale/geometry, hall_open == hall_closed, adc_bits outside
-// 1..16, a non-printable serial); `detail` then names the field.
+// Physically sane ranges of the device-info fields (docs/protocol.md,
+// "Device info ranges"): a desk-size master has cables of centimetres to a
+// metre or two, pots resolving micrometres to a millimetre per count, and a
+// report rate between 1 Hz and 100 kHz. A value outside is a corrupt report
+// or a broken firmware, and would turn into poses of 1e38 mm.
+constexpr double kRateMinHz = 1.0, kRateMaxHz = 100000.0;
+constexpr double kPotScaleMinMm = 1e-6, kPotScaleMaxMm = 1.0;   // mm per ADC count
+constexpr double kPotOffsetMaxMm = 10000.0;                      // |offset|
+constexpr double kGeometryMinMm = 1.0, kGeometryMaxMm = 10000.0; // a, b, m
+constexpr double kGripOpenMaxRad = 3.14159265358979323846;      // grip_open_rad in (0, pi]
+
+// Rejects Short, WrongReportId, WrongVersion and BadValue (a field outside
+// the ranges above or non-finite, m >= 2a or 2b, hall_open == hall_closed,
+// adc_bits outside 1..16, a non-printable serial); `detail` then names the
+// field, its value and its range.
 Reject parse_device_info(const uint8_t *buf, size_t len, DeviceInfoReport &out, std::string *detail);
 void serialize_device_info(const DeviceInfoReport &r, uint8_t *buf); // kDeviceInfoReportSize bytes
 

@@ -1,9 +1,12 @@
 #include "device/replay_format.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <cerrno>
 #include <cstring>
-#include <fstream>
-#include <iterator>
+#include <vector>
 
 #include "cdm/cdm.h"
 #include "device/protocol.h"
@@ -14,6 +17,14 @@ namespace {
 int parse_error(const std::string &name, size_t offset, const std::string &what, std::string &err) {
     err = name + ": byte " + std::to_string(offset) + ": " + what;
     return CDM_ERR_PARSE;
+}
+// The writer appends record by record, so a kill or a full disk can only
+// cut the last record: keep everything before it, and say so.
+void truncated_tail(const std::string &name, size_t off, size_t n, const std::string &where, File &f) {
+    f.truncated_bytes = n - off;
+    f.warning = name + ": byte " + std::to_string(off) + ": recording ends inside a " + where + "; " +
+                std::to_string(n - off) + " trailing bytes dropped, " + std::to_string(f.records.size()) +
+                " complete records kept (was the recorder killed, or the disk full?)";
 }
 } // namespace
 
@@ -38,9 +49,10 @@ int parse(std::vector<uint8_t> bytes, const std::string &name, File &out, std::s
     size_t off = kHeaderSize + info_len;
     uint64_t last_ns = 0;
     while (off < n) {
-        if (n - off < kRecordHeaderSize)
-            return parse_error(name, off, "truncated record header (" + std::to_string(n - off) + " of " +
-                                              std::to_string(kRecordHeaderSize) + " bytes)", err);
+        if (n - off < kRecordHeaderSize) {
+            truncated_tail(name, off, n, "record header", f);
+            break;
+        }
         const uint64_t t = proto::get_u64(bytes.data() + off);
         const uint16_t len = proto::get_u16(bytes.data() + off + 8);
         if (len == 0 || len > kMaxReport)
@@ -48,9 +60,10 @@ int parse(std::vector<uint8_t> bytes, const std::string &name, File &out, std::s
         if (t < last_ns)
             return parse_error(name, off, "host time goes backwards (record " + std::to_string(f.records.size()) + ")",
                                err);
-        if (n - off - kRecordHeaderSize < len)
-            return parse_error(name, off, "truncated record: " + std::to_string(len) + " report bytes announced, " +
-                                              std::to_string(n - off - kRecordHeaderSize) + " left", err);
+        if (n - off - kRecordHeaderSize < len) {
+            truncated_tail(name, off, n, "report (" + std::to_string(len) + " bytes announced)", f);
+            break;
+        }
         f.records.push_back(Record{t, off + kRecordHeaderSize, len});
         last_ns = t;
         off += kRecordHeaderSize + len;
@@ -61,70 +74,132 @@ int parse(std::vector<uint8_t> bytes, const std::string &name, File &out, std::s
 }
 
 int load(const std::string &path, File &out, std::string &err) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) {
+    // O_NONBLOCK: a FIFO without a writer must not hang the open; it is
+    // refused below anyway, like every file that is not regular.
+    const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY);
+    if (fd < 0) {
         err = path + ": cannot open: " + std::strerror(errno);
-        return CDM_ERR_NO_DEVICE;
+        return errno == ENOENT ? CDM_ERR_NO_DEVICE : CDM_ERR_IO;
     }
-    std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (in.bad()) {
-        err = path + ": read error";
-        return CDM_ERR_IO;
+    struct stat st;
+    std::vector<uint8_t> bytes;
+    int rc = CDM_OK;
+    if (::fstat(fd, &st) != 0) {
+        err = path + ": cannot stat: " + std::strerror(errno);
+        rc = CDM_ERR_IO;
+    } else if (!S_ISREG(st.st_mode)) {
+        err = path + ": not a regular file (" +
+              (S_ISDIR(st.st_mode) ? "a directory" : S_ISFIFO(st.st_mode) ? "a FIFO" : "a device or socket") +
+              "): a recording is a file written by cdm record";
+        rc = CDM_ERR_INVALID_ARG;
+    } else if (uint64_t(st.st_size) > kMaxFileBytes) {
+        err = path + ": " + std::to_string(st.st_size) + " bytes, more than the " +
+              std::to_string(kMaxFileBytes) + "-byte limit of a recording";
+        rc = CDM_ERR_INVALID_ARG;
+    } else {
+        bytes.resize(size_t(st.st_size));
+        size_t got = 0;
+        while (got < bytes.size()) {
+            const ssize_t r = ::read(fd, bytes.data() + got, bytes.size() - got);
+            if (r < 0 && errno == EINTR) continue;
+            if (r < 0) {
+                err = path + ": read error at byte " + std::to_string(got) + ": " + std::strerror(errno);
+                rc = CDM_ERR_IO;
+                break;
+            }
+            if (r == 0) break; // shrank while reading: parse what is there
+            got += size_t(r);
+        }
+        bytes.resize(got);
     }
+    ::close(fd);
+    if (rc != CDM_OK) return rc;
     return parse(std::move(bytes), path, out, err);
 }
 
 Writer::~Writer() {
-    if (f_) std::fclose(f_);
+    if (fd_ >= 0) ::close(fd_);
+}
+
+int Writer::write_all(const uint8_t *p, size_t n, std::string &err) {
+    if (failed_) {
+        err = fail_text_;
+        return CDM_ERR_IO;
+    }
+    size_t done = 0;
+    while (done < n) {
+        const ssize_t w = ::write(fd_, p + done, n - done);
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) {
+            const int e = w < 0 ? errno : ENOSPC;
+            // Keep the file a valid recording: drop the partial record.
+            const bool cut = ::ftruncate(fd_, off_t(bytes_)) == 0 && ::lseek(fd_, off_t(bytes_), SEEK_SET) >= 0;
+            failed_ = true;
+            fail_text_ = path_ + ": write error after " + std::to_string(records_) + " records (" +
+                         std::to_string(bytes_) + " bytes kept" + (cut ? "" : ", last record may be partial") +
+                         "): " + std::strerror(e);
+            err = fail_text_;
+            return CDM_ERR_IO;
+        }
+        done += size_t(w);
+    }
+    bytes_ += n;
+    return CDM_OK;
 }
 
 int Writer::open(const std::string &path, const uint8_t *info, size_t info_len, std::string &err) {
-    if (info_len == 0 || info_len > kMaxReport) {
-        err = "device-info report of " + std::to_string(info_len) + " bytes";
+    if (fd_ >= 0) {
+        err = path_ + ": writer already open";
         return CDM_ERR_INVALID_ARG;
     }
-    f_ = std::fopen(path.c_str(), "wb");
-    if (!f_) {
+    if (!info || info_len == 0 || info_len > kMaxReport) {
+        err = "device-info report of " + std::to_string(info_len) + " bytes (1..1024)";
+        return CDM_ERR_INVALID_ARG;
+    }
+    fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NOCTTY, 0644);
+    if (fd_ < 0) {
         err = path + ": cannot create: " + std::strerror(errno);
         return CDM_ERR_IO;
     }
     path_ = path;
-    uint8_t h[kHeaderSize];
-    std::memcpy(h, kMagic, sizeof kMagic);
-    proto::put_u16(h + 8, kVersion);
-    proto::put_u16(h + 10, uint16_t(info_len));
-    if (std::fwrite(h, 1, sizeof h, f_) != sizeof h || std::fwrite(info, 1, info_len, f_) != info_len) {
-        err = path + ": write error: " + std::strerror(errno);
-        return CDM_ERR_IO;
-    }
-    return CDM_OK;
+    failed_ = false;
+    records_ = bytes_ = 0;
+    std::vector<uint8_t> h(kHeaderSize + info_len);
+    std::memcpy(h.data(), kMagic, sizeof kMagic);
+    proto::put_u16(h.data() + 8, kVersion);
+    proto::put_u16(h.data() + 10, uint16_t(info_len));
+    std::memcpy(h.data() + kHeaderSize, info, info_len);
+    return write_all(h.data(), h.size(), err);
 }
 
 int Writer::write(uint64_t host_ns, const uint8_t *report, size_t len, std::string &err) {
-    if (!f_ || len == 0 || len > kMaxReport) {
-        err = "record of " + std::to_string(len) + " bytes";
+    if (fd_ < 0 || !report || len == 0 || len > kMaxReport) {
+        err = fd_ < 0 ? std::string("recording not open") : "record of " + std::to_string(len) + " bytes (1..1024)";
         return CDM_ERR_INVALID_ARG;
     }
-    uint8_t h[kRecordHeaderSize];
-    proto::put_u64(h, host_ns);
-    proto::put_u16(h + 8, uint16_t(len));
-    if (std::fwrite(h, 1, sizeof h, f_) != sizeof h || std::fwrite(report, 1, len, f_) != len) {
-        err = path_ + ": write error: " + std::strerror(errno);
-        return CDM_ERR_IO;
-    }
-    return CDM_OK;
+    uint8_t rec[kRecordHeaderSize + kMaxReport];
+    proto::put_u64(rec, host_ns);
+    proto::put_u16(rec + 8, uint16_t(len));
+    std::memcpy(rec + kRecordHeaderSize, report, len);
+    const int rc = write_all(rec, kRecordHeaderSize + len, err);
+    if (rc == CDM_OK) ++records_;
+    return rc;
 }
 
 int Writer::close(std::string &err) {
-    if (!f_) return CDM_OK;
-    const bool ok = std::fflush(f_) == 0 && std::ferror(f_) == 0;
-    const bool closed = std::fclose(f_) == 0;
-    f_ = nullptr;
-    if (!ok || !closed) {
-        err = path_ + ": write error: " + std::strerror(errno);
-        return CDM_ERR_IO;
+    if (fd_ < 0) return CDM_OK;
+    int rc = failed_ ? CDM_ERR_IO : CDM_OK;
+    if (failed_) err = fail_text_;
+    if (::fsync(fd_) != 0 && rc == CDM_OK) {
+        err = path_ + ": fsync: " + std::strerror(errno);
+        rc = CDM_ERR_IO;
     }
-    return CDM_OK;
+    if (::close(fd_) != 0 && rc == CDM_OK) {
+        err = path_ + ": close: " + std::strerror(errno);
+        rc = CDM_ERR_IO;
+    }
+    fd_ = -1;
+    return rc;
 }
 
 } // namespace cdm::replay

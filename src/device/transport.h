@@ -64,6 +64,13 @@ public:
     // Called from the reader thread after kReadDisconnected/kReadError, every
     // ~250 ms: one attempt to reopen the same device (same serial number).
     virtual int reopen(std::string &err);
+
+    // OPTIONAL (default: none). Something the caller should know although
+    // the open succeeded (a recording cut short: its tail was dropped).
+    // cdm_open puts it into cdm_device_error; truncated_bytes goes into
+    // cdm_stats.replay_truncated_bytes.
+    virtual std::string open_warning() const { return {}; }
+    virtual uint64_t truncated_bytes() const { return 0; }
 };
 
 using TransportPtr = std::unique_ptr<Transport>;

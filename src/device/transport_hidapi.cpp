@@ -13,6 +13,7 @@
 
 #include "cdm/cdm.h"
 #include "device/device.h"
+#include "device/hidraw_check.h"
 #include "device/protocol.h"
 #include "device/transport.h"
 #include "device/transport_hidapi.h"
@@ -58,6 +59,22 @@ std::string find_by_serial(const std::string &serial) {
     }
     hid_free_enumeration(list);
     return path;
+}
+
+// hidapi is handed only a node that passed cdm_hidraw_node_check.
+int checked_open(const std::string &path, hid_device *&d, std::string &why) {
+    char buf[512];
+    const int rc = cdm_hidraw_node_check(path.c_str(), buf, sizeof buf);
+    if (rc != CDM_OK) {
+        why = buf;
+        return rc;
+    }
+    d = hid_open_path(path.c_str());
+    if (!d) {
+        why = "cannot open " + path + ": " + hid_err(nullptr);
+        return CDM_ERR_NO_DEVICE;
+    }
+    return CDM_OK;
 }
 
 class HidTransport final : public Transport {
@@ -116,11 +133,9 @@ public:
             err = "no master with serial " + serial_ + " connected";
             return CDM_ERR_NO_DEVICE;
         }
-        hid_device *d = hid_open_path(path.c_str());
-        if (!d) {
-            err = "hid_open_path(" + path + "): " + hid_err(nullptr);
-            return CDM_ERR_NO_DEVICE;
-        }
+        hid_device *d = nullptr;
+        const int rc = checked_open(path, d, err);
+        if (rc != CDM_OK) return rc;
         std::lock_guard<std::mutex> lock(mu_);
         if (dev_) hid_close(dev_);
         dev_ = d;
@@ -143,11 +158,12 @@ private:
 };
 
 int open_path(const std::string &path, const std::string &uri_text, TransportPtr &out, std::string &err) {
-    hid_device *d = hid_open_path(path.c_str());
-    if (!d) {
-        err = "URI \"" + uri_text + "\": cannot open " + path + ": " + hid_err(nullptr) +
-              " (is it a master, and may this user open it? see udev/70-cdm.rules)";
-        return CDM_ERR_NO_DEVICE;
+    std::string why;
+    hid_device *d = nullptr;
+    const int rc = checked_open(path, d, why);
+    if (rc != CDM_OK) {
+        err = "URI \"" + uri_text + "\": " + why + " (is it a master, and may this user open it? see udev/70-cdm.rules)";
+        return rc;
     }
     wchar_t wserial[64] = {0};
     std::string serial;
@@ -197,7 +213,9 @@ void hid_list_masters(std::vector<cdm_device_info> &out, std::string &err) {
         const std::string uri = std::string("hid:") + d->path;
         cdm_device_info info{};
         bool full = false;
-        if (hid_device *h = hid_open_path(d->path)) {
+        hid_device *h = nullptr;
+        std::string why;
+        if (checked_open(d->path, h, why) == CDM_OK) {
             uint8_t buf[proto::kDeviceInfoReportSize] = {proto::kDeviceInfoReportId};
             const int n = hid_get_feature_report(h, buf, sizeof buf);
             proto::DeviceInfoReport r;

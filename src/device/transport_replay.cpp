@@ -16,6 +16,10 @@ namespace cdm {
 
 namespace {
 
+// Slower than 1/1000 of real time no recording is worth watching, and the
+// bound keeps every pacing computation far from overflow.
+constexpr double kMinSpeed = 1e-3, kMaxSpeed = 1e6;
+
 class ReplayTransport final : public Transport {
 public:
     ReplayTransport(const std::string &uri, replay::File file, double speed)
@@ -27,14 +31,16 @@ public:
         if (speed_ > 0) {
             const uint64_t now = monotonic_ns();
             if (next_ == 0) start_ns_ = now;
-            const double since_first = double(r.host_ns - file_.records[0].host_ns) / speed_;
-            const uint64_t due = start_ns_ + uint64_t(since_first);
-            if (now < due) {
-                if (double(due - now) > timeout_ms * 1e6) {
+            // In double throughout: a slow speed times a long recording may
+            // exceed any integer; only a wait shorter than timeout_ms is
+            // ever converted back.
+            const double due_in_ns = double(r.host_ns - file_.records[0].host_ns) / speed_ - double(now - start_ns_);
+            if (due_in_ns > 0) {
+                if (due_in_ns > timeout_ms * 1e6) {
                     std::this_thread::sleep_for(std::chrono::milliseconds(timeout_ms));
                     return kReadTimeout;
                 }
-                std::this_thread::sleep_for(std::chrono::nanoseconds(due - now));
+                std::this_thread::sleep_for(std::chrono::nanoseconds(int64_t(due_in_ns)));
             }
         }
         if (r.length > cap) {
@@ -56,6 +62,8 @@ public:
         return int(n);
     }
 
+    std::string open_warning() const override { return file_.warning; }
+    uint64_t truncated_bytes() const override { return file_.truncated_bytes; }
     const char *name() const override { return "replay"; }
     std::string uri() const override { return uri_; }
 
@@ -77,7 +85,13 @@ int open_replay(const Uri &u, TransportPtr &out, std::string &err) {
     double speed = 1.0;
     for (const auto &kv : u.options) {
         if (kv.first == "speed") {
-            if (!option_double(u, kv.first, kv.second, 0.0, 1e6, speed, err)) return CDM_ERR_INVALID_ARG;
+            // 0 (as fast as read) or a factor in [kMinSpeed, kMaxSpeed].
+            if (!option_double(u, kv.first, kv.second, 0.0, kMaxSpeed, speed, err) ||
+                (speed != 0.0 && speed < kMinSpeed)) {
+                err = "URI \"" + u.text + "\": option speed=\"" + kv.second + "\" must be 0 (as fast as possible) or " +
+                      "a factor from 0.001 to 1000000";
+                return CDM_ERR_INVALID_ARG;
+            }
         } else {
             err = unknown_option(u, kv.first, "speed");
             return CDM_ERR_INVALID_ARG;

@@ -3,6 +3,8 @@
 // same serializer) on top of a physical model of the device, so everything
 // above the transport runs exactly as with the hardware.
 #include <chrono>
+#include <cstring>
+#include <deque>
 #include <fstream>
 #include <mutex>
 #include <sstream>
@@ -11,6 +13,7 @@
 
 #include "cdm/cdm.h"
 #include "device/device.h"
+#include "device/sim/faults.h"
 #include "device/sim/firmware.h"
 #include "device/sim/sim_truth.h"
 #include "device/sim/simulator.h"
@@ -36,13 +39,51 @@ class SimTransport final : public Transport {
 public:
     SimTransport(const std::string &uri, ModelPtr truth, const proto::DeviceInfoReport &info,
                  std::unique_ptr<sim::Motion> motion, const sim::SensorOptions &so, bool realtime,
-                 uint64_t stall_after)
+                 uint64_t stall_after, sim::FaultPlan faults)
         : uri_(uri), fw_(info), sim_(std::move(truth), fw_, std::move(motion), so), rate_hz_(so.rate_hz),
-          realtime_(realtime), stall_after_(stall_after), history_(kSimTruthHistory) {}
+          realtime_(realtime), stall_after_(stall_after), faults_(std::move(faults), so.rate_hz),
+          history_(kSimTruthHistory) {}
 
-    int read(uint8_t *buf, size_t cap, int timeout_ms, std::string &) override {
-        if (ended_) return kReadEnd;
+    int read(uint8_t *buf, size_t cap, int timeout_ms, std::string &err) override {
         if (cap < proto::kInputReportSize) return kReadError;
+        if (unplugged_) return kReadDisconnected;
+        if (!pending_.empty()) return deliver(buf);
+        if (ended_) return kReadEnd;
+        const int n = produce(buf, timeout_ms);
+        if (n <= 0 || !faults_.active()) return n;
+        const uint64_t k = produced_ - 1;
+        if (const uint64_t ms = faults_.disconnect_at(k)) {
+            // Unplugged: this report and those the device samples meanwhile
+            // never reach the host; reopen() succeeds after ms (same serial).
+            unplugged_ = true;
+            replug_ns_ = monotonic_ns() + ms * 1000000u;
+            err = "simulated unplug at report " + std::to_string(k) + " for " + std::to_string(ms) + " ms";
+            return kReadDisconnected;
+        }
+        faults_.process(k, buf, size_t(n), pending_);
+        return pending_.empty() ? int(kReadTimeout) : deliver(buf);
+    }
+
+    int reopen(std::string &err) override {
+        if (!unplugged_) return CDM_OK;
+        if (monotonic_ns() < replug_ns_) {
+            err = "simulated master still unplugged";
+            return CDM_ERR_NO_DEVICE;
+        }
+        unplugged_ = false;
+        return CDM_OK;
+    }
+
+private:
+    int deliver(uint8_t *buf) {
+        const std::vector<uint8_t> r = std::move(pending_.front());
+        pending_.pop_front();
+        std::memcpy(buf, r.data(), r.size());
+        return int(r.size());
+    }
+
+    // One report of the simulated firmware, paced when realtime.
+    int produce(uint8_t *buf, int timeout_ms) {
         if (stall_after_ && produced_ >= stall_after_) {
             // A hung device: connected, silent.
             std::this_thread::sleep_for(std::chrono::milliseconds(timeout_ms));
@@ -80,6 +121,7 @@ public:
         return int(proto::kInputReportSize);
     }
 
+public:
     int get_feature(uint8_t *buf, size_t len, std::string &err) override {
         const int n = fw_.get_feature(buf, len);
         if (n < 0) {
@@ -121,6 +163,10 @@ private:
     double rate_hz_;
     bool realtime_;
     uint64_t stall_after_;
+    sim::FaultInjector faults_;
+    std::deque<std::vector<uint8_t>> pending_; // reports due to the host after fault injection
+    bool unplugged_ = false;
+    uint64_t replug_ns_ = 0;
     bool started_ = false, ended_ = false;
     uint64_t start_ns_ = 0;
     std::atomic<uint64_t> produced_{0};
@@ -139,6 +185,7 @@ int open_sim(const Uri &u, TransportPtr &out, std::string &err) {
     std::string motion = "random", effects, device_path, truth_path, serial = "CDMSIM0001";
     bool realtime = true, have_effect_seed = false;
     uint64_t effect_seed = 0, stall_after = 0;
+    sim::FaultPlan faults;
     sim::JigMotionOptions jig;
     bool any_jig_option = false;
     for (const auto &kv : u.options) {
@@ -192,8 +239,12 @@ int open_sim(const Uri &u, TransportPtr &out, std::string &err) {
             jig.transit = int(n);
             any_jig_option = true;
         } else {
-            err = unknown_option(u, k, kSimOptions);
-            return CDM_ERR_INVALID_ARG;
+            bool known = false;
+            ok = sim::parse_fault_option(u, k, v, faults, known, err);
+            if (!known) {
+                err = unknown_option(u, k, (std::string(kSimOptions) + ", " + sim::kFaultOptions).c_str());
+                return CDM_ERR_INVALID_ARG;
+            }
         }
         if (!ok) return CDM_ERR_INVALID_ARG;
     }
@@ -291,7 +342,8 @@ int open_sim(const Uri &u, TransportPtr &out, std::string &err) {
         jig.seed = so.seed ^ 0x6A09E667F3BCC909ull;
         m = sim::make_jig_motion(truth, jig);
     }
-    out = std::make_unique<SimTransport>(u.text, truth, info, std::move(m), so, realtime, stall_after);
+    out = std::make_unique<SimTransport>(u.text, truth, info, std::move(m), so, realtime, stall_after,
+                                         std::move(faults));
     return CDM_OK;
 }
 

@@ -111,7 +111,7 @@ static class CdmTests
             Expect(cs == value, m.Groups[1].Value + ": header " + value + ", C# " + e.Name + "." + match + " = " + cs);
             found++;
         }
-        Expect(found == 16 + 5 + 3, "parsed " + found + " constants from the header, expected 24");
+        Expect(found == 16 + 6 + 3, "parsed " + found + " constants from the header, expected 25");
         Expect(Enum.GetValues(typeof(ErrorCode)).Length == 16, "ErrorCode has a member the header lacks");
         Expect(Device.LibraryVersion == "1.0.0" || Device.LibraryVersion.StartsWith("1."), "library version " + Device.LibraryVersion);
     }
@@ -137,6 +137,9 @@ static class CdmTests
                    Math.Abs(p.Orientation.Y) <= qtol && Math.Abs(p.Orientation.Z) <= qtol, "level grip, got " + p.Orientation);
             var q = dev.WaitPose(1000);
             Expect(q.Sequence != p.Sequence && q.HostTimeNs > p.HostTimeNs, "WaitPose returns a newer pose");
+            // No lost wake-up: a pose newer than p already exists, so this returns at once.
+            var a = dev.WaitPoseAfter(p.HostSequence, 0);
+            Expect(a.HostSequence > p.HostSequence, "WaitPoseAfter(" + p.HostSequence + ") gave " + a.HostSequence);
             var g = dev.GetPose();
             Expect(g.Sequence - q.Sequence < 1000, "GetPose sequence " + g.Sequence + " after " + q.Sequence);
             var info = dev.GetInfo();

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Checks udev/70-cdm.rules: udev syntax (key, operator, quoted value), and the
-content the project relies on: a hidraw rule and a usb rule for the VID/PID of
-src/device/protocol.h, each with TAG+="uaccess", no world-writable MODE, and a
-file number below 73 (systemd's seat rules). Runs `udevadm verify` as well when
+content the project relies on: a hidraw rule for the VID/PID of
+src/device/protocol.h with TAG+="uaccess", NO rule granting the raw USB node
+(libcdm opens only hidraw; issue 9), no world-writable MODE, and a file number
+below 73 (systemd's seat rules). Runs `udevadm verify` as well when
 this udevadm has it (systemd >= 253).
 
 usage: check_udev_rules.py RULES_FILE [PROTOCOL_H]
@@ -80,7 +81,7 @@ def check(path, vid, pid):
         rules = parse(path)
     except ValueError as e:
         return [str(e)]
-    found = {"hidraw": False, "usb": False}
+    found = {"hidraw": False}
     for n, tokens in rules:
         match = {(k, a): v for k, a, op, v in tokens if op == "=="}
         for k, a, op, v in tokens:
@@ -89,6 +90,10 @@ def check(path, vid, pid):
             if k == "TAG" and op == "=" and v == "uaccess":
                 problems.append("%s:%d: TAG=\"uaccess\" replaces the other tags; use TAG+=" % (path, n))
         subsystem = match.get(("SUBSYSTEM", None))
+        grants = any(k in ("TAG", "MODE", "GROUP", "OWNER") and op != "==" for k, a, op, v in tokens)
+        if subsystem in ("usb", "usb_device") and grants:
+            problems.append("%s:%d: grants the raw USB node; libcdm needs only the hidraw node" % (path, n))
+            continue
         if subsystem not in found:
             continue
         key = "ATTRS" if subsystem == "hidraw" else "ATTR"  # hidraw nodes: the IDs sit on a parent

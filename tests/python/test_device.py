@@ -174,3 +174,44 @@ def test_enumerate_without_devices_is_a_list():
     devs = cdm.enumerate()
     assert isinstance(devs, list)
     assert all(isinstance(d, cdm.DeviceInfo) for d in devs)
+
+
+def test_wait_pose_after_returns_at_once_when_newer_exists():
+    # No lost wake-up: a pose published while the caller was busy is handed
+    # over at once by wait_pose(after=last.host_sequence).
+    with cdm.open("sim:?rate=20") as dev:  # a report every 50 ms
+        first = dev.wait_pose(2.0)
+        assert first.host_sequence >= 1
+        time.sleep(0.3)  # several poses published meanwhile
+        t0 = time.monotonic()
+        p = dev.wait_pose(2.0, after=first.host_sequence)
+        assert time.monotonic() - t0 < 0.03, "waited although a newer pose existed"
+        assert p.host_sequence > first.host_sequence
+        q = dev.wait_pose(2.0, after=p.host_sequence)
+        assert q.host_sequence > p.host_sequence
+        with pytest.raises(ValueError, match="after"):
+            dev.wait_pose(1.0, after=-1)
+        s = dev.stats()
+        assert s.sequence_jumps == 0 and s.out_of_order == 0 and s.replay_truncated_bytes == 0
+
+
+def test_wait_pose_without_limit_is_interrupted_by_ctrl_c():
+    # wait_pose(None) on a silent device waits in 100 ms slices, so SIGINT
+    # (Ctrl-C) raises KeyboardInterrupt promptly instead of hanging in C.
+    import signal
+    import threading
+
+    with cdm.open("sim:?stall_after=3") as dev:
+        last = 0
+        while last < 3:  # all the reports the stalled device will ever send
+            last = dev.wait_pose(2.0, after=last).host_sequence
+        timer = threading.Timer(0.3, lambda: signal.pthread_kill(threading.main_thread().ident, signal.SIGINT))
+        t0 = time.monotonic()
+        timer.start()
+        try:
+            with pytest.raises(KeyboardInterrupt):
+                dev.wait_pose(None, after=last)
+        finally:
+            timer.cancel()
+        waited = time.monotonic() - t0
+        assert 0.25 < waited < 0.3 + 0.1 + 0.2, waited  # interrupt + one slice + scheduling

@@ -132,6 +132,19 @@ namespace Cdm
             return Pose.From(ref n, rc);
         }
 
+        /// <summary>Waits for a pose whose HostSequence is greater than afterHostSequence;
+        /// returns at once if one already exists (no lost wake-up between calls).
+        /// timeoutMs &lt; 0 waits without limit. Throws CdmException (Timeout) when none
+        /// came in time.</summary>
+        public Pose WaitPoseAfter(ulong afterHostSequence, int timeoutMs)
+        {
+            var n = new NativePose();
+            n.struct_size = PoseSize;
+            int rc = NativeMethods.cdm_wait_pose_after(H, afterHostSequence, timeoutMs, ref n);
+            if (rc < 0 && !Filled(rc)) throw Check.Error(rc, "cdm_wait_pose_after", _h);
+            return Pose.From(ref n, rc);
+        }
+
         public Raw GetRaw()
         {
             var n = new NativeRaw();
@@ -157,6 +170,8 @@ namespace Cdm
             {
                 Reports = n.reports, Malformed = n.malformed, Dropped = n.dropped,
                 OutOfWorkspace = n.out_of_workspace, Reconnects = n.reconnects,
+                SequenceJumps = n.sequence_jumps, OutOfOrder = n.out_of_order,
+                ReplayTruncatedBytes = n.replay_truncated_bytes,
             };
         }
 

@@ -33,6 +33,8 @@ namespace Cdm
         Compensated = 1u << 2,
         OutOfWorkspace = 1u << 3,
         EndOfStream = 1u << 4,
+        /// <summary>since 1.1: no position was ever computed; Position is meaningless.</summary>
+        NoPosition = 1u << 5,
     }
 
     /// <summary>cdm_button bits.</summary>

@@ -41,6 +41,7 @@ namespace Cdm
         public ulong host_time_ns;
         public uint dropped;
         public uint reserved0;
+        public ulong host_sequence; // since 1.1
     }
 
     [CStruct("cdm_raw"), StructLayout(LayoutKind.Sequential)]
@@ -89,6 +90,9 @@ namespace Cdm
         public ulong dropped;
         public ulong out_of_workspace;
         public ulong reconnects;
+        public ulong sequence_jumps; // since 1.1
+        public ulong out_of_order; // since 1.1
+        public ulong replay_truncated_bytes; // since 1.1
     }
 
     [CStruct("cdm_sample"), StructLayout(LayoutKind.Sequential)]
@@ -152,6 +156,7 @@ namespace Cdm
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern void cdm_close(IntPtr dev);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_get_pose(DeviceHandle dev, ref NativePose pose);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_wait_pose(DeviceHandle dev, int timeoutMs, ref NativePose pose);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_wait_pose_after(DeviceHandle dev, ulong afterHostSequence, int timeoutMs, ref NativePose pose);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_get_raw(DeviceHandle dev, ref NativeRaw raw);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_get_info(DeviceHandle dev, ref NativeDeviceInfo info);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_set_stale_timeout(DeviceHandle dev, uint timeoutUs);

@@ -43,6 +43,9 @@ namespace Cdm
         public ulong DeviceTimeUs;
         /// <summary>CLOCK_MONOTONIC (ns) when the report was received.</summary>
         public ulong HostTimeNs;
+        /// <summary>since 1.1: poses this handle has published so far (host side,
+        /// monotonic); pass it to Device.WaitPoseAfter.</summary>
+        public ulong HostSequence;
         public ErrorCode Status;
 
         public bool IsStale { get { return (Flags & PoseFlags.Stale) != 0; } }
@@ -64,6 +67,7 @@ namespace Cdm
             r.Flags = (PoseFlags)p.flags;
             r.DeviceTimeUs = p.device_time_us;
             r.HostTimeNs = p.host_time_ns;
+            r.HostSequence = p.host_sequence;
             r.Status = (ErrorCode)status;
             return r;
         }
@@ -144,5 +148,8 @@ namespace Cdm
     public struct Stats
     {
         public ulong Reports, Malformed, Dropped, OutOfWorkspace, Reconnects;
+        /// <summary>since 1.1: sequence-counter resets or corruptions (not in Dropped);
+        /// duplicated or late reports discarded; bytes of a truncated recording's tail.</summary>
+        public ulong SequenceJumps, OutOfOrder, ReplayTruncatedBytes;
     }
 }

@@ -37,6 +37,7 @@ class cdm_pose(_Sized):
         ("host_time_ns", ctypes.c_uint64),
         ("dropped", ctypes.c_uint32),
         ("reserved0", ctypes.c_uint32),
+        ("host_sequence", ctypes.c_uint64),  # since 1.1
     ]
 
 
@@ -87,6 +88,9 @@ class cdm_stats(_Sized):
         ("dropped", ctypes.c_uint64),
         ("out_of_workspace", ctypes.c_uint64),
         ("reconnects", ctypes.c_uint64),
+        ("sequence_jumps", ctypes.c_uint64),  # since 1.1
+        ("out_of_order", ctypes.c_uint64),  # since 1.1
+        ("replay_truncated_bytes", ctypes.c_uint64),  # since 1.1
     ]
 
 
@@ -155,6 +159,7 @@ PROTOTYPES = {
     "cdm_close": (None, [_handle]),
     "cdm_get_pose": (_int, [_handle, ctypes.POINTER(cdm_pose)]),
     "cdm_wait_pose": (_int, [_handle, _int, ctypes.POINTER(cdm_pose)]),
+    "cdm_wait_pose_after": (_int, [_handle, ctypes.c_uint64, _int, ctypes.POINTER(cdm_pose)]),
     "cdm_get_raw": (_int, [_handle, ctypes.POINTER(cdm_raw)]),
     "cdm_get_info": (_int, [_handle, ctypes.POINTER(cdm_device_info)]),
     "cdm_set_stale_timeout": (_int, [_handle, ctypes.c_uint32]),

@@ -43,6 +43,7 @@ class PoseFlag(enum.IntFlag):
     CDM_POSE_COMPENSATED = 1 << 2
     CDM_POSE_OUT_OF_WORKSPACE = 1 << 3
     CDM_POSE_END_OF_STREAM = 1 << 4
+    CDM_POSE_NO_POSITION = 1 << 5  # since 1.1
 
 
 class Button(enum.IntFlag):

@@ -1,6 +1,7 @@
 """Devices: open, poses, raw values, information, counters, stored calibration."""
 import ctypes
 import math
+import time
 from dataclasses import dataclass
 from typing import Callable, Optional, Tuple
 
@@ -31,11 +32,12 @@ class Pose:
     device_time_us: int
     host_time_ns: int
     status: int = 0
+    host_sequence: int = 0  # since 1.1: poses published by this handle so far; pass to wait_pose(after=)
 
     @classmethod
     def _from_c(cls, p, status=0):
         return cls(tuple(p.position), tuple(p.orientation), p.grip, p.buttons, p.sequence, p.dropped,
-                   p.flags, p.device_time_us, p.host_time_ns, int(status))
+                   p.flags, p.device_time_us, p.host_time_ns, int(status), int(p.host_sequence))
 
     @property
     def is_stale(self):
@@ -132,6 +134,9 @@ class Stats:
     dropped: int
     out_of_workspace: int
     reconnects: int
+    sequence_jumps: int = 0  # since 1.1: counter resets or corruptions (not in dropped)
+    out_of_order: int = 0  # since 1.1: duplicated or late reports, discarded
+    replay_truncated_bytes: int = 0  # since 1.1: incomplete tail a replay dropped
 
 
 @dataclass(frozen=True)
@@ -206,21 +211,38 @@ class Device(_native.Closing):
             raise self._fail(rc, "cdm_get_pose")
         return Pose._from_c(p, rc)
 
-    def wait_pose(self, timeout=1.0):
-        """Blocks until a pose newer than the current one arrives; timeout in
-        seconds (None: no limit). Raises CdmError(CDM_ERR_TIMEOUT) when none
-        came in time; otherwise returns like get_pose."""
-        h = self._handle("cdm_wait_pose")
-        if timeout is None:
-            ms = -1
-        else:
-            if timeout < 0 or math.isnan(timeout):
-                raise ValueError("wait_pose: timeout must be >= 0 seconds or None, got %r" % (timeout,))
-            ms = min(int(math.ceil(timeout * 1000.0)), 2**31 - 1)
+    # The C call waits in slices this long, so that Ctrl-C (handled by Python
+    # between two foreign calls) interrupts a long wait within 0.1 s.
+    _WAIT_SLICE_MS = 100
+
+    def wait_pose(self, timeout=1.0, after=None):
+        """Blocks until a pose newer than `after` (a Pose.host_sequence; None:
+        the newest pose at the time of the call) exists; returns at once if one
+        already does, so a loop passing the last pose's host_sequence never
+        misses one. timeout in seconds (None: no limit). Raises
+        CdmError(CDM_ERR_TIMEOUT) when none came in time; otherwise returns
+        like get_pose. Ctrl-C interrupts it."""
+        h = self._handle("cdm_wait_pose_after")
+        if timeout is not None and (timeout < 0 or math.isnan(timeout)):
+            raise ValueError("wait_pose: timeout must be >= 0 seconds or None, got %r" % (timeout,))
+        if after is not None and (isinstance(after, bool) or not isinstance(after, int) or after < 0):
+            raise ValueError("wait_pose: after must be a Pose.host_sequence (int >= 0), got %r" % (after,))
+        L = _native.lib()
         p = _native.cdm_pose()
-        rc = _native.lib().cdm_wait_pose(h, ms, ctypes.byref(p))
+        if after is None:
+            L.cdm_get_pose(h, ctypes.byref(p))
+            after = int(p.host_sequence)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            left_ms = self._WAIT_SLICE_MS
+            if deadline is not None:
+                left_ms = max(0, min(left_ms, int(math.ceil((deadline - time.monotonic()) * 1000.0))))
+            rc = L.cdm_wait_pose_after(h, after, left_ms, ctypes.byref(p))
+            waiting = rc in (Error.CDM_ERR_TIMEOUT, Error.CDM_ERR_DISCONNECTED)
+            if not waiting or (deadline is not None and time.monotonic() >= deadline):
+                break
         if rc < 0 and rc not in _FILLED:
-            raise self._fail(rc, "cdm_wait_pose")
+            raise self._fail(rc, "cdm_wait_pose_after")
         return Pose._from_c(p, rc)
 
     def get_raw(self):
@@ -247,7 +269,8 @@ class Device(_native.Closing):
         rc = _native.lib().cdm_get_stats(h, ctypes.byref(s))
         if rc < 0:
             raise self._fail(rc, "cdm_get_stats")
-        return Stats(s.reports, s.malformed, s.dropped, s.out_of_workspace, s.reconnects)
+        return Stats(s.reports, s.malformed, s.dropped, s.out_of_workspace, s.reconnects, s.sequence_jumps,
+                     s.out_of_order, s.replay_truncated_bytes)
 
     def error_detail(self):
         """The handle's last asynchronous problem (cdm_device_error), "" if none."""

@@ -108,6 +108,10 @@ void __wrap_hid_free_enumeration(struct hid_device_info *d) {
     }
 }
 
+// The mock's /dev/hidraw7 does not exist: the node check (tested on real
+// paths in test_hid_paths.cpp) is bypassed and hid_open_path decides.
+int __wrap_cdm_hidraw_node_check(const char *, char *, size_t) { return 0; }
+
 hid_device *__wrap_hid_open_path(const char *path) {
     std::lock_guard<std::mutex> lock(g_mock->mu);
     if (!g_mock->plugged || g_mock->path != path) return nullptr;
@@ -347,6 +351,173 @@ void test_out_of_workspace(void **) {
     close_dev(dev);
 }
 
+// Waits until the reader has taken `n` reports in all (published, rejected
+// or discarded as out of order).
+void settle(cdm_device *dev, uint64_t n) {
+    assert_true(cdm_test::wait_until(
+        [&] {
+            const cdm_stats s = stats(dev);
+            return s.reports + s.malformed + s.out_of_order >= n;
+        },
+        2000));
+}
+
+// Before the first solvable report there is no position to hold: not
+// (0,0,0) passed off as one.
+void test_oow_before_first_pose_has_no_position(void **) {
+    cdm_device *dev = open_ok("hid:/dev/hidraw7");
+    const double at[3] = {40, 5, 5};
+    auto r = report_at(1, at);
+    for (int i = 0; i < 4; ++i) put_u16(r.data() + 16 + 2 * i, 100);
+    push(r);
+    settle(dev, 1);
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    assert_int_equal(cdm_get_pose(dev, &p), CDM_ERR_NO_DATA);
+    assert_true(p.flags & CDM_POSE_OUT_OF_WORKSPACE);
+    assert_true(p.flags & CDM_POSE_NO_POSITION);
+    assert_int_equal(p.host_sequence, 1);
+    const double qn = p.orientation[0] * p.orientation[0] + p.orientation[1] * p.orientation[1] +
+                      p.orientation[2] * p.orientation[2] + p.orientation[3] * p.orientation[3];
+    assert_true(std::fabs(qn - 1) < 1e-12); // a unit quaternion, from the report
+    push(report_at(2, at));
+    settle(dev, 2);
+    assert_int_equal(cdm_get_pose(dev, &p), CDM_OK);
+    assert_false(p.flags & (CDM_POSE_NO_POSITION | CDM_POSE_OUT_OF_WORKSPACE));
+    // Out of the workspace again: now the last good position is held.
+    r = report_at(3, at);
+    for (int i = 0; i < 4; ++i) put_u16(r.data() + 16 + 2 * i, 100);
+    push(r);
+    settle(dev, 3);
+    const int rc = cdm_get_pose(dev, &p);
+    assert_true(rc == CDM_OK || rc == CDM_ERR_STALE);
+    assert_true(p.flags & CDM_POSE_OUT_OF_WORKSPACE);
+    assert_false(p.flags & CDM_POSE_NO_POSITION);
+    close_dev(dev);
+}
+
+// Before any report, the pose's orientation is the identity, not zero.
+void test_no_report_orientation_is_identity(void **) {
+    cdm_device *dev = open_ok("hid:/dev/hidraw7");
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    assert_int_equal(cdm_get_pose(dev, &p), CDM_ERR_NO_DATA);
+    assert_true(p.orientation[0] == 1.0 && p.orientation[1] == 0 && p.orientation[2] == 0 && p.orientation[3] == 0);
+    close_dev(dev);
+}
+
+// One flipped bit of the sequence number added 4e9 to dropped; a counter
+// reset 3e8. Both are now sequence jumps, and dropped stays honest.
+void test_sequence_flipped_bit_not_counted_as_dropped(void **) {
+    cdm_device *dev = open_ok("hid:/dev/hidraw7");
+    const double at[3] = {40, 5, 5};
+    const uint32_t seqs[] = {1000, 1001, 1002 | (1u << 30), 1003, 1004};
+    uint64_t n = 0;
+    for (uint32_t q : seqs) {
+        push(report_at(q, at));
+        settle(dev, ++n);
+    }
+    cdm_stats s = stats(dev);
+    assert_int_equal(s.dropped, 0);
+    assert_int_equal(s.sequence_jumps, 2); // there and back
+    // The device restarts its counter (no unplug): one jump, nothing dropped.
+    push(report_at(1, at));
+    settle(dev, ++n);
+    push(report_at(2, at));
+    settle(dev, ++n);
+    s = stats(dev);
+    assert_int_equal(s.dropped, 0);
+    assert_int_equal(s.sequence_jumps, 3);
+    // A real gap of 3 reports is still counted as 3 dropped (within the bound
+    // of 2 x rate x elapsed + 64).
+    push(report_at(6, at));
+    settle(dev, ++n);
+    assert_int_equal(stats(dev).dropped, 3);
+    assert_int_equal(stats(dev).sequence_jumps, 3);
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    cdm_get_pose(dev, &p);
+    assert_int_equal(p.dropped, 3);
+    close_dev(dev);
+}
+
+// A duplicated report and a late one are discarded (an older sample must
+// not replace a newer one) and counted in out_of_order.
+void test_sequence_duplicate_and_reordered_discarded(void **) {
+    cdm_device *dev = open_ok("hid:/dev/hidraw7");
+    const double at[3] = {40, 5, 5};
+    const uint32_t seqs[] = {1, 2, 2, 4, 3, 5};
+    uint64_t n = 0;
+    for (uint32_t q : seqs) {
+        push(report_at(q, at));
+        settle(dev, ++n);
+    }
+    const cdm_stats s = stats(dev);
+    assert_int_equal(s.out_of_order, 2);
+    assert_int_equal(s.reports, 4);
+    assert_int_equal(s.dropped, 1); // 3 was missing when 4 came; it came late
+    assert_int_equal(s.sequence_jumps, 0);
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    cdm_get_pose(dev, &p);
+    assert_int_equal(p.sequence, 5);
+    assert_int_equal(p.host_sequence, 4);
+    close_dev(dev);
+}
+
+// cdm_wait_pose_after returns at once when a newer pose already exists, so
+// a consumer that was busy between two calls loses no wake-up.
+void test_wait_pose_after_no_lost_wakeup(void **) {
+    cdm_device *dev = open_ok("hid:/dev/hidraw7");
+    const double at[3] = {40, 5, 5};
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    assert_int_equal(cdm_wait_pose_after(dev, 0, 0, &p), CDM_ERR_TIMEOUT);
+    push(report_at(1, at));
+    assert_int_equal(cdm_wait_pose_after(dev, 0, 2000, &p), CDM_OK);
+    assert_int_equal(p.host_sequence, 1);
+    // Published while nobody waited: the next call must not sleep.
+    push(report_at(2, at));
+    settle(dev, 2);
+    const auto t0 = std::chrono::steady_clock::now();
+    assert_int_equal(cdm_wait_pose_after(dev, 1, 5000, &p), CDM_OK);
+    assert_true(std::chrono::steady_clock::now() - t0 < std::chrono::milliseconds(500));
+    assert_int_equal(p.host_sequence, 2);
+    assert_int_equal(cdm_wait_pose_after(dev, 2, 50, &p), CDM_ERR_TIMEOUT);
+    assert_int_equal(p.host_sequence, 2);
+    // A 1.0-sized struct cannot see host_sequence: refused.
+    p.struct_size = 104;
+    assert_int_equal(cdm_wait_pose_after(dev, 2, 0, &p), CDM_ERR_INVALID_ARG);
+    close_dev(dev);
+}
+
+// A device info with a pot offset of 3e38 gave poses of x = 3e38 mm.
+void test_device_info_insane_values_refused(void **) {
+    struct Case {
+        const char *field;
+        void (*spoil)(DeviceInfoReport &);
+    } cases[] = {
+        {"pot_offset_mm[0]", [](DeviceInfoReport &r) { r.pot_offset_mm[0] = 3e38f; }},
+        {"pot_scale_mm[1]", [](DeviceInfoReport &r) { r.pot_scale_mm[1] = 0; }},
+        {"pot_scale_mm[2]", [](DeviceInfoReport &r) { r.pot_scale_mm[2] = -0.01f; }},
+        {"pot_scale_mm[3]", [](DeviceInfoReport &r) { r.pot_scale_mm[3] = std::nanf(""); }},
+        {"a_mm", [](DeviceInfoReport &r) { r.a_mm = 1e30f; }},
+        {"m_mm", [](DeviceInfoReport &r) { r.m_mm = 0.001f; }},
+        {"report_rate_hz", [](DeviceInfoReport &r) { r.report_rate_hz = 1e9f; }},
+    };
+    for (const Case &c : cases) {
+        DeviceInfoReport info = mock_info();
+        c.spoil(info);
+        g_mock->fw = std::make_unique<cdm::sim::Firmware>(info);
+        cdm_device *dev = nullptr;
+        assert_int_equal(cdm_open("hid:/dev/hidraw7", &dev), CDM_ERR_PROTOCOL);
+        assert_null(dev);
+        if (!std::strstr(cdm_thread_error(), c.field))
+            fail_msg("\"%s\" does not name %s", cdm_thread_error(), c.field);
+        assert_non_null(std::strstr(cdm_thread_error(), "outside"));
+    }
+}
+
 void test_feature_reports(void **) {
     cdm_device *dev = open_ok("serial:MOCK0001");
     const char blob[] = "{\"format\":\"cdm-calibration\",\"version\":1} and some more bytes to span two chunks "
@@ -466,6 +637,12 @@ int main(void) {
         cmocka_unit_test_setup_teardown(test_malformed_counted, setup, teardown),
         cmocka_unit_test_setup_teardown(test_out_of_workspace, setup, teardown),
         cmocka_unit_test_setup_teardown(test_feature_reports, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_oow_before_first_pose_has_no_position, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_no_report_orientation_is_identity, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_sequence_flipped_bit_not_counted_as_dropped, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_sequence_duplicate_and_reordered_discarded, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_wait_pose_after_no_lost_wakeup, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_device_info_insane_values_refused, setup, teardown),
         cmocka_unit_test_setup_teardown(test_enumerate, setup, teardown),
         cmocka_unit_test_setup_teardown(test_unplug_replug, setup, teardown),
     };

@@ -1,6 +1,11 @@
 // Replay: a sim session recorded through the sample callback (as `cdm
 // record` does) plays back to the very same poses; pacing; corrupt files.
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
+
+#include <csignal>
 
 #include <chrono>
 #include <cstdio>
@@ -159,20 +164,35 @@ void test_corrupt_files(void **) {
         std::fwrite(b.data(), 1, b.size(), f);
         std::fclose(f);
     };
-    // Cut anywhere but on a record boundary: refused, with the byte offset.
+    // Cut inside the header or device info: refused, with the byte offset.
+    // Cut anywhere after (a killed recorder): every complete record plays,
+    // the tail is dropped with a warning and counted in the stats.
     for (size_t cut = 1; cut < bytes.size(); ++cut) {
-        const bool boundary = cut >= 140 && (cut - 140) % 74 == 0;
         write(std::vector<uint8_t>(bytes.begin(), bytes.begin() + cut));
         cdm_device *dev = nullptr;
-        const std::string uri = "replay:" + bad;
+        const std::string uri = "replay:" + bad + "?speed=0";
         const int rc = cdm_open(uri.c_str(), &dev);
-        if (boundary) {
-            assert_int_equal(rc, CDM_OK);
-            cdm_close(dev);
-        } else {
+        if (cut < 140) {
             if (rc != CDM_ERR_PARSE) fail_msg("cut at %zu: %d", cut, rc);
             assert_non_null(std::strstr(cdm_thread_error(), "byte"));
+            continue;
         }
+        if (rc != CDM_OK) fail_msg("cut at %zu: %d (%s)", cut, rc, cdm_thread_error());
+        const size_t tail = (cut - 140) % 74, complete = (cut - 140) / 74;
+        cdm_stats st{};
+        st.struct_size = sizeof st;
+        assert_int_equal(cdm_get_stats(dev, &st), CDM_OK);
+        assert_int_equal(st.replay_truncated_bytes, tail);
+        char text[512];
+        cdm_device_error(dev, text, sizeof text);
+        if (tail) assert_non_null(std::strstr(text, "trailing bytes dropped"));
+        cdm_pose p{};
+        p.struct_size = sizeof p;
+        assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_ERR_END_OF_STREAM; }, 5000));
+        assert_int_equal(p.host_sequence, complete);
+        // An ended replay never hands out the zero quaternion.
+        assert_true(p.orientation[0] != 0 || p.orientation[1] != 0 || p.orientation[2] != 0 || p.orientation[3] != 0);
+        cdm_close(dev);
     }
     auto b = bytes;
     b[0] = 'X';
@@ -200,6 +220,158 @@ void test_corrupt_files(void **) {
     std::remove(bad.c_str());
 }
 
+// Records of the format's maximum size (1024 bytes) overflowed a 512-byte
+// read buffer into a permanent DISCONNECTED.
+void test_replay_record_of_1024_bytes_plays(void **) {
+    const std::string good = tmp_path("small.cdmrec"), big = tmp_path("big.cdmrec");
+    record("sim:?realtime=0&motion=still", good, 1);
+    cdm::replay::File f;
+    std::string err;
+    assert_int_equal(cdm::replay::load(good, f, err), CDM_OK);
+    std::vector<uint8_t> report(cdm::replay::kMaxReport, 0); // a longer report of a newer firmware
+    std::memcpy(report.data(), f.bytes.data() + f.records[0].offset, f.records[0].length);
+    cdm::replay::Writer w;
+    assert_int_equal(w.open(big, f.info.data(), f.info.size(), err), CDM_OK);
+    for (int i = 0; i < 3; ++i) {
+        cdm::proto::put_u32(report.data() + 4, uint32_t(i + 1)); // sequence
+        assert_int_equal(w.write(uint64_t(i) * 1000000, report.data(), report.size(), err), CDM_OK);
+    }
+    assert_int_equal(w.close(err), CDM_OK);
+    cdm_device *dev = nullptr;
+    assert_int_equal(cdm_open(("replay:" + big + "?speed=0").c_str(), &dev), CDM_OK);
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_ERR_END_OF_STREAM; }, 5000));
+    assert_int_equal(p.host_sequence, 3);
+    assert_false(p.flags & CDM_POSE_DISCONNECTED);
+    cdm_close(dev);
+    std::remove(good.c_str());
+    std::remove(big.c_str());
+}
+
+void expect_open_error(const std::string &uri, int code, const char *needle) {
+    cdm_device *dev = nullptr;
+    const auto t0 = std::chrono::steady_clock::now();
+    const int rc = cdm_open(uri.c_str(), &dev);
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    print_message("%s -> %d \"%s\"\n", uri.c_str(), rc, cdm_thread_error());
+    if (rc != code) fail_msg("%s: %d, expected %d (%s)", uri.c_str(), rc, code, cdm_thread_error());
+    assert_null(dev);
+    if (!std::strstr(cdm_thread_error(), needle)) fail_msg("\"%s\" lacks \"%s\"", cdm_thread_error(), needle);
+    assert_true(s < 2.0); // never a hang
+}
+
+// speed=1e-300 overflowed a double-to-integer conversion (undefined).
+void test_replay_speed_out_of_range_refused(void **) {
+    const std::string good = tmp_path("speed.cdmrec");
+    record("sim:?realtime=0&motion=still", good, 2);
+    expect_open_error("replay:" + good + "?speed=1e-300", CDM_ERR_INVALID_ARG, "0.001");
+    expect_open_error("replay:" + good + "?speed=1e300", CDM_ERR_INVALID_ARG, "speed");
+    expect_open_error("replay:" + good + "?speed=nan", CDM_ERR_INVALID_ARG, "speed");
+    std::remove(good.c_str());
+}
+
+// replay:DIR was an "internal error", a FIFO without a writer hung, an
+// unreadable file's message lacked its reason.
+void test_replay_special_files_refused(void **) {
+    expect_open_error("replay:/tmp", CDM_ERR_INVALID_ARG, "a directory");
+    const std::string fifo = tmp_path("fifo");
+    assert_int_equal(mkfifo(fifo.c_str(), 0600), 0);
+    expect_open_error("replay:" + fifo, CDM_ERR_INVALID_ARG, "a FIFO");
+    std::remove(fifo.c_str());
+    expect_open_error("replay:/dev/zero", CDM_ERR_INVALID_ARG, "not a regular file");
+    expect_open_error("replay:" + tmp_path("missing"), CDM_ERR_NO_DEVICE, "No such file");
+    if (geteuid() != 0) {
+        const std::string locked = tmp_path("locked.cdmrec");
+        record("sim:?realtime=0&motion=still", locked, 1);
+        chmod(locked.c_str(), 0);
+        expect_open_error("replay:" + locked, CDM_ERR_IO, "Permission denied");
+        std::remove(locked.c_str());
+    } else {
+        print_message("running as root: the unreadable-file case cannot be made\n");
+    }
+}
+
+// A recorder killed by SIGKILL keeps every record it wrote: the writer hands
+// each to the kernel at once, and the reader plays them all.
+void test_replay_recording_survives_sigkill(void **) {
+    const std::string good = tmp_path("k.cdmrec"), killed = tmp_path("killed.cdmrec");
+    record("sim:?realtime=0&motion=still", good, 1);
+    cdm::replay::File f;
+    std::string err;
+    assert_int_equal(cdm::replay::load(good, f, err), CDM_OK);
+    const pid_t pid = fork();
+    if (pid == 0) {
+        cdm::replay::Writer w;
+        std::string e;
+        if (w.open(killed, f.info.data(), f.info.size(), e) != CDM_OK) _exit(2);
+        std::vector<uint8_t> rep(f.bytes.begin() + long(f.records[0].offset),
+                                 f.bytes.begin() + long(f.records[0].offset + f.records[0].length));
+        for (uint32_t i = 0; i < 50; ++i) {
+            cdm::proto::put_u32(rep.data() + 4, i + 1);
+            if (w.write(uint64_t(i) * 1000000, rep.data(), rep.size(), e) != CDM_OK) _exit(3);
+        }
+        raise(SIGKILL); // no close, no flush, no destructor
+        _exit(4);
+    }
+    int status = 0;
+    waitpid(pid, &status, 0);
+    assert_true(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
+    cdm_device *dev = nullptr;
+    assert_int_equal(cdm_open(("replay:" + killed + "?speed=0").c_str(), &dev), CDM_OK);
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_ERR_END_OF_STREAM; }, 5000));
+    assert_int_equal(p.host_sequence, 50);
+    cdm_close(dev);
+    std::remove(good.c_str());
+    std::remove(killed.c_str());
+}
+
+// A full disk (here: a file-size limit, same failure path as ENOSPC) keeps
+// every complete record and names the errno; /dev/full names ENOSPC.
+void test_replay_writer_full_disk_keeps_records(void **) {
+    const std::string good = tmp_path("fd.cdmrec"), out = tmp_path("full.cdmrec");
+    record("sim:?realtime=0&motion=still", good, 1);
+    cdm::replay::File f;
+    std::string err;
+    assert_int_equal(cdm::replay::load(good, f, err), CDM_OK);
+    {
+        cdm::replay::Writer w;
+        assert_int_equal(w.open("/dev/full", f.info.data(), f.info.size(), err), CDM_ERR_IO);
+        assert_non_null(std::strstr(err.c_str(), "No space left on device"));
+    }
+    const pid_t pid = fork();
+    if (pid == 0) {
+        signal(SIGXFSZ, SIG_IGN);
+        rlimit lim{1000, 1000}; // header 140 + 11 records of 74 = 954; the 12th does not fit
+        setrlimit(RLIMIT_FSIZE, &lim);
+        cdm::replay::Writer w;
+        std::string e;
+        if (w.open(out, f.info.data(), f.info.size(), e) != CDM_OK) _exit(2);
+        const uint8_t *rep = f.bytes.data() + f.records[0].offset;
+        int rc = CDM_OK;
+        uint32_t i = 0;
+        for (; i < 100 && rc == CDM_OK; ++i) rc = w.write(uint64_t(i) * 1000000, rep, f.records[0].length, e);
+        if (rc != CDM_ERR_IO || i != 12 || e.find("File too large") == std::string::npos ||
+            e.find("11 records") == std::string::npos)
+            _exit(5);
+        if (w.write(0, rep, f.records[0].length, e) != CDM_ERR_IO) _exit(6); // stays failed
+        w.close(e);
+        _exit(0);
+    }
+    int status = 0;
+    waitpid(pid, &status, 0);
+    assert_true(WIFEXITED(status));
+    assert_int_equal(WEXITSTATUS(status), 0);
+    cdm::replay::File back;
+    assert_int_equal(cdm::replay::load(out, back, err), CDM_OK);
+    assert_int_equal(back.records.size(), 11);
+    assert_int_equal(back.truncated_bytes, 0);
+    std::remove(good.c_str());
+    std::remove(out.c_str());
+}
+
 } // namespace
 
 int main(void) {
@@ -207,6 +379,11 @@ int main(void) {
         cmocka_unit_test(test_round_trip),
         cmocka_unit_test(test_pacing),
         cmocka_unit_test(test_corrupt_files),
+        cmocka_unit_test(test_replay_record_of_1024_bytes_plays),
+        cmocka_unit_test(test_replay_speed_out_of_range_refused),
+        cmocka_unit_test(test_replay_special_files_refused),
+        cmocka_unit_test(test_replay_recording_survives_sigkill),
+        cmocka_unit_test(test_replay_writer_full_disk_keeps_records),
     };
     return cmocka_run_group_tests(tests, nullptr, nullptr);
 }

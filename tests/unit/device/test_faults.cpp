@@ -1,0 +1,213 @@
+// Fault injection in sim: (docs/protocol.md "Fault injection", the table in
+// docs/reliability.md): one test per fault, through the public API only,
+// asserting what the caller sees: return codes, flags, cdm_stats counters,
+// cdm_device_error text. Unpaced (realtime=0) where only counts matter;
+// paced where the time to notice matters.
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#include "cdm/cdm.h"
+#include "test_util.h"
+
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+extern "C" {
+#include <cmocka.h>
+}
+
+namespace {
+
+const std::string kBase = "sim:?realtime=0&motion=still&noise=0&imu_noise=0&hall_noise=0&";
+
+cdm_stats stats(cdm_device *dev) {
+    cdm_stats s{};
+    s.struct_size = sizeof s;
+    assert_int_equal(cdm_get_stats(dev, &s), CDM_OK);
+    return s;
+}
+
+// Opens base + faults, lets the reader take `n` reports (all kinds), and
+// returns the counters.
+cdm_stats run(const std::string &faults, uint64_t n, cdm_device **keep = nullptr) {
+    cdm_device *dev = nullptr;
+    const std::string uri = kBase + faults;
+    if (cdm_open(uri.c_str(), &dev) != CDM_OK) fail_msg("%s: %s", uri.c_str(), cdm_thread_error());
+    assert_true(cdm_test::wait_until(
+        [&] {
+            const cdm_stats s = stats(dev);
+            return s.reports + s.malformed + s.out_of_order >= n;
+        },
+        10000));
+    const cdm_stats s = stats(dev);
+    if (keep) *keep = dev;
+    else cdm_close(dev);
+    return s;
+}
+
+void test_fault_dropped_report_counted_once(void **) {
+    const cdm_stats s = run("drop=10,11", 60);
+    assert_int_equal(s.dropped, 2);
+    assert_int_equal(s.sequence_jumps, 0);
+    assert_int_equal(s.malformed, 0);
+}
+
+void test_fault_duplicated_report_discarded(void **) {
+    const cdm_stats s = run("duplicate=10", 60);
+    assert_int_equal(s.out_of_order, 1);
+    assert_int_equal(s.dropped, 0);
+    assert_int_equal(s.sequence_jumps, 0);
+}
+
+void test_fault_reordered_report_discarded(void **) {
+    const cdm_stats s = run("reorder=10", 60);
+    // Report 11 comes first (10 counted missing), then 10 late: discarded.
+    assert_int_equal(s.out_of_order, 1);
+    assert_int_equal(s.dropped, 1);
+    assert_int_equal(s.sequence_jumps, 0);
+}
+
+void test_fault_malformed_each_kind_rejected(void **) {
+    const char *kinds[] = {"short", "report_id", "version", "quat_zero", "quat_norm"};
+    for (const char *k : kinds) {
+        cdm_device *dev = nullptr;
+        const cdm_stats s = run(std::string("malformed=") + k + ":10", 60, &dev);
+        char text[300];
+        cdm_device_error(dev, text, sizeof text);
+        print_message("malformed=%s:10 -> malformed %llu, dropped %llu, \"%s\"\n", k,
+                      (unsigned long long)s.malformed, (unsigned long long)s.dropped, text);
+        assert_int_equal(s.malformed, 1);
+        assert_int_equal(s.dropped, 1); // its sequence number never arrived
+        assert_non_null(std::strstr(text, "input report rejected"));
+        cdm_close(dev);
+    }
+}
+
+void test_fault_sequence_reset_is_a_jump_not_drops(void **) {
+    const cdm_stats s = run("seq_reset=20", 60);
+    assert_int_equal(s.sequence_jumps, 1);
+    assert_int_equal(s.dropped, 0);
+}
+
+void test_fault_sequence_bit_flip_is_two_jumps(void **) {
+    const cdm_stats s = run("seq_flip=20", 60);
+    assert_int_equal(s.sequence_jumps, 2);
+    assert_true(s.dropped <= 1); // the flipped report's own number is lost
+}
+
+void test_fault_device_clock_wrap_harmless(void **) {
+    cdm_device *dev = nullptr;
+    const cdm_stats s = run("clock_wrap=20", 60, &dev);
+    assert_int_equal(s.dropped, 0);
+    assert_int_equal(s.sequence_jumps, 0);
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    const int rc = cdm_get_pose(dev, &p);
+    assert_true(rc == CDM_OK || rc == CDM_ERR_STALE);
+    assert_true(p.device_time_us < (uint64_t(1) << 62)); // wrapped past 2^64 us (was near 2^64 before)
+    cdm_close(dev);
+}
+
+void test_fault_adc_saturation_holds_position(void **) {
+    cdm_device *dev = nullptr;
+    const cdm_stats s = run("saturate=20:5", 60, &dev);
+    assert_int_equal(s.out_of_workspace, 5);
+    cdm_close(dev);
+    // Saturated from the very first report: no position exists yet.
+    cdm_device *d2 = nullptr;
+    assert_int_equal(cdm_open((kBase + "saturate=0:1000000").c_str(), &d2), CDM_OK);
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    assert_int_equal(cdm_wait_pose_after(d2, 0, 5000, &p), CDM_ERR_NO_DATA);
+    assert_true((p.flags & (CDM_POSE_NO_POSITION | CDM_POSE_OUT_OF_WORKSPACE)) ==
+                (CDM_POSE_NO_POSITION | CDM_POSE_OUT_OF_WORKSPACE));
+    cdm_close(d2);
+}
+
+// Paced at 100 Hz (10 ms period): the unplug at report 20 is seen as
+// DISCONNECTED at once (the transport reports it on the read that would have
+// delivered report 20), and the replug 300 ms later brings poses back with
+// the same serial and one reconnection counted.
+void test_fault_disconnect_and_replug(void **) {
+    cdm_device *dev = nullptr;
+    assert_int_equal(cdm_open("sim:?rate=100&motion=still&disconnect=20:300", &dev), CDM_OK);
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    uint64_t last = 0;
+    int rc = CDM_OK;
+    // Wait pose by pose up to the last before the unplug.
+    while (last < 20) {
+        rc = cdm_wait_pose_after(dev, last, 1000, &p);
+        if (rc == CDM_ERR_DISCONNECTED) break;
+        assert_true(rc == CDM_OK || rc == CDM_ERR_STALE);
+        last = p.host_sequence;
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_ERR_DISCONNECTED; }, 20));
+    assert_true(p.flags & CDM_POSE_DISCONNECTED);
+    char text[300];
+    cdm_device_error(dev, text, sizeof text);
+    assert_non_null(std::strstr(text, "unplugged"));
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_OK; }, 2000));
+    const double gone = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    print_message("disconnected for %.3f s (300 ms unplug + up to 250 ms retry interval)\n", gone);
+    assert_true(gone > 0.25 && gone < 0.3 + 0.25 + 0.1);
+    const cdm_stats s = stats(dev);
+    assert_int_equal(s.reconnects, 1);
+    assert_int_equal(s.sequence_jumps, 0);
+    cdm_device_info info{};
+    info.struct_size = sizeof info;
+    cdm_get_info(dev, &info);
+    assert_string_equal(info.serial, "CDMSIM0001");
+    cdm_close(dev);
+}
+
+// A device that stops sending: STALE within the stale deadline plus two
+// report periods.
+void test_fault_stall_goes_stale(void **) {
+    cdm_device *dev = nullptr;
+    cdm_open_options o{};
+    o.struct_size = sizeof o;
+    o.stale_timeout_us = 20000;
+    assert_int_equal(cdm_open_ex("sim:?rate=100&motion=still&stall_after=10", &o, &dev), CDM_OK);
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    assert_true(cdm_test::wait_until([&] { cdm_get_pose(dev, &p); return p.host_sequence == 10; }, 2000));
+    const auto t0 = std::chrono::steady_clock::now();
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_ERR_STALE; }, 1000));
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    assert_true(s < 0.020 + 0.020 + 0.010); // deadline + two periods + polling
+    assert_true(p.flags & CDM_POSE_STALE);
+    cdm_close(dev);
+}
+
+void test_fault_options_checked(void **) {
+    cdm_device *dev = nullptr;
+    assert_int_equal(cdm_open("sim:?malformed=bogus:3", &dev), CDM_ERR_INVALID_ARG);
+    assert_non_null(std::strstr(cdm_thread_error(), "quat_norm"));
+    assert_int_equal(cdm_open("sim:?disconnect=5", &dev), CDM_ERR_INVALID_ARG);
+    assert_non_null(std::strstr(cdm_thread_error(), "AT:MS"));
+    assert_int_equal(cdm_open("sim:?drop=x", &dev), CDM_ERR_INVALID_ARG);
+}
+
+} // namespace
+
+int main(void) {
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_fault_dropped_report_counted_once),
+        cmocka_unit_test(test_fault_duplicated_report_discarded),
+        cmocka_unit_test(test_fault_reordered_report_discarded),
+        cmocka_unit_test(test_fault_malformed_each_kind_rejected),
+        cmocka_unit_test(test_fault_sequence_reset_is_a_jump_not_drops),
+        cmocka_unit_test(test_fault_sequence_bit_flip_is_two_jumps),
+        cmocka_unit_test(test_fault_device_clock_wrap_harmless),
+        cmocka_unit_test(test_fault_adc_saturation_holds_position),
+        cmocka_unit_test(test_fault_disconnect_and_replug),
+        cmocka_unit_test(test_fault_stall_goes_stale),
+        cmocka_unit_test(test_fault_options_checked),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

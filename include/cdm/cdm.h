@@ -45,11 +45,13 @@ extern "C" {
 #endif
 
 #define CDM_VERSION_MAJOR 1
-#define CDM_VERSION_MINOR 0
+/* CMakeLists.txt's project(VERSION) is the one source; the configure step
+ * fails when these differ from it, and tests/cli checks the bindings' copies. */
+#define CDM_VERSION_MINOR 1
 #define CDM_VERSION_PATCH 0
 #define CDM_VERSION_NUMBER (CDM_VERSION_MAJOR * 10000 + CDM_VERSION_MINOR * 100 + CDM_VERSION_PATCH)
 
-/** "1.0.0": the version of the library actually loaded. Static text. Any thread. */
+/** "1.1.0": the version of the library actually loaded. Static text. Any thread. */
 CDM_API const char *cdm_version(void);
 /** CDM_VERSION_NUMBER of the library actually loaded. Any thread. */
 CDM_API int cdm_version_number(void);
@@ -329,6 +331,14 @@ CDM_API int cdm_device_calibration_write(cdm_device *dev, const char *data, size
 #if defined(CDM_EXPERIMENTAL)
 
 /**
+ * Changes with every change to an experimental signature or struct. The
+ * experimental symbols carry the ELF version node CDM_EXPERIMENTAL_<this>
+ * (src/api/libcdm.map), so a program built against another experimental
+ * version fails to load instead of calling a changed function.
+ */
+#define CDM_EXPERIMENTAL_VERSION 1
+
+/**
  * A user-defined physical effect, acting on the cable readings. The model
  * calls `apply` with the readings predicted by the nominal geometry and every
  * effect before it; `apply` changes them in place (mm). Derivatives are taken
@@ -386,6 +396,134 @@ CDM_API int cdm_diagnose(const char *data_csv_path, const char *device_json_path
 
 /** Frees a string returned by libcdm. NULL is fine. */
 CDM_API void cdm_free_string(char *s);
+
+
+/* ------------------------------------------------- experimental: tools (since 1.1)
+ * What the `cdm` command needs beyond the stable API. Experimental: see
+ * CDM_EXPERIMENTAL_VERSION. Every function sets cdm_thread_error() when it
+ * fails.
+ */
+
+/**
+ * The device-info feature report (ID 0x02) of an open device, byte for byte,
+ * report ID first, as the device sent it (a recording starts with it). *len
+ * receives its size; CDM_ERR_NO_MEM when buf is NULL or cap too small (then
+ * *len says how much is needed). Caller owns buf. Any thread; talks to the
+ * device and may block for some milliseconds.
+ */
+CDM_API int cdm_device_info_report(cdm_device *dev, uint8_t *buf, size_t cap, size_t *len);
+
+/**
+ * The position (device frame, mm) the simulated master truly had when it sent
+ * report `sequence` (cdm_pose.sequence), for measuring the driver's error.
+ * CDM_ERR_UNSUPPORTED when dev is not a sim: device or the report is older
+ * than the simulator remembers (16384 reports). Any thread, including the
+ * on_sample callback; does not block on the reader.
+ */
+CDM_API int cdm_sim_truth(cdm_device *dev, uint32_t sequence, double position_mm[3]);
+
+/**
+ * A recording for `replay:FILE` (docs/protocol.md, "Replay files"): opened
+ * with the device-info report (cdm_device_info_report), then every input
+ * report with its host receipt time (cdm_sample.raw->host_time_ns, report and
+ * report_len). The handle is the caller's until cdm_recorder_close, which
+ * flushes, closes and frees it (NULL is fine) and reports a failure to
+ * complete the file. One thread at a time per recorder (the caller
+ * serialises); write may be called from the on_sample callback.
+ */
+typedef struct cdm_recorder cdm_recorder;
+CDM_API int cdm_recorder_open(const char *path, const uint8_t *info_report, size_t len, cdm_recorder **out);
+CDM_API int cdm_recorder_write(cdm_recorder *rec, uint64_t host_time_ns, const uint8_t *report, size_t len);
+CDM_API int cdm_recorder_close(cdm_recorder *rec);
+
+/** Jig-plan options; a zero field keeps the default (or the sim: URI's). */
+typedef struct cdm_jig_plan_options {
+    uint32_t struct_size;     /**< sizeof(cdm_jig_plan_options) */
+    int32_t holes;            /**< holes per side of the plate (default 25) */
+    double pitch_mm;          /**< hole pitch (default 5) */
+    const double *heights_mm; /**< n_heights fixture heights (default 30,40,50,60,70); copied */
+    size_t n_heights;
+    int32_t samples;          /**< samples kept per position (default 100) */
+} cdm_jig_plan_options;
+
+/** One position of a jig plan: the dataset's `point` and its reference. */
+typedef struct cdm_jig_position {
+    int32_t point;        /**< running id, 0-based */
+    int32_t height_index; /**< index into the heights */
+    int32_t row, col;     /**< hole indices along y and z */
+    double ref_mm[3];     /**< x (height), y, z in the jig frame */
+} cdm_jig_position;
+
+/**
+ * The ordered jig plan of a calibration session (`cdm record --jig`). With a
+ * sim: URI whose motion is jig, the simulator's own jig_* options are the
+ * defaults, and options that contradict them are CDM_ERR_INVALID_ARG (the
+ * labels would not match the positions); uri may be NULL. Options are
+ * validated (CDM_ERR_INVALID_ARG naming the field). The plan is the caller's:
+ * free it with cdm_jig_plan_free (NULL is fine). Any thread; a plan is
+ * read-only once made, so several threads may read it.
+ */
+typedef struct cdm_jig_plan cdm_jig_plan;
+CDM_API int cdm_jig_plan_create(const char *uri, const cdm_jig_plan_options *options, cdm_jig_plan **out);
+CDM_API size_t cdm_jig_plan_count(const cdm_jig_plan *plan);
+/** Samples to keep at each position. */
+CDM_API int cdm_jig_plan_samples(const cdm_jig_plan *plan);
+CDM_API int cdm_jig_plan_get(const cdm_jig_plan *plan, size_t i, cdm_jig_position *out);
+CDM_API void cdm_jig_plan_free(cdm_jig_plan *plan);
+
+/** One parameter of a catalogued effect. Strings as cdm_effect_name's. */
+typedef struct cdm_effect_param_info {
+    const char *name;
+    const char *unit;
+    double scale;        /**< typical magnitude */
+    double lower, upper; /**< bounds of the fit */
+} cdm_effect_param_info;
+
+/**
+ * The effect catalogue (cdm_effect_count order): the physics in one paragraph
+ * and each parameter. Strings live as long as the effect is registered
+ * (built-ins: forever); do not free them. Any thread.
+ */
+CDM_API const char *cdm_effect_doc(size_t i);
+CDM_API size_t cdm_effect_param_count(size_t i);
+CDM_API int cdm_effect_param(size_t i, size_t k, cdm_effect_param_info *out);
+
+/**
+ * The nominal device description (a = b = 150, m = 30 mm: the geometry
+ * cdm_simulate_jig_dataset and `cdm calib diagnose` use without a device
+ * JSON), as device JSON text allocated by the library: free it with
+ * cdm_free_string. Any thread.
+ */
+CDM_API int cdm_nominal_device_json(char **json);
+
+/** Options of cdm_simulate_jig_dataset; fill with cdm_jig_sim_defaults first. */
+typedef struct cdm_jig_sim_options {
+    uint32_t struct_size;
+    int32_t holes;
+    double pitch_mm;
+    const double *heights_mm; /**< NULL/0: 30,40,50,60,70 mm; copied */
+    size_t n_heights;
+    int32_t samples;          /**< per position */
+    double noise_mm;          /**< per-sample pot noise std */
+    double quant_mm;          /**< ADC step */
+    double jig_tolerance_mm;  /**< std of each position's own error */
+    uint64_t seed;            /**< noise seed */
+    const char *device_json_path; /**< NULL: the nominal geometry (a = b = 150, m = 30 mm) */
+    const char *truth_json_path;  /**< NULL: the nominal model; else a calibration JSON as the truth */
+    const char *effects;          /**< comma-separated hidden effects with random realistic magnitudes, or NULL */
+    uint64_t effect_seed;         /**< seed of those magnitudes */
+    const char *truth_out_path;   /**< NULL, or where to write the true model (calibration JSON) */
+} cdm_jig_sim_options;
+
+/** Defaults of cdm_jig_sim_options, struct_size set. */
+CDM_API void cdm_jig_sim_defaults(cdm_jig_sim_options *o);
+
+/**
+ * Writes a simulated jig dataset CSV (`cdm calib simulate`: the seed's
+ * experiment in software) from a known model. Errors name the file or the
+ * option. Any thread; the options' strings are read during the call only.
+ */
+CDM_API int cdm_simulate_jig_dataset(const char *out_csv, const cdm_jig_sim_options *o);
 
 #endif /* CDM_EXPERIMENTAL */
 

@@ -4,3 +4,5 @@ list(APPEND CDM_SOURCES
   api/device_api.cpp)
 list(APPEND CDM_SOURCES
   api/calibration_api.cpp)
+list(APPEND CDM_SOURCES
+  api/cli_support_api.cpp)

@@ -38,7 +38,7 @@ void add_calib_commands(CLI::App &app);
 uint64_t now_ns();
 double now_s();
 
-// A number as a person writes it: 1, 0.5, 100000, 1e+06 (%g).
+// A number as a person writes it: 1, 0.5, 1000000, 1e-05.
 std::string num(double v);
 // CLI11 range validator whose message prints its bounds with num().
 CLI::Validator range(double lo, double hi);

@@ -23,7 +23,11 @@ double now_s() { return double(now_ns()) * 1e-9; }
 
 std::string num(double v) {
     char b[32];
-    std::snprintf(b, sizeof b, "%g", v);
+    // Whole numbers in full (1000000, not 1e+06), the rest as %g.
+    if (std::isfinite(v) && v == std::floor(v) && std::fabs(v) < 1e15)
+        std::snprintf(b, sizeof b, "%.0f", v);
+    else
+        std::snprintf(b, sizeof b, "%g", v);
     return b;
 }
 

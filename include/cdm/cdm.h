@@ -46,7 +46,7 @@ extern "C" {
 
 #define CDM_VERSION_MAJOR 1
 /* CMakeLists.txt's project(VERSION) is the one source; the configure step
- * fails when these differ from it, and tests/cli checks the bindings' copies. */
+ * fails when these differ from it, and tests/cli/test_abi_version.py checks the bindings' copies. */
 #define CDM_VERSION_MINOR 1
 #define CDM_VERSION_PATCH 0
 #define CDM_VERSION_NUMBER (CDM_VERSION_MAJOR * 10000 + CDM_VERSION_MINOR * 100 + CDM_VERSION_PATCH)

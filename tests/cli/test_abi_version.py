@@ -62,6 +62,9 @@ def test_version_copies_agree():
         assert re.search(r"#define CDM_VERSION_%s %s\b" % (part, value), h), part
     assert re.search(r'^version = "%s"' % re.escape(VERSION), read("bindings", "python", "pyproject.toml"), re.M)
     assert 'AssemblyVersion("%s.0")' % VERSION in read("bindings", "csharp", "src", "AssemblyInfo.cs")
+    py = read("bindings", "python", "cdm", "constants.py")
+    for part, value in (("MAJOR", major), ("MINOR", minor), ("PATCH", patch)):
+        assert re.search(r"^CDM_VERSION_%s = %s$" % (part, value), py, re.M), "constants.py " + part
     assert cdm("--version").stdout.strip() == "cdm " + VERSION
 
 

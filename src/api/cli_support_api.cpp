@@ -83,6 +83,18 @@ int jig_options_from_uri(const std::string &text, cdm::JigPlanOptions &o, bool &
     return CDM_OK;
 }
 
+// "line L, column C" of a 1-based byte offset (the parser's own text carries
+// its internal error code, which means nothing to a user).
+std::string json_position(const std::string &text, size_t byte) {
+    size_t line = 1, col = 1;
+    for (size_t i = 0; i + 1 < byte && i < text.size(); ++i, ++col)
+        if (text[i] == '\n') {
+            ++line;
+            col = 0;
+        }
+    return "line " + std::to_string(line) + ", column " + std::to_string(col);
+}
+
 std::vector<std::string> split_list(const char *s) {
     std::vector<std::string> v;
     if (!s) return v;
@@ -289,8 +301,13 @@ int cdm_simulate_jig_dataset(const char *out_csv, const cdm_jig_sim_options *o) 
             std::stringstream ss;
             ss << f.rdbuf();
             if (!f) return cdm::fail(CDM_ERR_IO, std::string(o->truth_json_path) + ": cannot open: " + std::strerror(errno));
-            const auto j = nlohmann::json::parse(ss.str(), nullptr, false);
-            if (j.is_discarded()) return cdm::fail(CDM_ERR_PARSE, std::string(o->truth_json_path) + ": not valid JSON");
+            nlohmann::json j;
+            try {
+                j = nlohmann::json::parse(ss.str());
+            } catch (const nlohmann::json::parse_error &e) {
+                return cdm::fail(CDM_ERR_PARSE, std::string(o->truth_json_path) + ": " + json_position(ss.str(), e.byte) +
+                                                    ": not valid JSON");
+            }
             if (!cdm::Model::from_json(j, o->truth_json_path, truth, err)) return cdm::fail(CDM_ERR_PARSE, err);
         }
         uint64_t k = 0;

@@ -71,8 +71,15 @@ std::vector<double> parse_number_list(const std::string &text, const std::string
 
 int report_error(const std::string &what, int rc) {
     std::fprintf(stderr, "cdm: %s: %s", what.c_str(), cdm_strerror(rc));
-    const char *detail = cdm_thread_error();
-    if (detail && *detail) std::fprintf(stderr, ": %s", detail);
+    std::string detail = cdm_thread_error() ? cdm_thread_error() : "";
+    // The JSON parser's internal codes ("[json.exception.parse_error.101] ")
+    // mean nothing to a user; the library's own text around them says where
+    // and what. Until every loader words its errors itself, they stop here.
+    for (size_t at; (at = detail.find("[json.exception.")) != std::string::npos;) {
+        const size_t end = detail.find(']', at);
+        detail.erase(at, end == std::string::npos ? std::string::npos : end + 2 - at);
+    }
+    if (!detail.empty()) std::fprintf(stderr, ": %s", detail.c_str());
     std::fprintf(stderr, "\n");
     return kExitFailure;
 }

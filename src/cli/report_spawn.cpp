@@ -51,12 +51,13 @@ int spawn_wait(const std::vector<std::string> &args, const std::vector<std::stri
 }
 
 // Exit 0 when `python` can import the report with its dependencies; else 3,
-// with only the missing module's name on stderr (no traceback).
+// and with "-v" the missing module's name on stderr (no traceback).
 const char *const kProbe = "import sys\n"
                            "try:\n"
                            "    import cdm.report\n"
                            "except ImportError as e:\n"
-                           "    sys.stderr.write('missing Python module: %s\\n' % (e.name or e))\n"
+                           "    if sys.argv[1:] == ['-v']:\n"
+                           "        sys.stderr.write('cdm: missing Python module: %s\\n' % (e.name or e))\n"
                            "    sys.exit(3)\n";
 
 } // namespace
@@ -81,6 +82,7 @@ int run_report(const std::string &json_path, const std::vector<std::string> &bef
     }
 #endif
     if (probe != 0) {
+        spawn_wait({py, "-c", kProbe, "-v"}, env); // names what is missing
         std::fprintf(stderr,
                      "cdm: --report needs the cdm Python package with numpy and matplotlib for %s: install it with "
                      "`pip install ./bindings/python` (or the cdm .deb, or `apt install python3-numpy "

@@ -78,3 +78,21 @@ def test_never_writes_over_a_non_regular_file(tmp_path):
     assert r.returncode == 2 and "not a regular file" in r.stderr
     r = cdm("record", "sim:", str(tmp_path), "--seconds", "0.2")
     assert r.returncode == 2 and "not a regular file" in r.stderr
+
+
+def test_write_error_keeps_what_was_written_and_names_the_cause(tmp_path):
+    # A file-size limit stands in for a full disk: the write fails with
+    # EFBIG as it would with ENOSPC, without needing a small filesystem.
+    import resource
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000))
+
+    out = tmp_path / "full.cdmrec"
+    r = subprocess.run([CLI, "record", "sim:", str(out), "--seconds", "5"], preexec_fn=limit, capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 1
+    assert os.strerror(27) in r.stderr  # EFBIG, the real cause (not a stale errno)
+    assert "keeps what was written" in r.stderr
+    assert out.is_file() and out.stat().st_size > 12  # the header and the reports before the error

@@ -436,57 +436,38 @@ CDM_API int cdm_recorder_open(const char *path, const uint8_t *info_report, size
 CDM_API int cdm_recorder_write(cdm_recorder *rec, uint64_t host_time_ns, const uint8_t *report, size_t len);
 CDM_API int cdm_recorder_close(cdm_recorder *rec);
 
-/** Jig-plan options; a zero field keeps the default (or the sim: URI's). */
-typedef struct cdm_jig_plan_options {
-    uint32_t struct_size;     /**< sizeof(cdm_jig_plan_options) */
-    int32_t holes;            /**< holes per side of the plate (default 25) */
-    double pitch_mm;          /**< hole pitch (default 5) */
-    const double *heights_mm; /**< n_heights fixture heights (default 30,40,50,60,70); copied */
-    size_t n_heights;
-    int32_t samples;          /**< samples kept per position (default 100) */
-} cdm_jig_plan_options;
-
-/** One position of a jig plan: the dataset's `point` and its reference. */
-typedef struct cdm_jig_position {
-    int32_t point;        /**< running id, 0-based */
-    int32_t height_index; /**< index into the heights */
-    int32_t row, col;     /**< hole indices along y and z */
-    double ref_mm[3];     /**< x (height), y, z in the jig frame */
-} cdm_jig_position;
-
 /**
- * The ordered jig plan of a calibration session (`cdm record --jig`). With a
- * sim: URI whose motion is jig, the simulator's own jig_* options are the
- * defaults, and options that contradict them are CDM_ERR_INVALID_ARG (the
- * labels would not match the positions); uri may be NULL. Options are
- * validated (CDM_ERR_INVALID_ARG naming the field). The plan is the caller's:
- * free it with cdm_jig_plan_free (NULL is fine). Any thread; a plan is
- * read-only once made, so several threads may read it.
+ * The ordered jig plan of a calibration session (`cdm record --jig`):
+ * holes per side (default 25), hole pitch in mm (default 5), fixture heights
+ * in mm (default 30,40,50,60,70; copied), samples kept per position (default
+ * 100); a zero (or NULL/0 heights) keeps the default. With a sim: URI whose
+ * motion is jig, the simulator's own jig_* options are the defaults, and
+ * values that contradict them are CDM_ERR_INVALID_ARG (the labels would not
+ * match the positions); uri may be NULL. Values are validated
+ * (CDM_ERR_INVALID_ARG naming the field). The plan is the caller's: free it
+ * with cdm_jig_plan_free (NULL is fine). Any thread; a plan is read-only once
+ * made, so several threads may read it.
  */
 typedef struct cdm_jig_plan cdm_jig_plan;
-CDM_API int cdm_jig_plan_create(const char *uri, const cdm_jig_plan_options *options, cdm_jig_plan **out);
+CDM_API int cdm_jig_plan_create(const char *uri, int holes, double pitch_mm, const double *heights_mm,
+                                size_t n_heights, int samples, cdm_jig_plan **out);
 CDM_API size_t cdm_jig_plan_count(const cdm_jig_plan *plan);
 /** Samples to keep at each position. */
 CDM_API int cdm_jig_plan_samples(const cdm_jig_plan *plan);
-CDM_API int cdm_jig_plan_get(const cdm_jig_plan *plan, size_t i, cdm_jig_position *out);
+/** Position i: its dataset `point` id and reference x (height), y, z in mm, jig frame. */
+CDM_API int cdm_jig_plan_get(const cdm_jig_plan *plan, size_t i, int *point, double ref_mm[3]);
 CDM_API void cdm_jig_plan_free(cdm_jig_plan *plan);
-
-/** One parameter of a catalogued effect. Strings as cdm_effect_name's. */
-typedef struct cdm_effect_param_info {
-    const char *name;
-    const char *unit;
-    double scale;        /**< typical magnitude */
-    double lower, upper; /**< bounds of the fit */
-} cdm_effect_param_info;
 
 /**
  * The effect catalogue (cdm_effect_count order): the physics in one paragraph
- * and each parameter. Strings live as long as the effect is registered
+ * and each parameter (NULL out-pointers are skipped). Strings live as long as the effect is registered
  * (built-ins: forever); do not free them. Any thread.
  */
 CDM_API const char *cdm_effect_doc(size_t i);
 CDM_API size_t cdm_effect_param_count(size_t i);
-CDM_API int cdm_effect_param(size_t i, size_t k, cdm_effect_param_info *out);
+/** Parameter k of effect i: name, unit, typical magnitude, bounds of the fit. */
+CDM_API int cdm_effect_param(size_t i, size_t k, const char **name, const char **unit, double *scale,
+                             double *lower, double *upper);
 
 /**
  * The nominal device description (a = b = 150, m = 30 mm: the geometry
@@ -496,34 +477,23 @@ CDM_API int cdm_effect_param(size_t i, size_t k, cdm_effect_param_info *out);
  */
 CDM_API int cdm_nominal_device_json(char **json);
 
-/** Options of cdm_simulate_jig_dataset; fill with cdm_jig_sim_defaults first. */
-typedef struct cdm_jig_sim_options {
-    uint32_t struct_size;
-    int32_t holes;
-    double pitch_mm;
-    const double *heights_mm; /**< NULL/0: 30,40,50,60,70 mm; copied */
-    size_t n_heights;
-    int32_t samples;          /**< per position */
-    double noise_mm;          /**< per-sample pot noise std */
-    double quant_mm;          /**< ADC step */
-    double jig_tolerance_mm;  /**< std of each position's own error */
-    uint64_t seed;            /**< noise seed */
-    const char *device_json_path; /**< NULL: the nominal geometry (a = b = 150, m = 30 mm) */
-    const char *truth_json_path;  /**< NULL: the nominal model; else a calibration JSON as the truth */
-    const char *effects;          /**< comma-separated hidden effects with random realistic magnitudes, or NULL */
-    uint64_t effect_seed;         /**< seed of those magnitudes */
-    const char *truth_out_path;   /**< NULL, or where to write the true model (calibration JSON) */
-} cdm_jig_sim_options;
-
-/** Defaults of cdm_jig_sim_options, struct_size set. */
-CDM_API void cdm_jig_sim_defaults(cdm_jig_sim_options *o);
+/**
+ * The options of cdm_simulate_jig_dataset with their defaults, as JSON text
+ * allocated by the library (free it with cdm_free_string). Any thread.
+ */
+CDM_API int cdm_simulate_jig_defaults(char **options_json);
 
 /**
  * Writes a simulated jig dataset CSV (`cdm calib simulate`: the seed's
- * experiment in software) from a known model. Errors name the file or the
- * option. Any thread; the options' strings are read during the call only.
+ * experiment in software) from a known model. options_json may be NULL or
+ * hold any of: holes, pitch_mm, heights_mm [..], samples, noise_mm, quant_mm,
+ * jig_tolerance_mm, seed, effect_seed (numbers); device (device JSON path;
+ * default the nominal geometry), truth (calibration JSON as the true model),
+ * effects [..] (hidden effects with random realistic magnitudes), truth_out
+ * (where to write the true model). An unknown key or a bad value is
+ * CDM_ERR_INVALID_ARG naming it; other errors name the file. Any thread.
  */
-CDM_API int cdm_simulate_jig_dataset(const char *out_csv, const cdm_jig_sim_options *o);
+CDM_API int cdm_simulate_jig_dataset(const char *out_csv, const char *options_json);
 
 #endif /* CDM_EXPERIMENTAL */
 

@@ -4,6 +4,7 @@
 // jig-dataset simulation. Thin fences around the modules: no logic of their
 // own beyond argument checks.
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -13,6 +14,8 @@
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "api/errors.h"
 #include "calib/jig_plan.h"
@@ -95,14 +98,90 @@ std::string json_position(const std::string &text, size_t byte) {
     return "line " + std::to_string(line) + ", column " + std::to_string(col);
 }
 
-std::vector<std::string> split_list(const char *s) {
-    std::vector<std::string> v;
-    if (!s) return v;
-    std::stringstream ss(s);
-    std::string x;
-    while (std::getline(ss, x, ','))
-        if (!x.empty()) v.push_back(x);
-    return v;
+int to_c_string(const std::string &text, char **out) {
+    *out = static_cast<char *>(std::malloc(text.size() + 1));
+    if (!*out) return cdm::fail(CDM_ERR_NO_MEM, "out of memory");
+    std::memcpy(*out, text.c_str(), text.size() + 1);
+    return CDM_OK;
+}
+
+int read_text(const std::string &path, std::string &text) {
+    std::ifstream f(path);
+    if (!f) return cdm::fail(CDM_ERR_IO, path + ": cannot open: " + std::strerror(errno));
+    std::stringstream ss;
+    ss << f.rdbuf();
+    text = ss.str();
+    return CDM_OK;
+}
+
+struct SimRequest {
+    cdm::JigSimOptions o;
+    uint64_t effect_seed = 1;
+    std::string device, truth, truth_out;
+    std::vector<std::string> effects;
+};
+
+nlohmann::json sim_options_json(const cdm::JigSimOptions &o, uint64_t effect_seed) {
+    return {{"holes", o.n},         {"pitch_mm", o.pitch_mm},
+            {"heights_mm", o.heights}, {"samples", o.samples},
+            {"noise_mm", o.noise_mm}, {"quant_mm", o.quant_mm},
+            {"jig_tolerance_mm", o.jig_tolerance_mm}, {"seed", o.seed},
+            {"effect_seed", effect_seed}};
+}
+
+// A number option: finite and within [lo, hi], else false + err naming it.
+bool number(const nlohmann::json &v, const std::string &key, double lo, double hi, double &out, std::string &err) {
+    if (!v.is_number() || !std::isfinite(v.get<double>()) || v.get<double>() < lo || v.get<double>() > hi) {
+        std::ostringstream m;
+        m << "option \"" << key << "\" must be a number in [" << lo << ", " << hi << "], not " << v.dump();
+        err = m.str();
+        return false;
+    }
+    out = v.get<double>();
+    return true;
+}
+
+bool parse_sim_options(const char *text, SimRequest &r, std::string &err) {
+    nlohmann::json j;
+    try {
+        j = nlohmann::json::parse(text);
+    } catch (const nlohmann::json::parse_error &e) {
+        err = "options: " + json_position(text, e.byte) + ": not valid JSON";
+        return false;
+    }
+    if (!j.is_object()) return err = "options must be a JSON object", false;
+    for (auto it = j.begin(); it != j.end(); ++it) {
+        const std::string &k = it.key();
+        const auto &v = it.value();
+        double d = 0;
+        bool ok = true;
+        if (k == "holes") ok = number(v, k, 1, 1000, d, err), r.o.n = int(d);
+        else if (k == "pitch_mm") ok = number(v, k, 1e-3, 1000, r.o.pitch_mm, err);
+        else if (k == "samples") ok = number(v, k, 1, 1e6, d, err), r.o.samples = int(d);
+        else if (k == "noise_mm") ok = number(v, k, 0, 100, r.o.noise_mm, err);
+        else if (k == "quant_mm") ok = number(v, k, 0, 100, r.o.quant_mm, err);
+        else if (k == "jig_tolerance_mm") ok = number(v, k, 0, 100, r.o.jig_tolerance_mm, err);
+        else if (k == "seed") ok = number(v, k, 0, 9007199254740992.0, d, err), r.o.seed = uint64_t(d);
+        else if (k == "effect_seed") ok = number(v, k, 0, 9007199254740992.0, d, err), r.effect_seed = uint64_t(d);
+        else if (k == "heights_mm" && v.is_array() && !v.empty()) {
+            r.o.heights.clear();
+            for (const auto &h : v) ok = ok && number(h, "heights_mm", 1e-3, 1e4, d, err) && (r.o.heights.push_back(d), true);
+        } else if (k == "effects" && v.is_array()) {
+            for (const auto &e : v) {
+                if (!e.is_string()) return err = "option \"effects\" must be a list of effect names", false;
+                r.effects.push_back(e.get<std::string>());
+            }
+        } else if ((k == "device" || k == "truth" || k == "truth_out") && v.is_string()) {
+            (k == "device" ? r.device : k == "truth" ? r.truth : r.truth_out) = v.get<std::string>();
+        } else if (k == "heights_mm" || k == "effects" || k == "device" || k == "truth" || k == "truth_out") {
+            return err = "option \"" + k + "\" has the wrong type: " + v.dump(), false;
+        } else {
+            return err = "unknown option \"" + k + "\" (known: holes, pitch_mm, heights_mm, samples, noise_mm, "
+                         "quant_mm, jig_tolerance_mm, seed, effect_seed, device, truth, effects, truth_out)", false;
+        }
+        if (!ok) return false;
+    }
+    return true;
 }
 
 } // namespace
@@ -173,12 +252,11 @@ int cdm_recorder_close(cdm_recorder *rec) {
     });
 }
 
-int cdm_jig_plan_create(const char *uri, const cdm_jig_plan_options *options, cdm_jig_plan **out) {
+int cdm_jig_plan_create(const char *uri, int holes, double pitch_mm, const double *heights_mm, size_t n_heights,
+                        int samples, cdm_jig_plan **out) {
     return fenced("cdm_jig_plan_create", [&] {
         if (!out) return null_arg("cdm_jig_plan_create", "out");
         *out = nullptr;
-        if (options && options->struct_size < sizeof(cdm_jig_plan_options))
-            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_jig_plan_create: options->struct_size is too small");
         auto plan = std::make_unique<cdm_jig_plan>();
         cdm::JigPlanOptions &o = plan->options;
         std::string err;
@@ -187,14 +265,12 @@ int cdm_jig_plan_create(const char *uri, const cdm_jig_plan_options *options, cd
             if (int rc = jig_options_from_uri(uri, o, is_sim, err); rc != CDM_OK) return cdm::fail(rc, err);
         }
         const cdm::JigPlanOptions from_uri = o;
-        if (options) {
-            if (options->holes) o.n = options->holes;
-            if (options->pitch_mm != 0) o.pitch_mm = options->pitch_mm;
-            if (options->samples) o.samples = options->samples;
-            if (options->n_heights) {
-                if (!options->heights_mm) return null_arg("cdm_jig_plan_create", "options->heights_mm");
-                o.heights_mm.assign(options->heights_mm, options->heights_mm + options->n_heights);
-            }
+        if (holes) o.n = holes;
+        if (pitch_mm != 0) o.pitch_mm = pitch_mm;
+        if (samples) o.samples = samples;
+        if (n_heights) {
+            if (!heights_mm) return null_arg("cdm_jig_plan_create", "heights_mm");
+            o.heights_mm.assign(heights_mm, heights_mm + n_heights);
         }
         if (is_sim && (o.n != from_uri.n || o.pitch_mm != from_uri.pitch_mm || o.samples != from_uri.samples ||
                        o.heights_mm != from_uri.heights_mm))
@@ -212,17 +288,15 @@ size_t cdm_jig_plan_count(const cdm_jig_plan *plan) { return plan ? plan->positi
 
 int cdm_jig_plan_samples(const cdm_jig_plan *plan) { return plan ? plan->options.samples : 0; }
 
-int cdm_jig_plan_get(const cdm_jig_plan *plan, size_t i, cdm_jig_position *out) {
-    if (!plan || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_jig_plan_get: plan or out is NULL");
+int cdm_jig_plan_get(const cdm_jig_plan *plan, size_t i, int *point, double ref_mm[3]) {
+    if (!plan || !point || !ref_mm)
+        return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_jig_plan_get: plan, point or ref_mm is NULL");
     if (i >= plan->positions.size())
         return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_jig_plan_get: position " + std::to_string(i) + " of " +
                                                   std::to_string(plan->positions.size()));
     const cdm::JigPosition &p = plan->positions[i];
-    out->point = p.point;
-    out->height_index = p.height_index;
-    out->row = p.row;
-    out->col = p.col;
-    std::memcpy(out->ref_mm, p.ref, sizeof p.ref);
+    *point = p.point;
+    std::memcpy(ref_mm, p.ref, sizeof p.ref);
     return CDM_OK;
 }
 
@@ -239,100 +313,71 @@ size_t cdm_effect_param_count(size_t i) {
     return i < v.size() ? v[i]->params.size() : 0;
 }
 
-int cdm_effect_param(size_t i, size_t k, cdm_effect_param_info *out) {
-    if (!out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_effect_param: out is NULL");
+int cdm_effect_param(size_t i, size_t k, const char **name, const char **unit, double *scale, double *lower,
+                     double *upper) {
     auto v = cdm::all_effects();
     if (i >= v.size() || k >= v[i]->params.size())
         return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_effect_param: no parameter " + std::to_string(k) + " of effect " +
                                                   std::to_string(i));
     const cdm::ParamDesc &p = v[i]->params[k];
-    out->name = p.name.c_str();
-    out->unit = p.unit.c_str();
-    out->scale = p.scale;
-    out->lower = p.lower;
-    out->upper = p.upper;
+    if (name) *name = p.name.c_str();
+    if (unit) *unit = p.unit.c_str();
+    if (scale) *scale = p.scale;
+    if (lower) *lower = p.lower;
+    if (upper) *upper = p.upper;
     return CDM_OK;
 }
 
 int cdm_nominal_device_json(char **json) {
     return fenced("cdm_nominal_device_json", [&] {
         if (!json) return null_arg("cdm_nominal_device_json", "json");
-        const std::string text = cdm::device_to_json(cdm::DeviceGeometry{}).dump(2) + "\n";
-        *json = static_cast<char *>(std::malloc(text.size() + 1));
-        if (!*json) return cdm::fail(CDM_ERR_NO_MEM, "cdm_nominal_device_json: out of memory");
-        std::memcpy(*json, text.c_str(), text.size() + 1);
-        return int(CDM_OK);
+        return to_c_string(cdm::device_to_json(cdm::DeviceGeometry{}).dump(2) + "\n", json);
     });
 }
 
-void cdm_jig_sim_defaults(cdm_jig_sim_options *o) {
-    if (!o) return;
-    const cdm::JigSimOptions d;
-    std::memset(o, 0, sizeof *o);
-    o->struct_size = sizeof *o;
-    o->holes = d.n;
-    o->pitch_mm = d.pitch_mm;
-    o->samples = d.samples;
-    o->noise_mm = d.noise_mm;
-    o->quant_mm = d.quant_mm;
-    o->jig_tolerance_mm = d.jig_tolerance_mm;
-    o->seed = d.seed;
-    o->effect_seed = 1;
+int cdm_simulate_jig_defaults(char **options_json) {
+    return fenced("cdm_simulate_jig_defaults", [&] {
+        if (!options_json) return null_arg("cdm_simulate_jig_defaults", "options_json");
+        return to_c_string(sim_options_json(cdm::JigSimOptions{}, 1).dump(), options_json);
+    });
 }
 
-int cdm_simulate_jig_dataset(const char *out_csv, const cdm_jig_sim_options *o) {
+int cdm_simulate_jig_dataset(const char *out_csv, const char *options_json) {
     return fenced("cdm_simulate_jig_dataset", [&] {
         if (!out_csv) return null_arg("cdm_simulate_jig_dataset", "out_csv");
-        if (!o) return null_arg("cdm_simulate_jig_dataset", "options");
-        if (o->struct_size < sizeof(cdm_jig_sim_options))
-            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_simulate_jig_dataset: options->struct_size is too small");
+        SimRequest req;
         std::string err;
+        if (options_json && *options_json && !parse_sim_options(options_json, req, err))
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_simulate_jig_dataset: " + err);
         cdm::DeviceGeometry g;
-        if (o->device_json_path) {
-            std::ifstream f(o->device_json_path);
-            std::stringstream ss;
-            ss << f.rdbuf();
-            if (!f) return cdm::fail(CDM_ERR_IO, std::string(o->device_json_path) + ": cannot open: " + std::strerror(errno));
-            if (!cdm::parse_device_json(ss.str(), o->device_json_path, g, err)) return cdm::fail(CDM_ERR_PARSE, err);
+        if (!req.device.empty()) {
+            std::string text;
+            if (int rc = read_text(req.device, text); rc != CDM_OK) return rc;
+            if (!cdm::parse_device_json(text, req.device, g, err)) return cdm::fail(CDM_ERR_PARSE, err);
         }
         cdm::Model truth(g);
-        if (o->truth_json_path) {
-            std::ifstream f(o->truth_json_path);
-            std::stringstream ss;
-            ss << f.rdbuf();
-            if (!f) return cdm::fail(CDM_ERR_IO, std::string(o->truth_json_path) + ": cannot open: " + std::strerror(errno));
+        if (!req.truth.empty()) {
+            std::string text;
+            if (int rc = read_text(req.truth, text); rc != CDM_OK) return rc;
             nlohmann::json j;
             try {
-                j = nlohmann::json::parse(ss.str());
+                j = nlohmann::json::parse(text);
             } catch (const nlohmann::json::parse_error &e) {
-                return cdm::fail(CDM_ERR_PARSE, std::string(o->truth_json_path) + ": " + json_position(ss.str(), e.byte) +
-                                                    ": not valid JSON");
+                return cdm::fail(CDM_ERR_PARSE, req.truth + ": " + json_position(text, e.byte) + ": not valid JSON");
             }
-            if (!cdm::Model::from_json(j, o->truth_json_path, truth, err)) return cdm::fail(CDM_ERR_PARSE, err);
+            if (!cdm::Model::from_json(j, req.truth, truth, err)) return cdm::fail(CDM_ERR_PARSE, err);
         }
         uint64_t k = 0;
-        for (const auto &e : split_list(o->effects))
-            if (!truth.add_effect_random(e, o->effect_seed + k++, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
-        cdm::JigSimOptions so;
-        so.n = o->holes;
-        so.pitch_mm = o->pitch_mm;
-        if (o->n_heights) {
-            if (!o->heights_mm) return null_arg("cdm_simulate_jig_dataset", "options->heights_mm");
-            so.heights.assign(o->heights_mm, o->heights_mm + o->n_heights);
-        }
-        so.samples = o->samples;
-        so.noise_mm = o->noise_mm;
-        so.quant_mm = o->quant_mm;
-        so.jig_tolerance_mm = o->jig_tolerance_mm;
-        so.seed = o->seed;
-        if (!cdm::simulate_jig_csv(truth, so, out_csv, err)) return cdm::fail(CDM_ERR_IO, err);
-        if (o->truth_out_path) {
-            const std::string tmp = std::string(o->truth_out_path) + ".tmp";
+        for (const auto &e : req.effects)
+            if (!truth.add_effect_random(e, req.effect_seed + k++, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
+        if (!cdm::simulate_jig_csv(truth, req.o, out_csv, err)) return cdm::fail(CDM_ERR_IO, err);
+        if (!req.truth_out.empty()) {
+            const std::string tmp = req.truth_out + ".tmp";
             std::ofstream f(tmp);
             f << truth.to_json().dump(2) << "\n";
             f.close();
-            if (!f || std::rename(tmp.c_str(), o->truth_out_path) != 0)
-                return cdm::fail(CDM_ERR_IO, std::string(o->truth_out_path) + ": cannot write: " + std::strerror(errno));
+            if (!f || std::rename(tmp.c_str(), req.truth_out.c_str()) != 0)
+                return cdm::fail(CDM_ERR_IO, req.truth_out + ": cannot write: " + std::strerror(errno));
         }
         return int(CDM_OK);
     });

@@ -16,7 +16,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "cdm/cdm.h"
+#include <cdm/cdm.h>
 #include "commands.h"
 #include "report.h"
 
@@ -205,25 +205,43 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
 
 struct SimArgs {
     std::string out, effects, truth, device, plugin, heights, truth_out;
-    cdm_jig_sim_options o{};
+    int holes = 0, samples = 0;
+    double pitch_mm = 0, noise_mm = 0, quant_mm = 0, jig_tolerance_mm = 0;
+    uint64_t seed = 0, effect_seed = 0;
 };
 
-int cmd_simulate(SimArgs &a) {
-    std::vector<double> heights;
-    if (!a.heights.empty()) heights = parse_number_list(a.heights, "--heights");
+// The library's defaults, so that --help shows the numbers it will use.
+void sim_defaults(SimArgs &s) {
+    char *text = nullptr;
+    if (cdm_simulate_jig_defaults(&text) != CDM_OK) return;
+    const auto d = nlohmann::json::parse(text);
+    cdm_free_string(text);
+    s.holes = d.at("holes").get<int>();
+    s.samples = d.at("samples").get<int>();
+    s.pitch_mm = d.at("pitch_mm").get<double>();
+    s.noise_mm = d.at("noise_mm").get<double>();
+    s.quant_mm = d.at("quant_mm").get<double>();
+    s.jig_tolerance_mm = d.at("jig_tolerance_mm").get<double>();
+    s.seed = d.at("seed").get<uint64_t>();
+    s.effect_seed = d.at("effect_seed").get<uint64_t>();
+}
+
+int cmd_simulate(const SimArgs &a) {
+    nlohmann::json o = {{"holes", a.holes},       {"samples", a.samples},   {"pitch_mm", a.pitch_mm},
+                        {"noise_mm", a.noise_mm}, {"quant_mm", a.quant_mm}, {"jig_tolerance_mm", a.jig_tolerance_mm},
+                        {"seed", a.seed},         {"effect_seed", a.effect_seed}};
+    if (!a.heights.empty()) o["heights_mm"] = parse_number_list(a.heights, "--heights");
+    if (!a.effects.empty()) o["effects"] = split_list(a.effects);
+    if (!a.device.empty()) o["device"] = a.device;
+    if (!a.truth.empty()) o["truth"] = a.truth;
+    if (!a.truth_out.empty()) o["truth_out"] = a.truth_out;
     if (!a.plugin.empty() && cdm_effect_load_plugin(a.plugin.c_str()) != CDM_OK)
         return report_error("--plugin " + a.plugin, CDM_ERR_INVALID_ARG);
-    cdm_jig_sim_options o = a.o;
-    o.heights_mm = heights.data();
-    o.n_heights = heights.size();
-    o.device_json_path = a.device.empty() ? nullptr : a.device.c_str();
-    o.truth_json_path = a.truth.empty() ? nullptr : a.truth.c_str();
-    o.effects = a.effects.empty() ? nullptr : a.effects.c_str();
-    o.truth_out_path = a.truth_out.empty() ? nullptr : a.truth_out.c_str();
-    if (int rc = cdm_simulate_jig_dataset(a.out.c_str(), &o); rc != CDM_OK) return report_error("calib simulate", rc);
-    const size_t n_heights = heights.empty() ? 5 : heights.size();
-    std::printf("wrote %s (%zu positions x %d samples)\n", a.out.c_str(),
-                n_heights * size_t(o.holes) * size_t(o.holes), o.samples);
+    if (int rc = cdm_simulate_jig_dataset(a.out.c_str(), o.dump().c_str()); rc != CDM_OK)
+        return report_error("calib simulate", rc);
+    const size_t n_heights = o.contains("heights_mm") ? o["heights_mm"].size() : 5;
+    std::printf("wrote %s (%zu positions x %d samples)\n", a.out.c_str(), n_heights * size_t(a.holes) * size_t(a.holes),
+                a.samples);
     return kExitOk;
 }
 
@@ -233,13 +251,14 @@ int cmd_effects(bool json) {
         nlohmann::json e = {{"name", cdm_effect_name(i)}, {"doc", cdm_effect_doc(i)}, {"parameters", nlohmann::json::array()}};
         if (!json) std::printf("%s\n    %s\n    parameters:", cdm_effect_name(i), cdm_effect_doc(i));
         for (size_t k = 0; k < cdm_effect_param_count(i); ++k) {
-            cdm_effect_param_info p{};
-            if (cdm_effect_param(i, k, &p) != CDM_OK) continue;
-            e["parameters"].push_back({{"name", p.name}, {"unit", p.unit}, {"scale", p.scale}, {"lower", p.lower},
-                                       {"upper", p.upper}});
+            const char *name = nullptr, *unit = nullptr;
+            double scale = 0, lower = 0, upper = 0;
+            if (cdm_effect_param(i, k, &name, &unit, &scale, &lower, &upper) != CDM_OK) continue;
+            e["parameters"].push_back(
+                {{"name", name}, {"unit", unit}, {"scale", scale}, {"lower", lower}, {"upper", upper}});
             if (!json)
-                std::printf(" %s [%s, typical %s, bounds %s..%s]", p.name, p.unit, num(p.scale).c_str(),
-                            num(p.lower).c_str(), num(p.upper).c_str());
+                std::printf(" %s [%s, typical %s, bounds %s..%s]", name, unit, num(scale).c_str(), num(lower).c_str(),
+                            num(upper).c_str());
         }
         if (!json) std::printf("\n");
         all.push_back(e);
@@ -260,25 +279,25 @@ void add_diagnose_options(CLI::App *c, DiagArgs &d) {
 
 void add_simulate(CLI::App *calib) {
     static SimArgs s;
-    cdm_jig_sim_defaults(&s.o);
+    sim_defaults(s);
     auto *sim = calib->add_subcommand("simulate", "Write a simulated jig dataset (the seed's experiment) from a known model");
     sim->add_option("out", s.out, "Dataset CSV to write")->required();
     sim->add_option("--device", s.device, "Device description JSON (default: the nominal a=b=150, m=30 mm)");
     sim->add_option("--effects", s.effects,
                     "Hidden effects, a comma-separated list (e.g. exit_pulley,cable_gain), random realistic "
                     "magnitudes (default: none)");
-    sim->add_option("--effect-seed", s.o.effect_seed, "Seed of the hidden effects' magnitudes");
+    sim->add_option("--effect-seed", s.effect_seed, "Seed of the hidden effects' magnitudes");
     sim->add_option("--truth", s.truth, "Calibration JSON to use as the true model (default: the nominal model)");
     sim->add_option("--plugin", s.plugin, "Load a user-effect plugin (.so) first (its effects can be in --truth)");
     sim->add_option("--truth-out", s.truth_out, "Write the true model (with the hidden magnitudes) here");
-    sim->add_option("--seed", s.o.seed, "Noise seed");
-    sim->add_option("--noise-mm", s.o.noise_mm, "Per-sample pot noise std (mm)")->check(range(0, 100));
-    sim->add_option("--quant-mm", s.o.quant_mm, "ADC step (mm)")->check(range(0, 100));
-    sim->add_option("--jig-tolerance-mm", s.o.jig_tolerance_mm, "Std of each position's own error (mm)")
+    sim->add_option("--seed", s.seed, "Noise seed");
+    sim->add_option("--noise-mm", s.noise_mm, "Per-sample pot noise std (mm)")->check(range(0, 100));
+    sim->add_option("--quant-mm", s.quant_mm, "ADC step (mm)")->check(range(0, 100));
+    sim->add_option("--jig-tolerance-mm", s.jig_tolerance_mm, "Std of each position's own error (mm)")
         ->check(range(0, 100));
-    sim->add_option("--samples", s.o.samples, "Samples per position")->check(range(1, 1000000));
-    sim->add_option("--holes", s.o.holes, "Holes per side of the plate")->check(range(1, 1000));
-    sim->add_option("--pitch-mm", s.o.pitch_mm, "Hole pitch (mm)")->check(range(1e-3, 1000));
+    sim->add_option("--samples", s.samples, "Samples per position")->check(range(1, 1000000));
+    sim->add_option("--holes", s.holes, "Holes per side of the plate")->check(range(1, 1000));
+    sim->add_option("--pitch-mm", s.pitch_mm, "Hole pitch (mm)")->check(range(1e-3, 1000));
     sim->add_option("--heights", s.heights, "Comma-separated fixture heights (mm) (default: 30,40,50,60,70)");
     sim->callback([] { select_command([] { return cmd_simulate(s); }); });
 }

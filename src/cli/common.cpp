@@ -8,7 +8,7 @@
 #include <cstdlib>
 #include <sstream>
 
-#include "cdm/cdm.h"
+#include <cdm/cdm.h>
 #include "commands.h"
 
 namespace cdm::cli {

@@ -16,7 +16,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "cdm/cdm.h"
+#include <cdm/cdm.h>
 #include "commands.h"
 
 namespace cdm::cli {

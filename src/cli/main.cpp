@@ -4,7 +4,7 @@
 #include <exception>
 #include <string>
 
-#include "cdm/cdm.h"
+#include <cdm/cdm.h>
 #include "commands.h"
 
 namespace cdm::cli {

@@ -18,7 +18,7 @@
 #include <thread>
 #include <vector>
 
-#include "cdm/cdm.h"
+#include <cdm/cdm.h>
 #include "commands.h"
 
 namespace cdm::cli {
@@ -74,11 +74,12 @@ void close_dwell(RecordCtx &c) {
         c.dwell.clear();
         return;
     }
-    cdm_jig_position jp{};
-    cdm_jig_plan_get(c.plan, c.next_point, &jp);
+    int point = 0;
+    double ref[3] = {0, 0, 0};
+    cdm_jig_plan_get(c.plan, c.next_point, &point, ref);
     for (const auto &l : c.dwell)
-        std::fprintf(c.csv, "%d,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f\n", jp.point, jp.ref_mm[0], jp.ref_mm[1],
-                     jp.ref_mm[2], l[0], l[1], l[2], l[3]);
+        std::fprintf(c.csv, "%d,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f\n", point, ref[0], ref[1], ref[2], l[0], l[1], l[2],
+                     l[3]);
     c.dwell.clear();
     if (++c.next_point == c.plan_n) c.done = true;
 }
@@ -150,15 +151,8 @@ void check_output(const std::string &uri, const std::string &file) {
 cdm_jig_plan *jig_plan_for(const std::string &uri, const JigArgs &a) {
     std::vector<double> heights;
     if (!a.heights.empty()) heights = parse_number_list(a.heights, "--jig-heights");
-    cdm_jig_plan_options o{};
-    o.struct_size = sizeof o;
-    o.holes = a.n;
-    o.pitch_mm = a.pitch;
-    o.samples = a.samples;
-    o.heights_mm = heights.data();
-    o.n_heights = heights.size();
     cdm_jig_plan *plan = nullptr;
-    if (cdm_jig_plan_create(uri.c_str(), &o, &plan) != CDM_OK)
+    if (cdm_jig_plan_create(uri.c_str(), a.n, a.pitch, heights.data(), heights.size(), a.samples, &plan) != CDM_OK)
         throw UsageError(std::string("record --jig: ") + cdm_thread_error());
     return plan;
 }

@@ -45,11 +45,13 @@ extern "C" {
 #endif
 
 #define CDM_VERSION_MAJOR 1
-#define CDM_VERSION_MINOR 0
+/* CMakeLists.txt's project(VERSION) is the one source; the configure step
+ * fails when these differ from it, and tests/cli/test_abi_version.py checks the bindings' copies. */
+#define CDM_VERSION_MINOR 1
 #define CDM_VERSION_PATCH 0
 #define CDM_VERSION_NUMBER (CDM_VERSION_MAJOR * 10000 + CDM_VERSION_MINOR * 100 + CDM_VERSION_PATCH)
 
-/** "1.0.0": the version of the library actually loaded. Static text. Any thread. */
+/** "1.1.0": the version of the library actually loaded. Static text. Any thread. */
 CDM_API const char *cdm_version(void);
 /** CDM_VERSION_NUMBER of the library actually loaded. Any thread. */
 CDM_API int cdm_version_number(void);
@@ -364,6 +366,14 @@ CDM_API int cdm_device_calibration_write(cdm_device *dev, const char *data, size
 #if defined(CDM_EXPERIMENTAL)
 
 /**
+ * Changes with every change to an experimental signature or struct. The
+ * experimental symbols carry the ELF version node CDM_EXPERIMENTAL_<this>
+ * (src/api/libcdm.map), so a program built against another experimental
+ * version fails to load instead of calling a changed function.
+ */
+#define CDM_EXPERIMENTAL_VERSION 1
+
+/**
  * A user-defined physical effect, acting on the cable readings. The model
  * calls `apply` with the readings predicted by the nominal geometry and every
  * effect before it; `apply` changes them in place (mm). Derivatives are taken
@@ -451,6 +461,114 @@ CDM_API int cdm_dataset_writer_add(cdm_dataset_writer *w, int point, const doubl
                                    const double lengths_mm[4]);
 CDM_API int cdm_dataset_writer_commit(cdm_dataset_writer *w);
 CDM_API void cdm_dataset_writer_free(cdm_dataset_writer *w);
+
+/* ------------------------------------------------- experimental: tools (since 1.1)
+ * What the `cdm` command needs beyond the stable API. Experimental: see
+ * CDM_EXPERIMENTAL_VERSION. Every function sets cdm_thread_error() when it
+ * fails.
+ */
+
+/**
+ * The device-info feature report (ID 0x02) of an open device, byte for byte,
+ * report ID first, as the device sent it (a recording starts with it). *len
+ * receives its size; CDM_ERR_NO_MEM when buf is NULL or cap too small (then
+ * *len says how much is needed). Caller owns buf. Any thread; talks to the
+ * device and may block for some milliseconds.
+ */
+CDM_API int cdm_device_info_report(cdm_device *dev, uint8_t *buf, size_t cap, size_t *len);
+
+/**
+ * The position (device frame, mm) the simulated master truly had when it sent
+ * report `sequence` (cdm_pose.sequence), for measuring the driver's error.
+ * CDM_ERR_UNSUPPORTED when dev is not a sim: device or the report is older
+ * than the simulator remembers (16384 reports). Any thread, including the
+ * on_sample callback; does not block on the reader.
+ */
+CDM_API int cdm_sim_truth(cdm_device *dev, uint32_t sequence, double position_mm[3]);
+
+/**
+ * A recording for `replay:FILE` (docs/protocol.md, "Replay files"): opened
+ * with the device-info report (cdm_device_info_report), then every input
+ * report with its host receipt time (cdm_sample.raw->host_time_ns, report and
+ * report_len). The handle is the caller's until cdm_recorder_close, which
+ * flushes, closes and frees it (NULL is fine) and reports a failure to
+ * complete the file. One thread at a time per recorder (the caller
+ * serialises); write may be called from the on_sample callback.
+ */
+typedef struct cdm_recorder cdm_recorder;
+CDM_API int cdm_recorder_open(const char *path, const uint8_t *info_report, size_t len, cdm_recorder **out);
+CDM_API int cdm_recorder_write(cdm_recorder *rec, uint64_t host_time_ns, const uint8_t *report, size_t len);
+CDM_API int cdm_recorder_close(cdm_recorder *rec);
+
+/**
+ * The ordered jig plan of a calibration session (`cdm record --jig`):
+ * holes per side (default 25), hole pitch in mm (default 5), fixture heights
+ * in mm (default 30,40,50,60,70; copied), samples kept per position (default
+ * 100); a zero (or NULL/0 heights) keeps the default. With a sim: URI whose
+ * motion is jig, the simulator's own jig_* options are the defaults, and
+ * values that contradict them are CDM_ERR_INVALID_ARG (the labels would not
+ * match the positions); uri may be NULL. Values are validated
+ * (CDM_ERR_INVALID_ARG naming the field). The plan is the caller's: free it
+ * with cdm_jig_plan_free (NULL is fine). Any thread; a plan is read-only once
+ * made, so several threads may read it.
+ */
+typedef struct cdm_jig_plan cdm_jig_plan;
+CDM_API int cdm_jig_plan_create(const char *uri, int holes, double pitch_mm, const double *heights_mm,
+                                size_t n_heights, int samples, cdm_jig_plan **out);
+CDM_API size_t cdm_jig_plan_count(const cdm_jig_plan *plan);
+/** Samples to keep at each position. */
+CDM_API int cdm_jig_plan_samples(const cdm_jig_plan *plan);
+/** Position i: its dataset `point` id and reference x (height), y, z in mm, jig frame. */
+CDM_API int cdm_jig_plan_get(const cdm_jig_plan *plan, size_t i, int *point, double ref_mm[3]);
+CDM_API void cdm_jig_plan_free(cdm_jig_plan *plan);
+
+/**
+ * The effect catalogue (cdm_effect_count order): the physics in one paragraph
+ * and each parameter (NULL out-pointers are skipped). Strings live as long as the effect is registered
+ * (built-ins: forever); do not free them. Any thread.
+ */
+CDM_API const char *cdm_effect_doc(size_t i);
+CDM_API size_t cdm_effect_param_count(size_t i);
+/** Parameter k of effect i: name, unit, typical magnitude, bounds of the fit. */
+CDM_API int cdm_effect_param(size_t i, size_t k, const char **name, const char **unit, double *scale,
+                             double *lower, double *upper);
+
+/**
+ * The nominal device description (a = b = 150, m = 30 mm: the geometry
+ * cdm_simulate_jig_dataset and `cdm calib diagnose` use without a device
+ * JSON), as device JSON text allocated by the library: free it with
+ * cdm_free_string. Any thread.
+ */
+CDM_API int cdm_nominal_device_json(char **json);
+
+/**
+ * The options of cdm_simulate_jig_dataset with their defaults, as JSON text
+ * allocated by the library (free it with cdm_free_string). Any thread.
+ */
+CDM_API int cdm_simulate_jig_defaults(char **options_json);
+
+/**
+ * Writes a simulated jig dataset CSV (`cdm calib simulate`: the seed's
+ * experiment in software) from a known model. options_json may be NULL or
+ * hold any of: holes, pitch_mm, heights_mm [..], samples, noise_mm, quant_mm,
+ * jig_tolerance_mm, seed, effect_seed (numbers); device (device JSON path;
+ * default the nominal geometry), truth (calibration JSON as the true model),
+ * effects [..] (hidden effects with random realistic magnitudes), truth_out
+ * (where to write the true model). An unknown key or a bad value is
+ * CDM_ERR_INVALID_ARG naming it; other errors name the file. Any thread.
+ */
+CDM_API int cdm_simulate_jig_dataset(const char *out_csv, const char *options_json);
+
+/**
+ * Writes `len` bytes to `path` the way libcdm writes every file: an exclusive
+ * temporary in the target's directory, fsync, rename over the target, fsync
+ * of the directory. The old target survives any failure; a target that is
+ * not a regular file, or is the same file as one of `protect_paths` (the
+ * caller's inputs; n_protect may be 0), is refused (CDM_ERR_IO naming it).
+ * Errors carry the errno text. Any thread.
+ */
+CDM_API int cdm_write_file_atomic(const char *path, const void *data, size_t len, const char *const *protect_paths,
+                                  size_t n_protect);
 
 #endif /* CDM_EXPERIMENTAL */
 

@@ -227,14 +227,5 @@ bool DatasetWriter::commit(std::string &err) {
     return f_.commit(err);
 }
 
-bool write_dataset_csv(const std::string &path, const std::vector<long> &point,
-                       const std::vector<std::array<double, 3>> &ref,
-                       const std::vector<std::array<double, 4>> &len, std::string &err) {
-    DatasetWriter w;
-    if (!w.open(path, {}, err)) return false;
-    for (size_t k = 0; k < point.size(); ++k)
-        if (!w.add_row(point[k], ref[k].data(), len[k].data(), err)) return false;
-    return w.commit(err);
-}
 
 } // namespace cdm

@@ -57,9 +57,6 @@ private:
     std::string buf_;
 };
 
-// Writes a whole dataset through DatasetWriter.
-bool write_dataset_csv(const std::string &path, const std::vector<long> &point,
-                       const std::vector<std::array<double, 3>> &ref,
-                       const std::vector<std::array<double, 4>> &lengths, std::string &err);
+
 
 } // namespace cdm

@@ -47,19 +47,16 @@ template <class Sink> bool run(const Model &truth, const JigSimOptions &o, Sink 
 }
 } // namespace
 
-bool simulate_jig_csv(const Model &truth, const JigSimOptions &o, const std::string &path, std::string &err) {
-    std::vector<long> pt;
-    std::vector<std::array<double, 3>> ref;
-    std::vector<std::array<double, 4>> len;
-    if (!run(truth, o,
-             [&](long id, const double *r, const double *l) {
-                 pt.push_back(id);
-                 ref.push_back({r[0], r[1], r[2]});
-                 len.push_back({l[0], l[1], l[2], l[3]});
-             },
-             err))
+bool simulate_jig_csv(const Model &truth, const JigSimOptions &o, const std::string &path,
+                      const std::vector<std::string> &protect_paths, std::string &err) {
+    // Rows stream into the writer's temporary: memory stays flat however
+    // large the simulated session.
+    DatasetWriter w;
+    if (!w.open(path, protect_paths, err)) return false;
+    bool ok = true;
+    if (!run(truth, o, [&](long id, const double *r, const double *l) { ok = ok && w.add_row(id, r, l, err); }, err))
         return false;
-    return write_dataset_csv(path, pt, ref, len, err);
+    return ok && w.commit(err);
 }
 
 bool simulate_jig(const Model &truth, const JigSimOptions &o, Dataset &out, std::string &err) {

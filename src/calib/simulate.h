@@ -36,8 +36,11 @@ struct JigSimOptions {
     bool scattered = false;
 };
 
-// Writes the CSV text; false + err on I/O or model failure.
-bool simulate_jig_csv(const Model &truth, const JigSimOptions &o, const std::string &path, std::string &err);
+// Streams the CSV through DatasetWriter (atomic; `protect_paths`, the
+// caller's inputs, are refused as the target); false + err on I/O or model
+// failure.
+bool simulate_jig_csv(const Model &truth, const JigSimOptions &o, const std::string &path,
+                      const std::vector<std::string> &protect_paths, std::string &err);
 bool simulate_jig(const Model &truth, const JigSimOptions &o, Dataset &out, std::string &err);
 
 } // namespace cdm

@@ -1,36 +1,28 @@
 // `cdm calib simulate|diagnose|fit|effects`: the model-debugging workflow
-// (docs/calibration.md). The numbers come from libcdm (cdm_diagnose); the
-// figures from the Python package (python3 -m cdm.report).
+// (docs/calibration.md). The numbers come from libcdm (cdm_diagnose,
+// cdm_simulate_jig_dataset); the figures from the Python package
+// (python3 -m cdm.report, report_spawn.cpp).
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
-#include <sstream>
+#include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
-#include "calib/simulate.h"
-#include "cdm/cdm.h"
-#include "cli/commands.h"
-#include "model/effect.h"
-#include "io/calibration_json.h"
-#include "io/device_json.h"
+#include <cdm/cdm.h>
+#include "commands.h"
+#include "report.h"
 
 namespace cdm::cli {
 
 namespace {
-
-std::vector<std::string> split_list(const std::string &s) {
-    std::vector<std::string> v;
-    std::stringstream ss(s);
-    std::string x;
-    while (std::getline(ss, x, ','))
-        if (!x.empty()) v.push_back(x);
-    return v;
-}
 
 int progress_cb(void *, const char *stage, double f) {
     static std::string last;
@@ -98,34 +90,49 @@ void print_summary(const nlohmann::json &r) {
     std::printf("\nVerdict: %s\n", r["verdict"].get<std::string>().c_str());
 }
 
-bool write_atomic(const std::string &path, const std::string &text) {
-    const std::string tmp = path + ".tmp";
-    {
-        std::ofstream f(tmp);
-        f << text;
-        if (!f) return false;
-    }
-    return std::rename(tmp.c_str(), path.c_str()) == 0;
+// Through libcdm's one atomic writer: the old file survives any failure,
+// and the command's inputs (`protect`) are never written over.
+bool write_atomic(const std::string &path, const std::string &text, const std::vector<std::string> &protect) {
+    std::vector<const char *> p;
+    for (const auto &s : protect)
+        if (!s.empty()) p.push_back(s.c_str());
+    if (cdm_write_file_atomic(path.c_str(), text.data(), text.size(), p.data(), p.size()) == CDM_OK) return true;
+    std::fprintf(stderr, "cdm: %s\n", cdm_thread_error());
+    return false;
 }
 
-int run_report(const std::string &json_path, const std::vector<std::string> &before, const std::string &dir) {
-    std::string py = std::getenv("PYTHON") ? std::getenv("PYTHON") : "python3";
-    std::string pp;
-#ifdef CDM_SOURCE_DIR
-    struct stat st;
-    if (stat(CDM_SOURCE_DIR "/bindings/python/cdm/report.py", &st) == 0) pp = CDM_SOURCE_DIR "/bindings/python";
-#endif
-    std::string cmd;
-    if (!pp.empty()) cmd = "PYTHONPATH='" + pp + "'${PYTHONPATH:+:$PYTHONPATH} ";
-    cmd += py + " -m cdm.report";
-    for (auto &b : before) cmd += " '" + b + "'";
-    cmd += " '" + json_path + "' --out '" + dir + "'";
-    int rc = std::system(cmd.c_str());
-    if (rc != 0) {
-        std::fprintf(stderr, "cdm calib: the report tool failed (%s)\n", cmd.c_str());
-        return 1;
+// A device description for cdm_diagnose when --device is absent: the nominal
+// geometry, the same default as `calib simulate`, in a temporary file.
+struct NominalDevice {
+    std::string path;
+    ~NominalDevice() {
+        if (!path.empty()) unlink(path.c_str());
     }
-    return 0;
+};
+
+int nominal_device(NominalDevice &nd) {
+    char *json = nullptr;
+    if (int rc = cdm_nominal_device_json(&json); rc != CDM_OK) return report_error("nominal device", rc);
+    const std::string text = json;
+    cdm_free_string(json);
+    const char *tmpdir = std::getenv("TMPDIR");
+    std::string tmpl = std::string(tmpdir && *tmpdir ? tmpdir : "/tmp") + "/cdm-device-XXXXXX";
+    std::vector<char> name(tmpl.begin(), tmpl.end());
+    name.push_back('\0');
+    const int fd = mkstemp(name.data());
+    if (fd < 0 || write(fd, text.data(), text.size()) != ssize_t(text.size())) {
+        std::fprintf(stderr, "cdm: cannot write a temporary device description in %s: %s\n", tmpl.c_str(),
+                     std::strerror(errno));
+        if (fd >= 0) close(fd);
+        return kExitFailure;
+    }
+    close(fd);
+    nd.path = name.data();
+    const auto g = nlohmann::json::parse(text);
+    std::fprintf(stderr, "cdm: no --device: using the nominal geometry (a %s mm, b %s mm, m %s mm)\n",
+                 num(g.value("a_mm", 0.0)).c_str(), num(g.value("b_mm", 0.0)).c_str(),
+                 num(g.value("m_mm", 0.0)).c_str());
+    return kExitOk;
 }
 
 struct DiagArgs {
@@ -135,101 +142,157 @@ struct DiagArgs {
     bool quiet = false, no_candidates = false;
 };
 
+int write_outputs(const DiagArgs &a, const nlohmann::json &r) {
+    const std::vector<std::string> inputs{a.data, a.device, a.calib_out};
+    if (!a.json_out.empty() && !write_atomic(a.json_out, r.dump(1) + "\n", inputs)) return kExitFailure;
+    if (a.report.empty()) return kExitOk;
+    std::string jp = a.json_out;
+    if (jp.empty()) {
+        if (mkdir(a.report.c_str(), 0755) != 0 && errno != EEXIST) {
+            std::fprintf(stderr, "cdm: --report: cannot create %s: %s\n", a.report.c_str(), std::strerror(errno));
+            return kExitFailure;
+        }
+        jp = a.report + "/diagnosis.json";
+        if (!write_atomic(jp, r.dump() + "\n", inputs)) return kExitFailure;
+    }
+    if (run_report(jp, a.before, a.report) != 0) return kExitFailure;
+    std::printf("report: %s/index.html\n", a.report.c_str());
+    return kExitOk;
+}
+
 int cmd_diagnose(const DiagArgs &a, bool fit_only) {
-    if (!a.plugin.empty() && cdm_effect_load_plugin(a.plugin.c_str()) != CDM_OK) {
-        std::fprintf(stderr, "cdm calib: %s\n", cdm_thread_error());
-        return 2;
+    const auto effects = split_list(a.effects);
+    if (fit_only && effects.empty())
+        throw UsageError("calib fit: --effects is required (a comma-separated list, e.g. cable_offset,cable_gain; "
+                         "`cdm calib effects` lists them): without effects the calibration would correct nothing");
+    if (!a.plugin.empty() && cdm_effect_load_plugin(a.plugin.c_str()) != CDM_OK)
+        return report_error("--plugin " + a.plugin, CDM_ERR_INVALID_ARG);
+    NominalDevice nd;
+    std::string device = a.device;
+    if (device.empty()) {
+        if (int rc = nominal_device(nd); rc != kExitOk) return rc;
+        device = nd.path;
     }
     nlohmann::json o;
-    o["effects"] = split_list(a.effects);
+    o["effects"] = effects;
     if (a.jig >= 0) o["jig_tolerance_mm"] = a.jig;
     if (!a.calib_out.empty()) o["calibration_out"] = a.calib_out;
-    if (!fit_only && a.no_candidates) {
-        o["candidates"] = false;
-        o["validation"] = true;
-    }
+    if (!fit_only && a.no_candidates) o["candidates"] = false;
     char *res = nullptr;
-    // fit: cdm_fit (the fit alone, no candidates/review/validation)
-    int rc = (fit_only ? cdm_fit : cdm_diagnose)(a.data.c_str(), a.device.c_str(), o.dump().c_str(),
-                                                 a.quiet ? nullptr : progress_cb, nullptr, &res);
-    if (rc != CDM_OK) {
-        std::fprintf(stderr, "cdm calib: %s: %s\n", cdm_strerror(rc), cdm_thread_error());
-        return 2;
-    }
-    auto r = nlohmann::json::parse(res);
+    // fit: cdm_fit, the fit alone (no candidates, review or validation)
+    const int rc = (fit_only ? cdm_fit : cdm_diagnose)(a.data.c_str(), device.c_str(), o.dump().c_str(),
+                                                       a.quiet ? nullptr : progress_cb, nullptr, &res);
+    if (rc != CDM_OK) return report_error(fit_only ? "calib fit" : "calib diagnose", rc);
+    const auto r = nlohmann::json::parse(res);
     cdm_free_string(res);
     if (fit_only) {
-        std::printf("fitted %s on %s: x rms %.4f y %.4f z %.4f mm (jig tolerance x %.4f)\n", o["effects"].dump().c_str(),
+        std::printf("fitted %s on %s: x rms %.4f y %.4f z %.4f mm (jig tolerance x %.4f mm)\n", a.effects.c_str(),
                     a.data.c_str(), r["error_mm"]["x"]["rms"].get<double>(), r["error_mm"]["y"]["rms"].get<double>(),
                     r["error_mm"]["z"]["rms"].get<double>(), r["jig_tolerance_mm"][0].get<double>());
         std::printf("calibration written to %s\n", a.calib_out.c_str());
     } else {
         print_summary(r);
     }
-    if (!a.json_out.empty() && !write_atomic(a.json_out, r.dump(1) + "\n")) {
-        std::fprintf(stderr, "cdm calib: cannot write %s\n", a.json_out.c_str());
-        return 2;
-    }
-    if (!a.report.empty()) {
-        std::string jp = a.json_out;
-        if (jp.empty()) {
-            mkdir(a.report.c_str(), 0755);
-            jp = a.report + "/diagnosis.json";
-            if (!write_atomic(jp, r.dump() + "\n")) return 2;
-        }
-        if (run_report(jp, a.before, a.report) != 0) return 1;
-        std::printf("report: %s/index.html\n", a.report.c_str());
-    }
-    return 0;
+    return write_outputs(a, r);
 }
 
 struct SimArgs {
-    std::string out, effects, truth, device, plugin;
-    uint64_t effect_seed = 1, seed = 1;
-    JigSimOptions o;
-    std::string heights;
-    std::string truth_out;
+    std::string out, effects, truth, device, plugin, heights, truth_out;
+    int holes = 0, samples = 0;
+    double pitch_mm = 0, noise_mm = 0, quant_mm = 0, jig_tolerance_mm = 0;
+    uint64_t seed = 0, effect_seed = 0;
 };
 
-int cmd_simulate(SimArgs &a) {
-    DeviceGeometry g;
-    std::string err;
-    if (!a.plugin.empty() && cdm_effect_load_plugin(a.plugin.c_str()) != CDM_OK) {
-        std::fprintf(stderr, "cdm calib simulate: %s\n", cdm_thread_error());
-        return 2;
-    }
-    if (!a.device.empty()) {
-        if (!io::load_device_json(a.device, g, err)) {
-            std::fprintf(stderr, "cdm calib simulate: %s\n", err.c_str());
-            return 2;
+// The library's defaults, so that --help shows the numbers it will use.
+void sim_defaults(SimArgs &s) {
+    char *text = nullptr;
+    if (cdm_simulate_jig_defaults(&text) != CDM_OK) return;
+    const auto d = nlohmann::json::parse(text);
+    cdm_free_string(text);
+    s.holes = d.at("holes").get<int>();
+    s.samples = d.at("samples").get<int>();
+    s.pitch_mm = d.at("pitch_mm").get<double>();
+    s.noise_mm = d.at("noise_mm").get<double>();
+    s.quant_mm = d.at("quant_mm").get<double>();
+    s.jig_tolerance_mm = d.at("jig_tolerance_mm").get<double>();
+    s.seed = d.at("seed").get<uint64_t>();
+    s.effect_seed = d.at("effect_seed").get<uint64_t>();
+}
+
+int cmd_simulate(const SimArgs &a) {
+    nlohmann::json o = {{"holes", a.holes},       {"samples", a.samples},   {"pitch_mm", a.pitch_mm},
+                        {"noise_mm", a.noise_mm}, {"quant_mm", a.quant_mm}, {"jig_tolerance_mm", a.jig_tolerance_mm},
+                        {"seed", a.seed},         {"effect_seed", a.effect_seed}};
+    if (!a.heights.empty()) o["heights_mm"] = parse_number_list(a.heights, "--heights");
+    if (!a.effects.empty()) o["effects"] = split_list(a.effects);
+    if (!a.device.empty()) o["device"] = a.device;
+    if (!a.truth.empty()) o["truth"] = a.truth;
+    if (!a.truth_out.empty()) o["truth_out"] = a.truth_out;
+    if (!a.plugin.empty() && cdm_effect_load_plugin(a.plugin.c_str()) != CDM_OK)
+        return report_error("--plugin " + a.plugin, CDM_ERR_INVALID_ARG);
+    if (int rc = cdm_simulate_jig_dataset(a.out.c_str(), o.dump().c_str()); rc != CDM_OK)
+        return report_error("calib simulate", rc);
+    const size_t n_heights = o.contains("heights_mm") ? o["heights_mm"].size() : 5;
+    std::printf("wrote %s (%zu positions x %d samples)\n", a.out.c_str(), n_heights * size_t(a.holes) * size_t(a.holes),
+                a.samples);
+    return kExitOk;
+}
+
+int cmd_effects(bool json) {
+    nlohmann::json all = nlohmann::json::array();
+    for (size_t i = 0; i < cdm_effect_count(); ++i) {
+        nlohmann::json e = {{"name", cdm_effect_name(i)}, {"doc", cdm_effect_doc(i)}, {"parameters", nlohmann::json::array()}};
+        if (!json) std::printf("%s\n    %s\n    parameters:", cdm_effect_name(i), cdm_effect_doc(i));
+        for (size_t k = 0; k < cdm_effect_param_count(i); ++k) {
+            const char *name = nullptr, *unit = nullptr;
+            double scale = 0, lower = 0, upper = 0;
+            if (cdm_effect_param(i, k, &name, &unit, &scale, &lower, &upper) != CDM_OK) continue;
+            e["parameters"].push_back(
+                {{"name", name}, {"unit", unit}, {"scale", scale}, {"lower", lower}, {"upper", upper}});
+            if (!json)
+                std::printf(" %s [%s, typical %s, bounds %s..%s]", name, unit, num(scale).c_str(), num(lower).c_str(),
+                            num(upper).c_str());
         }
+        if (!json) std::printf("\n");
+        all.push_back(e);
     }
-    Model truth(g);
-    if (!a.truth.empty()) {
-        if (!io::load_calibration(a.truth, truth, err)) {
-            std::fprintf(stderr, "cdm calib simulate: %s\n", err.c_str());
-            return 2;
-        }
-    }
-    int k = 0;
-    for (auto &e : split_list(a.effects))
-        if (!truth.add_effect_random(e, a.effect_seed + uint64_t(k++), err)) {
-            std::fprintf(stderr, "cdm calib simulate: %s\n", err.c_str());
-            return 2;
-        }
-    if (!a.heights.empty()) {
-        a.o.heights.clear();
-        for (auto &h : split_list(a.heights)) a.o.heights.push_back(std::stod(h));
-    }
-    a.o.seed = a.seed;
-    if (!simulate_jig_csv(truth, a.o, a.out, err)) {
-        std::fprintf(stderr, "cdm calib simulate: %s\n", err.c_str());
-        return 2;
-    }
-    if (!a.truth_out.empty() && !write_atomic(a.truth_out, io::model_to_json(truth).dump(2) + "\n")) return 2;
-    std::printf("wrote %s (%zu positions x %d samples)\n", a.out.c_str(),
-                a.o.heights.size() * size_t(a.o.n) * size_t(a.o.n), a.o.samples);
-    return 0;
+    if (json) std::printf("%s\n", all.dump(1).c_str());
+    return kExitOk;
+}
+
+void add_diagnose_options(CLI::App *c, DiagArgs &d) {
+    c->add_option("data", d.data, "Jig dataset CSV: point,x_ref,y_ref,z_ref,l1,l2,l3,l4")->required();
+    c->add_option("--device", d.device,
+                  "Device description JSON {\"a_mm\":..,\"b_mm\":..,\"m_mm\":..} (default: the nominal a=b=150, "
+                  "m=30 mm)");
+    c->add_option("--jig-tolerance-mm", d.jig, "Std of the jig's own position error (-1: estimated from the data)");
+    c->add_option("--plugin", d.plugin, "Load a user-effect plugin (.so) first");
+    c->add_flag("--quiet", d.quiet, "No progress output");
+}
+
+void add_simulate(CLI::App *calib) {
+    static SimArgs s;
+    sim_defaults(s);
+    auto *sim = calib->add_subcommand("simulate", "Write a simulated jig dataset (the seed's experiment) from a known model");
+    sim->add_option("out", s.out, "Dataset CSV to write")->required();
+    sim->add_option("--device", s.device, "Device description JSON (default: the nominal a=b=150, m=30 mm)");
+    sim->add_option("--effects", s.effects,
+                    "Hidden effects, a comma-separated list (e.g. exit_pulley,cable_gain), random realistic "
+                    "magnitudes (default: none)");
+    sim->add_option("--effect-seed", s.effect_seed, "Seed of the hidden effects' magnitudes");
+    sim->add_option("--truth", s.truth, "Calibration JSON to use as the true model (default: the nominal model)");
+    sim->add_option("--plugin", s.plugin, "Load a user-effect plugin (.so) first (its effects can be in --truth)");
+    sim->add_option("--truth-out", s.truth_out, "Write the true model (with the hidden magnitudes) here");
+    sim->add_option("--seed", s.seed, "Noise seed");
+    sim->add_option("--noise-mm", s.noise_mm, "Per-sample pot noise std (mm)")->check(range(0, 100));
+    sim->add_option("--quant-mm", s.quant_mm, "ADC step (mm)")->check(range(0, 100));
+    sim->add_option("--jig-tolerance-mm", s.jig_tolerance_mm, "Std of each position's own error (mm)")
+        ->check(range(0, 100));
+    sim->add_option("--samples", s.samples, "Samples per position")->check(range(1, 1000000));
+    sim->add_option("--holes", s.holes, "Holes per side of the plate")->check(range(1, 1000));
+    sim->add_option("--pitch-mm", s.pitch_mm, "Hole pitch (mm)")->check(range(1e-3, 1000));
+    sim->add_option("--heights", s.heights, "Comma-separated fixture heights (mm) (default: 30,40,50,60,70)");
+    sim->callback([] { select_command([] { return cmd_simulate(s); }); });
 }
 
 } // namespace
@@ -237,62 +300,38 @@ int cmd_simulate(SimArgs &a) {
 void add_calib_commands(CLI::App &app) {
     auto *calib = app.add_subcommand("calib", "Model debugging: compare the model with jig data, find what is missing, "
                                               "fit, write a calibration (docs/calibration.md)");
-    calib->require_subcommand(1);
+    calib->require_subcommand(0, 1);
 
     static DiagArgs d, f;
     auto *diag = calib->add_subcommand("diagnose", "Fit the model with the given effects and diagnose what it misses");
-    diag->add_option("data", d.data, "Jig dataset CSV: point,x_ref,y_ref,z_ref,l1,l2,l3,l4")->required();
-    diag->add_option("--device", d.device, "Device description JSON {\"a_mm\":..,\"b_mm\":..,\"m_mm\":..}")->required();
-    diag->add_option("--effects", d.effects, "Comma-separated effects to fit (default: none, the nominal model)");
-    diag->add_option("--jig-tolerance-mm", d.jig, "Std of the jig's own position error (default: estimated)");
+    add_diagnose_options(diag, d);
+    diag->add_option("--effects", d.effects,
+                     "Effects to fit, a comma-separated list (e.g. cable_offset,cable_gain) (default: none, the "
+                     "nominal model)");
     diag->add_option("--json", d.json_out, "Write the diagnosis JSON here");
-    diag->add_option("--report", d.report, "Write the HTML report with figures into this directory");
+    diag->add_option("--report", d.report,
+                     "Write the HTML report with figures into this directory (runs $PYTHON -m cdm.report; PYTHON "
+                     "defaults to python3)");
     diag->add_option("--before", d.before, "Earlier diagnosis JSON files to compare in the report");
     diag->add_option("--calibration", d.calib_out, "Also write the fitted calibration JSON");
-    diag->add_option("--plugin", d.plugin, "Load a user-effect plugin (.so) first");
     diag->add_flag("--no-candidates", d.no_candidates, "Skip the ranking of missing effects");
-    diag->add_flag("--quiet", d.quiet, "No progress output");
-    diag->callback([] { std::exit(cmd_diagnose(d, false)); });
+    diag->callback([] { select_command([] { return cmd_diagnose(d, false); }); });
 
     auto *fit = calib->add_subcommand("fit", "Fit the model with the given effects and write the calibration");
-    fit->add_option("data", f.data, "Jig dataset CSV")->required();
-    fit->add_option("--device", f.device, "Device description JSON")->required();
-    fit->add_option("--effects", f.effects, "Comma-separated effects to fit");
-    fit->add_option("--jig-tolerance-mm", f.jig, "Std of the jig's own position error (default: estimated)");
+    add_diagnose_options(fit, f);
+    fit->add_option("--effects", f.effects,
+                    "Effects to fit, a comma-separated list (e.g. cable_offset,cable_gain); required")
+        ->required();
     fit->add_option("--out", f.calib_out, "Calibration JSON to write")->required();
     fit->add_option("--json", f.json_out, "Also write the fit statistics JSON");
-    fit->add_option("--plugin", f.plugin, "Load a user-effect plugin (.so) first");
-    fit->add_flag("--quiet", f.quiet, "No progress output");
-    fit->callback([] { std::exit(cmd_diagnose(f, true)); });
+    fit->callback([] { select_command([] { return cmd_diagnose(f, true); }); });
 
-    static SimArgs s;
-    auto *sim = calib->add_subcommand("simulate", "Write a simulated jig dataset (the seed's experiment) from a known model");
-    sim->add_option("out", s.out, "Dataset CSV to write")->required();
-    sim->add_option("--device", s.device, "Device description JSON (default: a=b=150, m=30 mm)");
-    sim->add_option("--effects", s.effects, "Hidden effects, random realistic magnitudes");
-    sim->add_option("--effect-seed", s.effect_seed, "Seed of the hidden effects' magnitudes");
-    sim->add_option("--truth", s.truth, "Calibration JSON to use as the true model");
-    sim->add_option("--plugin", s.plugin, "Load a user-effect plugin (.so) first (its effects can be in --truth)");
-    sim->add_option("--truth-out", s.truth_out, "Write the true model (with the hidden magnitudes) here");
-    sim->add_option("--seed", s.seed, "Noise seed");
-    sim->add_option("--noise-mm", s.o.noise_mm, "Per-sample pot noise std (mm)");
-    sim->add_option("--quant-mm", s.o.quant_mm, "ADC step (mm)");
-    sim->add_option("--jig-tolerance-mm", s.o.jig_tolerance_mm, "Std of each position's own error (mm)");
-    sim->add_option("--samples", s.o.samples, "Samples per position");
-    sim->add_option("--holes", s.o.n, "Holes per side of the plate");
-    sim->add_option("--pitch-mm", s.o.pitch_mm, "Hole pitch (mm)");
-    sim->add_option("--heights", s.heights, "Comma-separated heights (mm)");
-    sim->callback([] { std::exit(cmd_simulate(s)); });
+    add_simulate(calib);
 
     auto *eff = calib->add_subcommand("effects", "List the effect catalogue with each effect's physics");
-    eff->callback([] {
-        for (auto &e : all_effects()) {
-            std::printf("%s\n    %s\n    parameters:", e->name.c_str(), e->doc.c_str());
-            for (auto &p : e->params) std::printf(" %s[%s]", p.name.c_str(), p.unit.c_str());
-            std::printf("\n");
-        }
-        std::exit(0);
-    });
+    static bool e_json = false;
+    eff->add_flag("--json", e_json, "print a JSON array of {name, doc, parameters[{name, unit, scale, lower, upper}]}");
+    eff->callback([] { select_command([] { return cmd_effects(e_json); }); });
 }
 
 } // namespace cdm::cli

@@ -1,10 +1,53 @@
-// Command groups of the `cdm` command; main.cpp wires them into one CLI11 app.
+// Command groups of the `cdm` command and what they share; main.cpp wires
+// them into one CLI11 app. The CLI sees libcdm only through <cdm/cdm.h>
+// (with its experimental block), as any application would.
 #pragma once
 #include <CLI/CLI.hpp>
 
+#include <cstdint>
+#include <functional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
 namespace cdm::cli {
-// `cdm list|info|stream|record` (device_cmd.cpp)
+
+// Exit codes: the same for every subcommand (README, "The cdm command").
+enum Exit : int { kExitOk = 0, kExitFailure = 1, kExitUsage = 2 };
+
+// The command the parse selected; main runs it once parsing succeeded, so
+// that nothing runs inside CLI11's callbacks and every exception reaches
+// main's handler.
+using Command = std::function<int()>;
+void select_command(Command c);
+
+// A usage error found after parsing (a malformed number list, a missing
+// option that depends on another): main prints it and exits kExitUsage.
+struct UsageError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+// `cdm list|info|stream` (device_cmd.cpp), `cdm record` (record_cmd.cpp),
+// `cdm calib ...` (calib_cmd.cpp).
 void add_device_commands(CLI::App &app);
-// `cdm calib fit|diagnose|simulate` (calib_cmd.cpp)
+void add_record_command(CLI::App &app);
 void add_calib_commands(CLI::App &app);
+
+// Monotonic clock of our own (CLOCK_MONOTONIC, the clock libcdm stamps
+// host_time_ns with, so ages computed from the two agree).
+uint64_t now_ns();
+double now_s();
+
+// A number as a person writes it: 1, 0.5, 1000000, 1e-05.
+std::string num(double v);
+// CLI11 range validator whose message prints its bounds with num().
+CLI::Validator range(double lo, double hi);
+
+// "30,40,50" -> {30,40,50}; throws UsageError naming `option` and the item.
+std::vector<double> parse_number_list(const std::string &text, const std::string &option);
+std::vector<std::string> split_list(const std::string &s);
+
+// "cdm: WHAT: <cdm_strerror>: <detail>" on stderr; returns kExitFailure.
+int report_error(const std::string &what, int rc);
+
 } // namespace cdm::cli

@@ -1,45 +1,30 @@
-// `cdm list | info | stream | record`: the device side of the command. Every
-// report goes through the public C API (cdm_open_ex and its sample
-// callback), the same path an application takes.
+// `cdm list | info | stream`: the device side of the command, through the
+// public C API (cdm_open_ex and its sample callback), the path an
+// application takes.
 #include <unistd.h>
 
 #include <algorithm>
-#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <cstring>
-#include <fstream>
 #include <mutex>
-#include <sstream>
 #include <string>
 #include <thread>
-#include <vector>
 
-#include "jig/plan.h"
-#include "cdm/cdm.h"
-#include "cli/commands.h"
-#include "device/device.h"
-#include "device/replay_format.h"
-#include "device/sim/sim_truth.h"
-#include "device/transport.h"
+#include <nlohmann/json.hpp>
+
+#include <cdm/cdm.h>
+#include "commands.h"
 
 namespace cdm::cli {
 
 namespace {
 
 volatile std::sig_atomic_t g_interrupted = 0;
-void on_sigint(int) { g_interrupted = 1; }
-
-int report_error(const char *what, int rc) {
-    std::fprintf(stderr, "cdm: %s: %s", what, cdm_strerror(rc));
-    const char *detail = cdm_thread_error();
-    if (detail && *detail) std::fprintf(stderr, ": %s", detail);
-    std::fprintf(stderr, "\n");
-    return 1;
-}
+void on_signal(int) { g_interrupted = 1; }
 
 std::string flags_text(uint32_t f) {
     std::string s;
@@ -59,14 +44,19 @@ std::string buttons_text(uint32_t b) {
     return s;
 }
 
-double now_s() { return double(cdm::monotonic_ns()) * 1e-9; }
+std::string usb_id(const cdm_device_info &i) {
+    char b[16];
+    std::snprintf(b, sizeof b, "%04x:%04x", i.vendor_id, i.product_id);
+    return b;
+}
 
-int cmd_list() {
+int cmd_list(bool json) {
     cdm_device_list *list = nullptr;
     const int rc = cdm_enumerate(&list);
     if (rc != CDM_OK) return report_error("enumerate", rc);
     const size_t n = cdm_device_list_count(list);
-    if (n == 0) {
+    nlohmann::json out = nlohmann::json::array();
+    if (n == 0 && !json) {
         std::printf("no master connected (USB 1209:cd01)");
         const char *why = cdm_thread_error();
         if (why && *why) std::printf(": %s", why);
@@ -76,27 +66,41 @@ int cmd_list() {
         cdm_device_info info{};
         info.struct_size = sizeof info;
         if (cdm_device_list_get(list, i, &info) != CDM_OK) continue;
-        std::printf("%s  serial %s  firmware %s  %04x:%04x\n", info.uri, info.serial, info.firmware,
-                    info.vendor_id, info.product_id);
+        if (json)
+            out.push_back({{"uri", info.uri}, {"serial", info.serial}, {"firmware", info.firmware},
+                           {"usb_id", usb_id(info)}});
+        else
+            std::printf("%s  serial %s  firmware %s  %s\n", info.uri, info.serial, info.firmware, usb_id(info).c_str());
     }
     cdm_device_list_free(list);
-    return 0;
+    if (json) std::printf("%s\n", out.dump(1).c_str());
+    return kExitOk;
 }
 
-int cmd_info(const std::string &uri) {
-    cdm_device *dev = nullptr;
-    int rc = cdm_open(uri.c_str(), &dev);
-    if (rc != CDM_OK) return report_error(("open " + uri).c_str(), rc);
-    cdm_device_info i{};
-    i.struct_size = sizeof i;
-    rc = cdm_get_info(dev, &i);
-    if (rc != CDM_OK) {
-        cdm_close(dev);
-        return report_error("get info", rc);
-    }
+nlohmann::json info_json(const cdm_device_info &i, long calib_bytes) {
+    return {{"uri", i.uri},
+            {"transport", i.transport},
+            {"usb_id", usb_id(i)},
+            {"serial", i.serial},
+            {"firmware", i.firmware},
+            {"protocol_version", i.protocol_version},
+            {"report_rate_hz", i.report_rate_hz},
+            {"adc_bits", i.adc_bits},
+            {"pot_scale_mm_per_count", i.pot_scale_mm},
+            {"pot_offset_mm", i.pot_offset_mm},
+            {"a_mm", i.a_mm},
+            {"b_mm", i.b_mm},
+            {"m_mm", i.m_mm},
+            {"hall_closed", i.hall_closed},
+            {"hall_open", i.hall_open},
+            {"grip_open_rad", i.grip_open_rad},
+            {"stored_calibration_bytes", calib_bytes < 0 ? nlohmann::json() : nlohmann::json(calib_bytes)}};
+}
+
+void print_info(const cdm_device_info &i, long calib_bytes, const std::string &calib_why) {
     std::printf("uri:              %s\n", i.uri);
     std::printf("transport:        %s\n", i.transport);
-    std::printf("usb id:           %04x:%04x\n", i.vendor_id, i.product_id);
+    std::printf("usb id:           %s\n", usb_id(i).c_str());
     std::printf("serial:           %s\n", i.serial);
     std::printf("firmware:         %s\n", i.firmware);
     std::printf("protocol version: %u\n", i.protocol_version);
@@ -108,14 +112,33 @@ int cmd_info(const std::string &uri) {
     std::printf("geometry:         a %.3f mm, b %.3f mm, m %.3f mm\n", i.a_mm, i.b_mm, i.m_mm);
     std::printf("grip (Hall):      closed %.0f counts, open %.0f counts = %.4f rad\n", i.hall_closed, i.hall_open,
                 i.grip_open_rad);
+    if (calib_bytes >= 0)
+        std::printf("stored calib:     %ld bytes\n", calib_bytes);
+    else
+        std::printf("stored calib:     none (%s)\n", calib_why.c_str());
+}
+
+int cmd_info(const std::string &uri, bool json) {
+    cdm_device *dev = nullptr;
+    int rc = cdm_open(uri.c_str(), &dev);
+    if (rc != CDM_OK) return report_error("open " + uri, rc);
+    cdm_device_info i{};
+    i.struct_size = sizeof i;
+    rc = cdm_get_info(dev, &i);
+    if (rc != CDM_OK) {
+        cdm_close(dev);
+        return report_error("get info", rc);
+    }
     size_t len = 0;
     rc = cdm_device_calibration_read(dev, nullptr, 0, &len);
-    if (rc == CDM_OK || rc == CDM_ERR_NO_MEM)
-        std::printf("stored calib:     %zu bytes\n", len);
-    else
-        std::printf("stored calib:     none (%s)\n", cdm_thread_error());
+    const long calib_bytes = (rc == CDM_OK || rc == CDM_ERR_NO_MEM) ? long(len) : -1;
+    const std::string why = calib_bytes < 0 ? cdm_thread_error() : "";
     cdm_close(dev);
-    return 0;
+    if (json)
+        std::printf("%s\n", info_json(i, calib_bytes).dump(1).c_str());
+    else
+        print_info(i, calib_bytes, why);
+    return kExitOk;
 }
 
 // ----------------------------------------------------------------- stream
@@ -154,7 +177,7 @@ void stream_sample(void *user, const cdm_sample *s) {
     if (c->truth) {
         if (cdm_device *d = c->dev.load()) {
             double p[3];
-            if (sim_truth(d, s->pose->sequence, p)) {
+            if (cdm_sim_truth(d, s->pose->sequence, p) == CDM_OK) {
                 for (int k = 0; k < 3; ++k) e[k] = s->pose->position[k] - p[k];
                 have_truth = true;
             }
@@ -179,86 +202,160 @@ void stream_sample(void *user, const cdm_sample *s) {
     }
 }
 
-int cmd_stream(const std::string &uri, double seconds, double rate, const std::string &calib, bool truth) {
-    StreamCtx ctx;
-    ctx.truth = truth;
+struct StreamArgs {
+    std::string uri, calib;
+    double seconds = 0, rate = 10;
+    bool truth = false, json = false;
+};
+
+// One display line: the live numbers since the previous one.
+struct Tick {
+    cdm_pose p;
+    double hz, age_ms, ex_mean, ex_max, err[3];
+    uint64_t truth_n;
+};
+
+void print_tick(const Tick &t, bool tty, bool truth, bool json) {
+    const cdm_pose &p = t.p;
+    if (json) {
+        nlohmann::json j = {{"sequence", p.sequence},  {"position_mm", p.position}, {"orientation", p.orientation},
+                            {"grip_rad", p.grip},     {"buttons", p.buttons},     {"flags", p.flags},
+                            {"rate_hz", t.hz},        {"age_ms", t.age_ms},       {"delay_excess_mean_ms", t.ex_mean},
+                            {"delay_excess_max_ms", t.ex_max}, {"dropped", p.dropped}};
+        if (truth && t.truth_n) j["error_mm"] = t.err;
+        std::printf("%s\n", j.dump().c_str());
+        std::fflush(stdout);
+        return;
+    }
+    std::printf("%s#%-8u pos %8.3f %8.3f %8.3f mm  q %6.3f %6.3f %6.3f %6.3f  grip %5.3f  btn %s  %s  "
+                "%6.1f Hz  age %6.2f ms  delay+ %5.2f/%5.2f ms  drops %u",
+                tty ? "\r" : "", p.sequence, p.position[0], p.position[1], p.position[2], p.orientation[0],
+                p.orientation[1], p.orientation[2], p.orientation[3], p.grip, buttons_text(p.buttons).c_str(),
+                flags_text(p.flags).c_str(), t.hz, t.age_ms, t.ex_mean, t.ex_max, p.dropped);
+    if (truth && t.truth_n) std::printf("  err %+7.4f %+7.4f %+7.4f mm", t.err[0], t.err[1], t.err[2]);
+    std::printf("%s", tty ? "  " : "\n");
+    std::fflush(stdout);
+}
+
+void print_stream_summary(const StreamArgs &a, const StreamCtx &ctx, const cdm_stats &st, double elapsed,
+                          bool ended, const char *err, bool tty) {
+    const double n = double(ctx.truth_n);
+    if (a.json) {
+        nlohmann::json j = {{"summary", true},
+                            {"reports", st.reports},
+                            {"seconds", elapsed},
+                            {"rate_hz", double(st.reports) / elapsed},
+                            {"dropped", st.dropped},
+                            {"malformed", st.malformed},
+                            {"out_of_workspace", st.out_of_workspace},
+                            {"reconnects", st.reconnects},
+                            {"end_of_stream", ended},
+                            {"last_device_message", err}};
+        if (a.truth && ctx.truth_n) {
+            for (int k = 0; k < 3; ++k) {
+                j["truth_error_mean_mm"].push_back(ctx.err[k].sum / n);
+                j["truth_error_rms_mm"].push_back(std::sqrt(ctx.err[k].sum2 / n));
+            }
+        }
+        std::printf("%s\n", j.dump().c_str());
+        return;
+    }
+    std::printf("%s%llu reports in %.2f s (%.1f Hz), dropped %llu, malformed %llu, out of workspace %llu, "
+                "reconnects %llu%s\n",
+                tty ? "\n" : "", (unsigned long long)st.reports, elapsed, double(st.reports) / elapsed,
+                (unsigned long long)st.dropped, (unsigned long long)st.malformed,
+                (unsigned long long)st.out_of_workspace, (unsigned long long)st.reconnects,
+                ended ? " (end of stream)" : "");
+    if (*err) std::printf("last device message: %s\n", err);
+    if (!a.truth) return;
+    if (ctx.truth_n == 0) {
+        std::printf("no report could be matched with the simulator's truth\n");
+        return;
+    }
+    std::printf("error vs simulator truth over %llu reports (mm):\n", (unsigned long long)ctx.truth_n);
+    const char *ax = "xyz";
+    for (int k = 0; k < 3; ++k)
+        std::printf("  %c: mean %+8.4f  rms %7.4f\n", ax[k], ctx.err[k].sum / n, std::sqrt(ctx.err[k].sum2 / n));
+}
+
+// Opens the device with our sample callback and the calibration, if any.
+int open_stream(const StreamArgs &a, StreamCtx &ctx, cdm_device *&dev, cdm_device_info &info) {
     cdm_open_options o{};
     o.struct_size = sizeof o;
     o.on_sample = stream_sample;
     o.user = &ctx;
-    cdm_device *dev = nullptr;
-    int rc = cdm_open_ex(uri.c_str(), &o, &dev);
-    if (rc != CDM_OK) return report_error(("open " + uri).c_str(), rc);
+    int rc = cdm_open_ex(a.uri.c_str(), &o, &dev);
+    if (rc != CDM_OK) return report_error("open " + a.uri, rc);
     ctx.dev.store(dev);
-    cdm_device_info info{};
     info.struct_size = sizeof info;
     cdm_get_info(dev, &info);
-    if (truth && std::strcmp(info.transport, "sim") != 0) {
+    if (a.truth && std::strcmp(info.transport, "sim") != 0) {
         cdm_close(dev);
-        std::fprintf(stderr, "cdm: --truth needs a sim: device (%s is %s)\n", uri.c_str(), info.transport);
-        return 1;
+        throw UsageError("--truth needs a sim: device (" + a.uri + " is " + info.transport + ")");
     }
-    if (!calib.empty()) {
+    if (!a.calib.empty()) {
         cdm_calibration *cal = nullptr;
-        if (cdm_calibration_load(calib.c_str(), &cal) != CDM_OK) {
+        if ((rc = cdm_calibration_load(a.calib.c_str(), &cal)) != CDM_OK) {
             cdm_close(dev);
-            std::fprintf(stderr, "cdm: --calibration: %s\n", cdm_thread_error());
-            return 1;
+            return report_error("--calibration " + a.calib, rc);
         }
         cdm_set_calibration(dev, cal); // the device keeps its own reference
         cdm_calibration_free(cal);
     }
-    std::printf("streaming %s (%s, serial %s, %.0f Hz nominal); Ctrl-C stops\n", info.uri, info.transport,
-                info.serial, info.report_rate_hz);
-    std::printf("flags: S stale, D disconnected, C compensated, W out of workspace, E end of stream; "
-                "buttons: C clutch, A aux, M mark\n");
-    std::printf("age: newest pose's age when printed; delay+: host receipt minus device clock, over the best "
-                "seen (mean/max)\n");
-    std::signal(SIGINT, on_sigint);
-    const bool tty = isatty(fileno(stdout));
+    return kExitOk;
+}
+
+int cmd_stream(const StreamArgs &a) {
+    StreamCtx ctx;
+    ctx.truth = a.truth;
+    cdm_device *dev = nullptr;
+    cdm_device_info info{};
+    if (int rc = open_stream(a, ctx, dev, info); rc != kExitOk) return rc;
+    const bool tty = !a.json && isatty(fileno(stdout));
+    if (!a.json) {
+        std::printf("streaming %s (%s, serial %s, %.0f Hz nominal); Ctrl-C stops\n", info.uri, info.transport,
+                    info.serial, info.report_rate_hz);
+        std::printf("flags: S stale, D disconnected, C compensated, W out of workspace, E end of stream; "
+                    "buttons: C clutch, A aux, M mark\n");
+        std::printf("age: newest pose's age when printed; delay+: host receipt minus device clock, over the best "
+                    "seen (mean/max)\n");
+    }
+    std::signal(SIGINT, on_signal);
+    std::signal(SIGTERM, on_signal);
     const double t0 = now_s();
     double last_t = t0;
     uint64_t last_reports = 0;
-    const double period = 1.0 / std::max(0.5, rate);
-    int final_rc = CDM_OK;
-    while (!g_interrupted && (seconds <= 0 || now_s() - t0 < seconds)) {
+    const double period = 1.0 / a.rate;
+    bool ended = false;
+    while (!g_interrupted && (a.seconds <= 0 || now_s() - t0 < a.seconds)) {
         std::this_thread::sleep_for(std::chrono::duration<double>(period));
-        cdm_pose p{};
-        p.struct_size = sizeof p;
-        rc = cdm_get_pose(dev, &p);
-        const double t = now_s();
+        Tick t{};
+        t.p.struct_size = sizeof t.p;
+        const int rc = cdm_get_pose(dev, &t.p);
+        const double now = now_s();
         uint64_t reports;
-        double ex_mean, ex_max, le[3];
-        uint64_t tn;
         {
             std::lock_guard<std::mutex> lock(ctx.mu);
             reports = ctx.reports;
-            ex_mean = ctx.excess_n ? ctx.excess_sum_ms / double(ctx.excess_n) : 0.0;
-            ex_max = ctx.excess_max_ms;
+            t.ex_mean = ctx.excess_n ? ctx.excess_sum_ms / double(ctx.excess_n) : 0.0;
+            t.ex_max = ctx.excess_max_ms;
             ctx.excess_sum_ms = ctx.excess_max_ms = 0;
             ctx.excess_n = 0;
-            std::copy(ctx.last_err, ctx.last_err + 3, le);
-            tn = ctx.truth_n;
+            std::copy(ctx.last_err, ctx.last_err + 3, t.err);
+            t.truth_n = ctx.truth_n;
         }
-        const double measured = double(reports - last_reports) / (t - last_t);
+        t.hz = double(reports - last_reports) / (now - last_t);
         last_reports = reports;
-        last_t = t;
+        last_t = now;
         if (rc == CDM_ERR_NO_DATA) {
-            std::printf("%swaiting for the first report...%s", tty ? "\r" : "", tty ? "" : "\n");
+            if (!a.json) std::printf("%swaiting for the first report...%s", tty ? "\r" : "", tty ? "" : "\n");
             std::fflush(stdout);
             continue;
         }
-        const double age_ms = double(cdm::monotonic_ns() - p.host_time_ns) * 1e-6;
-        std::printf("%s#%-8u pos %8.3f %8.3f %8.3f mm  q %6.3f %6.3f %6.3f %6.3f  grip %5.3f  btn %s  %s  "
-                    "%6.1f Hz  age %6.2f ms  delay+ %5.2f/%5.2f ms  drops %u",
-                    tty ? "\r" : "", p.sequence, p.position[0], p.position[1], p.position[2], p.orientation[0],
-                    p.orientation[1], p.orientation[2], p.orientation[3], p.grip, buttons_text(p.buttons).c_str(),
-                    flags_text(p.flags).c_str(), measured, age_ms, ex_mean, ex_max, p.dropped);
-        if (truth && tn) std::printf("  err %+7.4f %+7.4f %+7.4f mm", le[0], le[1], le[2]);
-        std::printf("%s", tty ? "  " : "\n");
-        std::fflush(stdout);
+        t.age_ms = double(int64_t(now_ns() - t.p.host_time_ns)) * 1e-6;
+        print_tick(t, tty, a.truth, a.json);
         if (rc == CDM_ERR_END_OF_STREAM) {
-            final_rc = rc;
+            ended = true;
             break;
         }
     }
@@ -269,285 +366,38 @@ int cmd_stream(const std::string &uri, double seconds, double rate, const std::s
     char err[256] = "";
     cdm_device_error(dev, err, sizeof err);
     cdm_close(dev); // joins the reader thread: ctx is ours alone from here
-    std::printf("%s%llu reports in %.2f s (%.1f Hz), dropped %llu, malformed %llu, out of workspace %llu, "
-                "reconnects %llu%s\n",
-                tty ? "\n" : "", (unsigned long long)st.reports, elapsed, double(st.reports) / elapsed,
-                (unsigned long long)st.dropped, (unsigned long long)st.malformed,
-                (unsigned long long)st.out_of_workspace, (unsigned long long)st.reconnects,
-                final_rc == CDM_ERR_END_OF_STREAM ? " (end of stream)" : "");
-    if (*err) std::printf("last device message: %s\n", err);
-    if (truth) {
-        if (ctx.truth_n == 0) {
-            std::printf("no report could be matched with the simulator's truth\n");
-        } else {
-            const double n = double(ctx.truth_n);
-            std::printf("error vs simulator truth over %llu reports (mm):\n", (unsigned long long)ctx.truth_n);
-            const char *ax = "xyz";
-            for (int k = 0; k < 3; ++k)
-                std::printf("  %c: mean %+8.4f  rms %7.4f\n", ax[k], ctx.err[k].sum / n,
-                            std::sqrt(ctx.err[k].sum2 / n));
-        }
-    }
-    return 0;
+    print_stream_summary(a, ctx, st, elapsed, ended, err, tty);
+    return kExitOk;
 }
 
-// ----------------------------------------------------------------- record
-
-struct RecordCtx {
-    std::mutex mu;
-    // replay
-    replay::Writer *writer = nullptr;
-    std::vector<std::pair<uint64_t, std::vector<uint8_t>>> pending; // before the writer is open
-    std::string write_err;
-    // jig
-    bool jig = false;
-    std::vector<JigPosition> plan;
-    int samples = 100;
-    std::FILE *csv = nullptr;
-    size_t next_point = 0;
-    bool in_dwell = false;
-    std::vector<std::array<double, 4>> dwell;
-    uint64_t short_dwells = 0;
-    std::atomic<bool> done{false};
-    // both
-    uint64_t reports = 0;
-};
-
-void close_dwell(RecordCtx &c) {
-    c.in_dwell = false;
-    if (c.next_point >= c.plan.size()) return;
-    if (c.dwell.size() < size_t(c.samples)) {
-        // Released too early: the same position is asked for again.
-        ++c.short_dwells;
-        c.dwell.clear();
-        return;
-    }
-    const JigPosition &jp = c.plan[c.next_point];
-    for (const auto &l : c.dwell)
-        std::fprintf(c.csv, "%d,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f\n", jp.point, jp.ref[0], jp.ref[1], jp.ref[2], l[0],
-                     l[1], l[2], l[3]);
-    c.dwell.clear();
-    if (++c.next_point == c.plan.size()) c.done = true;
-}
-
-void record_sample(void *user, const cdm_sample *s) {
-    auto *c = static_cast<RecordCtx *>(user);
-    std::lock_guard<std::mutex> lock(c->mu);
-    ++c->reports;
-    if (!c->jig) {
-        if (!c->writer) {
-            c->pending.emplace_back(s->raw->host_time_ns, std::vector<uint8_t>(s->report, s->report + s->report_len));
-        } else if (c->write_err.empty()) {
-            c->writer->write(s->raw->host_time_ns, s->report, s->report_len, c->write_err);
-        }
-        return;
-    }
-    if (c->done) return;
-    const bool mark = s->raw->buttons & CDM_BUTTON_MARK;
-    if (mark) {
-        if (!c->in_dwell) {
-            c->in_dwell = true;
-            c->dwell.clear();
-        }
-        if (c->dwell.size() < size_t(c->samples))
-            c->dwell.push_back({s->raw->lengths_mm[0], s->raw->lengths_mm[1], s->raw->lengths_mm[2],
-                                s->raw->lengths_mm[3]});
-    } else if (c->in_dwell) {
-        close_dwell(*c);
-    }
-}
-
-struct JigArgs {
-    bool jig = false;
-    int n = 0;
-    double pitch = 0;
-    std::string heights;
-    int samples = 0;
-};
-
-// The plan `cdm record --jig` labels with. A sim: URI's jig_* options are the
-// defaults (so that `record "sim:?motion=jig&jig_n=5" --jig` labels what the
-// simulator does); an explicit flag that contradicts them is an error.
-bool jig_plan_for(const std::string &uri, const JigArgs &a, JigPlanOptions &o, std::string &err) {
-    Uri u;
-    if (parse_uri(uri, u, err) == CDM_OK && u.scheme == "sim") {
-        for (const auto &kv : u.options) {
-            if (kv.first == "jig_n") o.n = std::atoi(kv.second.c_str());
-            else if (kv.first == "jig_pitch") o.pitch_mm = std::atof(kv.second.c_str());
-            else if (kv.first == "jig_samples") o.samples = std::atoi(kv.second.c_str());
-            else if (kv.first == "jig_heights" && !parse_heights(kv.second, o.heights_mm, err)) return false;
-        }
-    }
-    err.clear();
-    JigPlanOptions from_uri = o;
-    if (a.n) o.n = a.n;
-    if (a.pitch > 0) o.pitch_mm = a.pitch;
-    if (a.samples) o.samples = a.samples;
-    if (!a.heights.empty() && !parse_heights(a.heights, o.heights_mm, err)) return false;
-    if (u.scheme == "sim" && (o.n != from_uri.n || o.pitch_mm != from_uri.pitch_mm ||
-                              o.samples != from_uri.samples || o.heights_mm != from_uri.heights_mm)) {
-        err = "the --jig-* flags disagree with the simulator's jig_* options in the URI: the labels would not "
-              "match the positions";
-        return false;
-    }
-    return check_jig_options(o, err);
-}
-
-int cmd_record(const std::string &uri, const std::string &file, double seconds, const JigArgs &ja) {
-    RecordCtx ctx;
-    ctx.jig = ja.jig;
-    const std::string tmp = file + ".tmp";
-    if (ja.jig) {
-        JigPlanOptions po;
-        std::string err;
-        if (!jig_plan_for(uri, ja, po, err)) {
-            std::fprintf(stderr, "cdm: record --jig: %s\n", err.c_str());
-            return 1;
-        }
-        ctx.plan = make_jig_plan(po);
-        ctx.samples = po.samples;
-        ctx.csv = std::fopen(tmp.c_str(), "w");
-        if (!ctx.csv) {
-            std::fprintf(stderr, "cdm: cannot create %s: %s\n", tmp.c_str(), std::strerror(errno));
-            return 1;
-        }
-        std::fprintf(ctx.csv, "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n");
-    }
-    cdm_open_options o{};
-    o.struct_size = sizeof o;
-    o.on_sample = record_sample;
-    o.user = &ctx;
-    cdm_device *dev = nullptr;
-    int rc = cdm_open_ex(uri.c_str(), &o, &dev);
-    if (rc != CDM_OK) {
-        if (ctx.csv) std::fclose(ctx.csv);
-        std::remove(tmp.c_str());
-        return report_error(("open " + uri).c_str(), rc);
-    }
-    replay::Writer writer;
-    if (!ja.jig) {
-        // The recording starts with the device's own info report, byte for
-        // byte, so a replay converts exactly as this device did.
-        uint8_t info[256] = {0x02};
-        std::string err;
-        const int n = dev->transport().get_feature(info, sizeof info, err);
-        if (n <= 0 || writer.open(tmp, info, size_t(n), err) != CDM_OK) {
-            cdm_close(dev);
-            std::remove(tmp.c_str());
-            std::fprintf(stderr, "cdm: record: %s\n", err.c_str());
-            return 1;
-        }
-        std::lock_guard<std::mutex> lock(ctx.mu);
-        for (const auto &r : ctx.pending)
-            if (ctx.write_err.empty()) writer.write(r.first, r.second.data(), r.second.size(), ctx.write_err);
-        ctx.pending.clear();
-        ctx.writer = &writer;
-    }
-    std::signal(SIGINT, on_sigint);
-    const bool tty = isatty(fileno(stderr));
-    const double t0 = now_s();
-    double last_print = 0;
-    bool ended = false;
-    while (!g_interrupted && !ctx.done && (seconds <= 0 || now_s() - t0 < seconds)) {
-        std::this_thread::sleep_for(std::chrono::milliseconds(20));
-        cdm_pose p{};
-        p.struct_size = sizeof p;
-        ended = cdm_get_pose(dev, &p) == CDM_ERR_END_OF_STREAM;
-        const double t = now_s() - t0;
-        if (t - last_print >= 0.5 || ended) {
-            last_print = t;
-            std::lock_guard<std::mutex> lock(ctx.mu);
-            if (ja.jig)
-                std::fprintf(stderr, "%sjig position %zu/%zu (%s), %llu reports, %.1f s, drops %u%s",
-                             tty ? "\r" : "", ctx.next_point, ctx.plan.size(), ctx.in_dwell ? "MARK held" : "moving",
-                             (unsigned long long)ctx.reports, t, p.dropped, tty ? "   " : "\n");
-            else
-                std::fprintf(stderr, "%srecorded %llu reports, %.1f s, drops %u%s", tty ? "\r" : "",
-                             (unsigned long long)ctx.reports, t, p.dropped, tty ? "   " : "\n");
-        }
-        if (ended) break;
-    }
-    cdm_stats st{};
-    st.struct_size = sizeof st;
-    cdm_get_stats(dev, &st);
-    cdm_close(dev); // no callback runs after this
-    if (tty) std::fprintf(stderr, "\n");
-    std::string err;
-    bool ok = true;
-    if (ja.jig) {
-        if (ctx.in_dwell) close_dwell(ctx); // the stream ended with MARK still held
-        ok = std::fflush(ctx.csv) == 0 && std::ferror(ctx.csv) == 0;
-        ok = std::fclose(ctx.csv) == 0 && ok;
-        if (!ok) err = tmp + ": write error";
-    } else {
-        if (!ctx.write_err.empty()) {
-            err = ctx.write_err;
-            ok = false;
-        }
-        if (writer.close(err) != CDM_OK) ok = false;
-    }
-    if (!ok || std::rename(tmp.c_str(), file.c_str()) != 0) {
-        std::remove(tmp.c_str());
-        std::fprintf(stderr, "cdm: record: %s\n", err.empty() ? std::strerror(errno) : err.c_str());
-        return 1;
-    }
-    if (ja.jig) {
-        std::printf("wrote %s: %zu of %zu jig positions x %d samples (%llu reports, %llu dwells too short and "
-                    "repeated, %llu dropped)\n",
-                    file.c_str(), ctx.next_point, ctx.plan.size(), ctx.samples, (unsigned long long)ctx.reports,
-                    (unsigned long long)ctx.short_dwells, (unsigned long long)st.dropped);
-        if (ctx.next_point < ctx.plan.size()) {
-            std::fprintf(stderr, "cdm: record: the session stopped before the jig plan was complete\n");
-            return 2;
-        }
-    } else {
-        std::printf("wrote %s: %llu reports (%llu dropped, %llu malformed)\n", file.c_str(),
-                    (unsigned long long)ctx.reports, (unsigned long long)st.dropped,
-                    (unsigned long long)st.malformed);
-    }
-    return 0;
-}
+const char *const kUriHelp = "device URI: sim:[?options], replay:FILE, hid:/dev/hidrawN, serial:SN";
 
 } // namespace
 
 void add_device_commands(CLI::App &app) {
     auto *list = app.add_subcommand("list", "List the connected masters (USB 1209:cd01)");
-    list->callback([] { std::exit(cmd_list()); });
+    static bool l_json = false;
+    list->add_flag("--json", l_json, "print a JSON array of {uri, serial, firmware, usb_id}");
+    list->callback([] { select_command([] { return cmd_list(l_json); }); });
 
     auto *info = app.add_subcommand("info", "Show what a device says about itself (feature report 0x02)");
     static std::string info_uri;
-    info->add_option("URI", info_uri, "device URI: hid:/dev/hidrawN, serial:SN, sim:?..., replay:FILE")->required();
-    info->callback([] { std::exit(cmd_info(info_uri)); });
+    static bool i_json = false;
+    info->add_option("URI", info_uri, kUriHelp)->required();
+    info->add_flag("--json", i_json, "print one JSON object");
+    info->callback([] { select_command([] { return cmd_info(info_uri, i_json); }); });
 
     auto *stream = app.add_subcommand("stream", "Print the live pose, report rate, latency and drops");
-    static std::string s_uri, s_calib;
-    static double s_seconds = 0, s_rate = 10;
-    static bool s_truth = false;
-    stream->add_option("URI", s_uri, "device URI (sim:, replay:FILE, hid:/dev/hidrawN, serial:SN)")->required();
-    stream->add_option("--seconds", s_seconds, "stop after this many seconds (default: until Ctrl-C or the end)");
-    stream->add_option("--rate", s_rate, "display refresh rate in Hz (default 10)")->check(CLI::Range(0.5, 1000.0));
-    stream->add_option("--calibration", s_calib, "apply this calibration (CALIB.json from `cdm calib fit`)");
-    stream->add_flag("--truth", s_truth,
+    static StreamArgs s;
+    stream->add_option("URI", s.uri, kUriHelp)->required();
+    stream->add_option("--seconds", s.seconds, "stop after this many seconds (0: until Ctrl-C or the end)")
+        ->check(range(0, 1e9));
+    stream->add_option("--rate", s.rate, "display refresh rate in Hz")->check(range(0.5, 1000));
+    stream->add_option("--calibration", s.calib, "apply this calibration (CALIB.json from `cdm calib fit`)");
+    stream->add_flag("--truth", s.truth,
                      "sim: only: also show the error against the simulator's true position, and a summary");
-    stream->callback([] { std::exit(cmd_stream(s_uri, s_seconds, s_rate, s_calib, s_truth)); });
-
-    auto *record = app.add_subcommand(
-        "record", "Record a device's reports to a replay file, or with --jig a calibration dataset CSV");
-    static std::string r_uri, r_file;
-    static double r_seconds = 0;
-    static JigArgs ja;
-    record->add_option("URI", r_uri, "device URI")->required();
-    record->add_option("FILE", r_file, "output file (written to FILE.tmp, renamed when complete)")->required();
-    record->add_option("--seconds", r_seconds, "stop after this many seconds (default: until Ctrl-C or the end)");
-    record->add_flag("--jig", ja.jig,
-                     "write the dataset CSV point,x_ref,y_ref,z_ref,l1..l4: each MARK-held dwell is labelled with "
-                     "the next jig-plan position");
-    record->add_option("--jig-n", ja.n, "holes per side of the plate (default 25)")->check(CLI::Range(1, 1000));
-    record->add_option("--jig-pitch", ja.pitch, "hole pitch in mm (default 5)")->check(CLI::PositiveNumber);
-    record->add_option("--jig-heights", ja.heights, "fixture heights in mm (default 30,40,50,60,70)");
-    record->add_option("--jig-samples", ja.samples, "samples kept per position (default 100)")
-        ->check(CLI::Range(1, 1000000));
-    record->callback([] { std::exit(cmd_record(r_uri, r_file, r_seconds, ja)); });
+    stream->add_flag("--json", s.json, "one JSON object per line per refresh, then a summary object");
+    stream->callback([] { select_command([] { return cmd_stream(s); }); });
 }
 
 } // namespace cdm::cli

@@ -156,9 +156,12 @@ int Writer::open(const std::string &path, const uint8_t *info, size_t info_len, 
         err = "device-info report of " + std::to_string(info_len) + " bytes (1..1024)";
         return CDM_ERR_INVALID_ARG;
     }
-    fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NOCTTY, 0644);
+    // A new file only: never truncates an existing one (an earlier
+    // recording, or whatever a planted symlink points at).
+    fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC | O_NOCTTY, 0644);
     if (fd_ < 0) {
-        err = path + ": cannot create: " + std::strerror(errno);
+        err = path + ": cannot create: " + std::strerror(errno) +
+              (errno == EEXIST ? " (not writing over an existing file; an interrupted recording plays as replay:)" : "");
         return CDM_ERR_IO;
     }
     path_ = path;

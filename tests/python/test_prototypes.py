@@ -13,6 +13,8 @@ def _kind_c(t):
         return "fnptr"
     if "*" in t:
         return "char*" if t.replace("const", "").split() == ["char", "*"] else "ptr"
+    if t == "uint64_t" and ctypes.c_uint64 is ctypes.c_size_t:
+        return "size_t"  # one ctypes type on LP64: the binding cannot say which it meant
     return t.replace("const ", "")
 
 
@@ -25,7 +27,8 @@ def _kind_py(ct):
         return "fnptr"
     if ct is ctypes.c_void_p or (isinstance(ct, type) and issubclass(ct, ctypes._Pointer)):
         return "ptr"
-    return {ctypes.c_int: "int", ctypes.c_size_t: "size_t", ctypes.c_uint32: "uint32_t"}.get(ct, repr(ct))
+    return {ctypes.c_int: "int", ctypes.c_size_t: "size_t", ctypes.c_uint32: "uint32_t",
+            ctypes.c_double: "double"}.get(ct, repr(ct))
 
 
 def test_parser_sees_the_header():

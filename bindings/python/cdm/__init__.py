@@ -19,7 +19,24 @@ from .diagnosis import diagnose, fit
 from .effects import effect_names, load_plugin, register_effect, unregister_effect
 from .errors import CdmError, LibraryNotFoundError
 
-__version__ = "1.0.0"
+
+
+def __getattr__(name):
+    # __version__ is the loaded library's (the version lives in one place,
+    # CMakeLists.txt); read lazily so that `import cdm` works without libcdm,
+    # and from the installed package's metadata when libcdm cannot be loaded.
+    if name == "__version__":
+        try:
+            return version()
+        except LibraryNotFoundError:
+            from importlib.metadata import PackageNotFoundError
+            from importlib.metadata import version as _dist_version
+
+            try:
+                return _dist_version("cdm")
+            except PackageNotFoundError:
+                return "unknown"
+    raise AttributeError("module 'cdm' has no attribute %r" % name)
 
 # cdm.enumerate() mirrors cdm_enumerate; enumerate_devices is the same without
 # shadowing the builtin in `from cdm import *`.
@@ -27,7 +44,7 @@ enumerate = enumerate_devices  # noqa: A001
 
 
 def version():
-    """Version text of the libcdm actually loaded ("1.0.0")."""
+    """Version text of the libcdm actually loaded ("1.1.0")."""
     return _native.lib().cdm_version().decode("ascii")
 
 

@@ -191,6 +191,25 @@ PROTOTYPES = {
     "cdm_dataset_writer_add": (_int, [_handle, _int, c_double_p, c_double_p]),
     "cdm_dataset_writer_commit": (_int, [_handle]),
     "cdm_dataset_writer_free": (None, [_handle]),
+    # CDM_EXPERIMENTAL, tools (the `cdm` command's needs)
+    "cdm_device_info_report": (_int, [_handle, ctypes.POINTER(ctypes.c_uint8), _size, ctypes.POINTER(ctypes.c_size_t)]),
+    "cdm_sim_truth": (_int, [_handle, ctypes.c_uint32, c_double_p]),
+    "cdm_recorder_open": (_int, [_str, ctypes.POINTER(ctypes.c_uint8), _size, _handle_p]),
+    "cdm_recorder_write": (_int, [_handle, ctypes.c_uint64, ctypes.POINTER(ctypes.c_uint8), _size]),
+    "cdm_recorder_close": (_int, [_handle]),
+    "cdm_jig_plan_create": (_int, [_str, _int, ctypes.c_double, c_double_p, _size, _int, _handle_p]),
+    "cdm_jig_plan_count": (_size, [_handle]),
+    "cdm_jig_plan_samples": (_int, [_handle]),
+    "cdm_jig_plan_get": (_int, [_handle, _size, ctypes.POINTER(ctypes.c_int), c_double_p]),
+    "cdm_jig_plan_free": (None, [_handle]),
+    "cdm_effect_doc": (_str, [_size]),
+    "cdm_effect_param_count": (_size, [_size]),
+    "cdm_effect_param": (_int, [_size, _size, ctypes.POINTER(ctypes.c_char_p), ctypes.POINTER(ctypes.c_char_p),
+                                c_double_p, c_double_p, c_double_p]),
+    "cdm_nominal_device_json": (_int, [_handle_p]),
+    "cdm_simulate_jig_defaults": (_int, [_handle_p]),
+    "cdm_simulate_jig_dataset": (_int, [_str, _str]),
+    "cdm_write_file_atomic": (_int, [_str, ctypes.c_void_p, _size, ctypes.POINTER(ctypes.c_char_p), _size]),
 }
 
 

@@ -98,11 +98,32 @@ static void write_is_atomic(void **) {
     int fd = mkstemp(path);
     assert_true(fd >= 0);
     close(fd);
-    assert_true(write_dataset_csv(path, {1, 1}, {{30, 0, 0}, {30, 0, 0}}, {{1, 2, 3, 4}, {1, 2, 3, 4}}, err));
+    const double ref[3] = {30, 0, 0}, len[4] = {1, 2, 3, 4};
+    {
+        DatasetWriter w;
+        assert_true(w.open(path, {}, err));
+        assert_true(w.add_row(1, ref, len, err) && w.add_row(1, ref, len, err));
+        // Not committed yet: the target is still the old (empty) file.
+        Dataset d;
+        assert_false(load_dataset(path, d, err));
+        assert_true(w.commit(err));
+    }
     Dataset d;
     assert_true(load_dataset(path, d, err));
     assert_int_equal(d.rows, 2);
-    assert_false(write_dataset_csv("/nonexistent-dir/x.csv", {1}, {{30, 0, 0}}, {{1, 2, 3, 4}}, err));
+    {
+        DatasetWriter w;
+        assert_false(w.open("/nonexistent-dir/x.csv", {}, err));
+        assert_non_null(strstr(err.c_str(), "No such file or directory"));
+    }
+    {
+        // Abandoned (destroyed without commit): the committed file is intact.
+        DatasetWriter w;
+        assert_true(w.open(path, {}, err));
+        assert_true(w.add_row(2, ref, len, err));
+    }
+    assert_true(load_dataset(path, d, err));
+    assert_int_equal(d.rows, 2);
     unlink(path);
 }
 

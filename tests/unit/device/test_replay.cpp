@@ -329,7 +329,8 @@ void test_replay_recording_survives_sigkill(void **) {
 }
 
 // A full disk (here: a file-size limit, same failure path as ENOSPC) keeps
-// every complete record and names the errno; /dev/full names ENOSPC.
+// every complete record and names the errno. An existing path (/dev/full,
+// an earlier recording) is refused: the writer only creates new files.
 void test_replay_writer_full_disk_keeps_records(void **) {
     const std::string good = tmp_path("fd.cdmrec"), out = tmp_path("full.cdmrec");
     record("sim:?realtime=0&motion=still", good, 1);
@@ -339,7 +340,9 @@ void test_replay_writer_full_disk_keeps_records(void **) {
     {
         cdm::replay::Writer w;
         assert_int_equal(w.open("/dev/full", f.info.data(), f.info.size(), err), CDM_ERR_IO);
-        assert_non_null(std::strstr(err.c_str(), "No space left on device"));
+        assert_non_null(std::strstr(err.c_str(), "File exists"));
+        assert_int_equal(w.open(good, f.info.data(), f.info.size(), err), CDM_ERR_IO);
+        assert_non_null(std::strstr(err.c_str(), "not writing over an existing file"));
     }
     const pid_t pid = fork();
     if (pid == 0) {

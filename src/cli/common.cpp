@@ -1,0 +1,87 @@
+// What the command groups share: exit codes, the clock, number parsing and
+// printing.
+#include <time.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <sstream>
+
+#include <cdm/cdm.h>
+#include "commands.h"
+
+namespace cdm::cli {
+
+uint64_t now_ns() {
+    timespec ts{};
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return uint64_t(ts.tv_sec) * 1000000000ull + uint64_t(ts.tv_nsec);
+}
+
+double now_s() { return double(now_ns()) * 1e-9; }
+
+std::string num(double v) {
+    char b[32];
+    // Whole numbers in full (1000000, not 1e+06), the rest as %g.
+    if (std::isfinite(v) && v == std::floor(v) && std::fabs(v) < 1e15)
+        std::snprintf(b, sizeof b, "%.0f", v);
+    else
+        std::snprintf(b, sizeof b, "%g", v);
+    return b;
+}
+
+CLI::Validator range(double lo, double hi) {
+    const std::string desc = "in [" + num(lo) + ", " + num(hi) + "]";
+    return CLI::Validator(
+        [lo, hi, desc](std::string &s) -> std::string {
+            char *end = nullptr;
+            errno = 0;
+            const double v = std::strtod(s.c_str(), &end);
+            if (s.empty() || *end || errno == ERANGE || !std::isfinite(v)) return "\"" + s + "\" is not a number";
+            if (v < lo || v > hi) return s + " is not " + desc;
+            return std::string();
+        },
+        desc);
+}
+
+std::vector<std::string> split_list(const std::string &s) {
+    std::vector<std::string> v;
+    std::stringstream ss(s);
+    std::string x;
+    while (std::getline(ss, x, ','))
+        if (!x.empty()) v.push_back(x);
+    return v;
+}
+
+std::vector<double> parse_number_list(const std::string &text, const std::string &option) {
+    std::vector<double> out;
+    for (const auto &item : split_list(text)) {
+        char *end = nullptr;
+        errno = 0;
+        const double v = std::strtod(item.c_str(), &end);
+        if (*end || errno == ERANGE || !std::isfinite(v))
+            throw UsageError(option + ": \"" + item + "\" is not a number (expected a comma-separated list such as "
+                                                      "30,40,50)");
+        out.push_back(v);
+    }
+    if (out.empty()) throw UsageError(option + ": empty list (expected a comma-separated list such as 30,40,50)");
+    return out;
+}
+
+int report_error(const std::string &what, int rc) {
+    std::fprintf(stderr, "cdm: %s: %s", what.c_str(), cdm_strerror(rc));
+    std::string detail = cdm_thread_error() ? cdm_thread_error() : "";
+    // The JSON parser's internal codes ("[json.exception.parse_error.101] ")
+    // mean nothing to a user; the library's own text around them says where
+    // and what. Until every loader words its errors itself, they stop here.
+    for (size_t at; (at = detail.find("[json.exception.")) != std::string::npos;) {
+        const size_t end = detail.find(']', at);
+        detail.erase(at, end == std::string::npos ? std::string::npos : end + 2 - at);
+    }
+    if (!detail.empty()) std::fprintf(stderr, ": %s", detail.c_str());
+    std::fprintf(stderr, "\n");
+    return kExitFailure;
+}
+
+} // namespace cdm::cli

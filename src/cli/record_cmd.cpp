@@ -1,0 +1,335 @@
+// `cdm record`: a device's reports to a replay file, or with --jig a
+// calibration dataset CSV. Kill-safe: SIGINT, SIGTERM and SIGHUP all finish
+// the file cleanly; a write error (a full disk) keeps what was written and
+// names the real cause; the output never replaces one of its inputs or a
+// file that is not a regular file.
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <array>
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <cstring>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <cdm/cdm.h>
+#include "commands.h"
+
+namespace cdm::cli {
+
+namespace {
+
+volatile std::sig_atomic_t g_stop = 0;
+void on_stop(int) { g_stop = 1; }
+
+void install_stop_handlers() {
+    struct sigaction sa {};
+    sa.sa_handler = on_stop;
+    sigemptyset(&sa.sa_mask);
+    for (int s : {SIGINT, SIGTERM, SIGHUP}) sigaction(s, &sa, nullptr);
+}
+
+struct JigArgs {
+    bool jig = false;
+    int n = 0;
+    double pitch = 0;
+    std::string heights;
+    int samples = 0;
+};
+
+struct RecordCtx {
+    std::mutex mu;
+    // replay
+    cdm_recorder *rec = nullptr;
+    std::vector<std::pair<uint64_t, std::vector<uint8_t>>> pending; // before the recorder is open
+    bool write_failed = false;
+    std::string write_err;
+    // jig
+    bool jig = false;
+    cdm_jig_plan *plan = nullptr;
+    size_t plan_n = 0;
+    int samples = 100;
+    cdm_dataset_writer *csv = nullptr;
+    size_t next_point = 0;
+    bool in_dwell = false;
+    std::vector<std::array<double, 4>> dwell;
+    uint64_t short_dwells = 0;
+    std::atomic<bool> done{false};
+    // both
+    uint64_t reports = 0;
+};
+
+void close_dwell(RecordCtx &c) {
+    c.in_dwell = false;
+    if (c.next_point >= c.plan_n) return;
+    if (c.dwell.size() < size_t(c.samples)) {
+        // Released too early: the same position is asked for again.
+        ++c.short_dwells;
+        c.dwell.clear();
+        return;
+    }
+    int point = 0;
+    double ref[3] = {0, 0, 0};
+    cdm_jig_plan_get(c.plan, c.next_point, &point, ref);
+    for (const auto &l : c.dwell)
+        if (!c.write_failed && cdm_dataset_writer_add(c.csv, point, ref, l.data()) != CDM_OK) {
+            c.write_failed = true;
+            c.write_err = cdm_thread_error();
+            c.done = true;
+        }
+    c.dwell.clear();
+    if (++c.next_point == c.plan_n) c.done = true;
+}
+
+void record_sample(void *user, const cdm_sample *s) {
+    auto *c = static_cast<RecordCtx *>(user);
+    std::lock_guard<std::mutex> lock(c->mu);
+    ++c->reports;
+    if (!c->jig) {
+        if (!c->rec) {
+            c->pending.emplace_back(s->raw->host_time_ns, std::vector<uint8_t>(s->report, s->report + s->report_len));
+            return;
+        }
+        if (!c->write_failed &&
+            cdm_recorder_write(c->rec, s->raw->host_time_ns, s->report, s->report_len) != CDM_OK) {
+            c->write_failed = true;
+            c->write_err = cdm_thread_error(); // this thread's: the reader's
+            c->done = true;
+        }
+        return;
+    }
+    if (c->done) return;
+    if (s->raw->buttons & CDM_BUTTON_MARK) {
+        if (!c->in_dwell) {
+            c->in_dwell = true;
+            c->dwell.clear();
+        }
+        if (c->dwell.size() < size_t(c->samples))
+            c->dwell.push_back({s->raw->lengths_mm[0], s->raw->lengths_mm[1], s->raw->lengths_mm[2],
+                                s->raw->lengths_mm[3]});
+    } else if (c->in_dwell) {
+        close_dwell(*c);
+    }
+}
+
+// The files a URI reads: replay:PATH, and a sim:'s device=/truth= options.
+std::vector<std::string> uri_inputs(const std::string &uri) {
+    std::vector<std::string> v;
+    const size_t q = uri.find('?');
+    if (uri.rfind("replay:", 0) == 0) v.push_back(uri.substr(7, q == std::string::npos ? q : q - 7));
+    if (q == std::string::npos) return v;
+    size_t i = q + 1;
+    while (i < uri.size()) {
+        size_t e = uri.find('&', i);
+        if (e == std::string::npos) e = uri.size();
+        const std::string opt = uri.substr(i, e - i);
+        for (const char *k : {"device=", "truth="})
+            if (opt.rfind(k, 0) == 0) v.push_back(opt.substr(std::strlen(k)));
+        i = e + 1;
+    }
+    return v;
+}
+
+// Refuses an output that would replace an input or a non-regular file
+// (a device node, a FIFO, a directory): a usage error, before anything opens.
+void check_output(const std::string &uri, const std::string &file) {
+    struct stat out {};
+    for (const std::string &p : {file, file + ".tmp"}) {
+        if (stat(p.c_str(), &out) != 0) continue;
+        if (!S_ISREG(out.st_mode)) throw UsageError(p + " exists and is not a regular file: not writing over it");
+        for (const auto &in : uri_inputs(uri)) {
+            struct stat st {};
+            if (stat(in.c_str(), &st) == 0 && st.st_dev == out.st_dev && st.st_ino == out.st_ino)
+                throw UsageError(p + " is the input " + in + " of " + uri + ": not writing over it");
+        }
+    }
+}
+
+cdm_jig_plan *jig_plan_for(const std::string &uri, const JigArgs &a) {
+    std::vector<double> heights;
+    if (!a.heights.empty()) heights = parse_number_list(a.heights, "--jig-heights");
+    cdm_jig_plan *plan = nullptr;
+    if (cdm_jig_plan_create(uri.c_str(), a.n, a.pitch, heights.data(), heights.size(), a.samples, &plan) != CDM_OK)
+        throw UsageError(std::string("record --jig: ") + cdm_thread_error());
+    return plan;
+}
+
+// The replay header: the device's own info report, byte for byte, so a
+// replay converts exactly as this device did.
+int open_recorder(cdm_device *dev, const std::string &tmp, RecordCtx &ctx) {
+    uint8_t info[1024];
+    size_t len = 0;
+    int rc = cdm_device_info_report(dev, info, sizeof info, &len);
+    if (rc != CDM_OK) return report_error("record: device-info report", rc);
+    cdm_recorder *rec = nullptr;
+    if ((rc = cdm_recorder_open(tmp.c_str(), info, len, &rec)) != CDM_OK) return report_error("record", rc);
+    std::lock_guard<std::mutex> lock(ctx.mu);
+    ctx.rec = rec;
+    for (const auto &r : ctx.pending)
+        if (!ctx.write_failed && cdm_recorder_write(rec, r.first, r.second.data(), r.second.size()) != CDM_OK) {
+            ctx.write_failed = true;
+            ctx.write_err = cdm_thread_error();
+            ctx.done = true;
+        }
+    ctx.pending.clear();
+    return kExitOk;
+}
+
+void progress(RecordCtx &ctx, bool jig, double t, uint32_t dropped, bool tty) {
+    std::lock_guard<std::mutex> lock(ctx.mu);
+    if (jig)
+        std::fprintf(stderr, "%sjig position %zu/%zu (%s), %llu reports, %.1f s, drops %u%s", tty ? "\r" : "",
+                     ctx.next_point, ctx.plan_n, ctx.in_dwell ? "MARK held" : "moving",
+                     (unsigned long long)ctx.reports, t, dropped, tty ? "   " : "\n");
+    else
+        std::fprintf(stderr, "%srecorded %llu reports, %.1f s, drops %u%s", tty ? "\r" : "",
+                     (unsigned long long)ctx.reports, t, dropped, tty ? "   " : "\n");
+}
+
+// Runs until the time is up, the stream ends, the plan is complete, a write
+// fails or a stop signal arrives.
+void record_loop(cdm_device *dev, RecordCtx &ctx, double seconds, bool jig) {
+    const bool tty = isatty(fileno(stderr));
+    const double t0 = now_s();
+    double last_print = -1;
+    while (!g_stop && !ctx.done && (seconds <= 0 || now_s() - t0 < seconds)) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        cdm_pose p{};
+        p.struct_size = sizeof p;
+        const bool ended = cdm_get_pose(dev, &p) == CDM_ERR_END_OF_STREAM;
+        const double t = now_s() - t0;
+        if (t - last_print >= 0.5 || ended) {
+            last_print = t;
+            progress(ctx, jig, t, p.dropped, tty);
+        }
+        if (ended) break;
+    }
+    if (tty) std::fprintf(stderr, "\n");
+}
+
+// Completes the file: flush, close, rename into place. A write error keeps
+// what was written (renamed all the same) and fails.
+int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, const cdm_stats &st) {
+    std::string err = ctx.write_err;
+    if (ctx.jig) {
+        if (ctx.in_dwell) close_dwell(ctx); // the stream ended with MARK still held
+        err = ctx.write_err;
+        // The dataset is committed (fsync, rename) only whole: after a write
+        // error the old FILE, if any, is left as it was.
+        const bool ok = err.empty() && cdm_dataset_writer_commit(ctx.csv) == CDM_OK;
+        if (!ok && err.empty()) err = cdm_thread_error();
+        cdm_dataset_writer_free(ctx.csv);
+        ctx.csv = nullptr;
+        if (!ok) {
+            std::fprintf(stderr, "cdm: record: %s; %s not written\n", err.c_str(), file.c_str());
+            return kExitFailure;
+        }
+    } else {
+        if (cdm_recorder_close(ctx.rec) != CDM_OK && err.empty()) err = cdm_thread_error();
+        if (std::rename(tmp.c_str(), file.c_str()) != 0) {
+            std::fprintf(stderr, "cdm: record: cannot rename %s to %s: %s\n", tmp.c_str(), file.c_str(),
+                         std::strerror(errno));
+            return kExitFailure;
+        }
+    }
+    if (!err.empty()) {
+        std::fprintf(stderr, "cdm: record: %s; %s keeps what was written before the error\n", err.c_str(),
+                     file.c_str());
+        return kExitFailure;
+    }
+    if (ctx.jig) {
+        std::printf("wrote %s: %zu of %zu jig positions x %d samples (%llu reports, %llu dwells too short and "
+                    "repeated, %llu dropped)\n",
+                    file.c_str(), ctx.next_point, ctx.plan_n, ctx.samples, (unsigned long long)ctx.reports,
+                    (unsigned long long)ctx.short_dwells, (unsigned long long)st.dropped);
+        if (ctx.next_point < ctx.plan_n) {
+            std::fprintf(stderr, "cdm: record: the session stopped before the jig plan was complete\n");
+            return kExitFailure;
+        }
+    } else {
+        std::printf("wrote %s: %llu reports (%llu dropped, %llu malformed)\n", file.c_str(),
+                    (unsigned long long)ctx.reports, (unsigned long long)st.dropped, (unsigned long long)st.malformed);
+    }
+    return kExitOk;
+}
+
+int cmd_record(const std::string &uri, const std::string &file, double seconds, const JigArgs &ja) {
+    check_output(uri, file);
+    RecordCtx ctx;
+    ctx.jig = ja.jig;
+    const std::string tmp = file + ".tmp";
+    install_stop_handlers(); // before the first report: a stop at any moment finishes the file
+    if (ja.jig) {
+        ctx.plan = jig_plan_for(uri, ja);
+        ctx.plan_n = cdm_jig_plan_count(ctx.plan);
+        ctx.samples = cdm_jig_plan_samples(ctx.plan);
+        const auto inputs = uri_inputs(uri);
+        std::vector<const char *> protect;
+        for (const auto &p : inputs) protect.push_back(p.c_str());
+        if (cdm_dataset_writer_open(file.c_str(), protect.data(), protect.size(), &ctx.csv) != CDM_OK) {
+            std::fprintf(stderr, "cdm: record: %s\n", cdm_thread_error());
+            cdm_jig_plan_free(ctx.plan);
+            return kExitFailure;
+        }
+    }
+    cdm_open_options o{};
+    o.struct_size = sizeof o;
+    o.on_sample = record_sample;
+    o.user = &ctx;
+    cdm_device *dev = nullptr;
+    int rc = cdm_open_ex(uri.c_str(), &o, &dev);
+    if (rc == CDM_OK && !ja.jig && (rc = open_recorder(dev, tmp, ctx)) != kExitOk) {
+        cdm_close(dev);
+        return rc;
+    }
+    if (rc != CDM_OK) {
+        cdm_dataset_writer_free(ctx.csv); // removes its temporary
+        cdm_jig_plan_free(ctx.plan);
+        return report_error("open " + uri, rc);
+    }
+    record_loop(dev, ctx, seconds, ja.jig);
+    cdm_stats st{};
+    st.struct_size = sizeof st;
+    cdm_get_stats(dev, &st);
+    cdm_close(dev); // no callback runs after this
+    rc = finish(ctx, tmp, file, st);
+    cdm_jig_plan_free(ctx.plan);
+    return rc;
+}
+
+} // namespace
+
+void add_record_command(CLI::App &app) {
+    auto *record = app.add_subcommand(
+        "record", "Record a device's reports to a replay file, or with --jig a calibration dataset CSV. "
+                  "Ctrl-C, SIGTERM and SIGHUP stop it and finish the file.");
+    static std::string r_uri, r_file;
+    static double r_seconds = 0;
+    static JigArgs ja;
+    record->add_option("URI", r_uri, "device URI: sim:[?options], replay:FILE, hid:/dev/hidrawN, serial:SN")
+        ->required();
+    record->add_option("FILE", r_file, "output file (a replay is written to FILE.tmp, which must not exist, and renamed when complete; a jig "
+                   "CSV goes through an exclusive temporary and replaces FILE only when whole)")->required();
+    record->add_option("--seconds", r_seconds, "stop after this many seconds (0: until Ctrl-C or the end)")
+        ->check(range(0, 1e9));
+    record->add_flag("--jig", ja.jig,
+                     "write the dataset CSV point,x_ref,y_ref,z_ref,l1..l4: each MARK-held dwell is labelled with "
+                     "the next jig-plan position");
+    record->add_option("--jig-n", ja.n, "holes per side of the plate (0: 25, or the sim: URI's jig_n)")
+        ->check(range(0, 1000));
+    record->add_option("--jig-pitch", ja.pitch, "hole pitch in mm (0: 5, or the sim: URI's jig_pitch)")
+        ->check(range(0, 1000));
+    record->add_option("--jig-heights", ja.heights,
+                       "comma-separated fixture heights in mm (default 30,40,50,60,70, or the sim: URI's)");
+    record->add_option("--jig-samples", ja.samples, "samples kept per position (0: 100, or the sim: URI's)")
+        ->check(range(0, 1000000));
+    record->callback([] { select_command([] { return cmd_record(r_uri, r_file, r_seconds, ja); }); });
+}
+
+} // namespace cdm::cli

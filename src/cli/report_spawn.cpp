@@ -1,0 +1,104 @@
+// Starts the HTML report tool (python3 -m cdm.report) with an argument
+// vector: no shell, so any path (quotes, spaces, `$`) reaches it verbatim.
+// The installed package (wheel or .deb) is preferred; the source tree beside
+// the build is the fallback for a run from a clone.
+#include <spawn.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "report.h"
+
+extern char **environ;
+
+namespace cdm::cli {
+
+namespace {
+
+// Spawns argv with environ plus `extra` (NAME=value entries, replacing any
+// same-named entry); returns the exit status, or -1 with errno when the
+// program could not be started.
+int spawn_wait(const std::vector<std::string> &args, const std::vector<std::string> &extra) {
+    std::vector<char *> argv;
+    for (const auto &a : args) argv.push_back(const_cast<char *>(a.c_str()));
+    argv.push_back(nullptr);
+    std::vector<char *> envp;
+    for (char **e = environ; *e; ++e) {
+        bool replaced = false;
+        for (const auto &x : extra)
+            if (std::strncmp(*e, x.c_str(), x.find('=') + 1) == 0) replaced = true;
+        if (!replaced) envp.push_back(*e);
+    }
+    for (const auto &x : extra) envp.push_back(const_cast<char *>(x.c_str()));
+    envp.push_back(nullptr);
+    pid_t pid = 0;
+    const int rc = posix_spawnp(&pid, argv[0], nullptr, nullptr, argv.data(), envp.data());
+    if (rc != 0) {
+        errno = rc;
+        return -1;
+    }
+    int status = 0;
+    while (waitpid(pid, &status, 0) < 0)
+        if (errno != EINTR) return -1;
+    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+// Exit 0 when `python` can import the report with its dependencies; else 3,
+// and with "-v" the missing module's name on stderr (no traceback).
+const char *const kProbe = "import sys\n"
+                           "try:\n"
+                           "    import cdm.report\n"
+                           "except ImportError as e:\n"
+                           "    if sys.argv[1:] == ['-v']:\n"
+                           "        sys.stderr.write('cdm: missing Python module: %s\\n' % (e.name or e))\n"
+                           "    sys.exit(3)\n";
+
+} // namespace
+
+int run_report(const std::string &json_path, const std::vector<std::string> &before, const std::string &dir) {
+    const char *env_py = std::getenv("PYTHON");
+    const std::string py = env_py && *env_py ? env_py : "python3";
+    std::vector<std::string> env;
+    int probe = spawn_wait({py, "-c", kProbe}, env);
+    if (probe < 0) {
+        std::fprintf(stderr, "cdm: --report: cannot run %s: %s (set PYTHON to the Python 3 to use)\n", py.c_str(),
+                     std::strerror(errno));
+        return 1;
+    }
+#ifdef CDM_SOURCE_DIR
+    struct stat st {};
+    const std::string src = CDM_SOURCE_DIR "/bindings/python";
+    if (probe != 0 && stat((src + "/cdm/report.py").c_str(), &st) == 0) {
+        const char *pp = std::getenv("PYTHONPATH");
+        env.push_back("PYTHONPATH=" + src + (pp && *pp ? ":" + std::string(pp) : ""));
+        probe = spawn_wait({py, "-c", kProbe}, env);
+    }
+#endif
+    if (probe != 0) {
+        spawn_wait({py, "-c", kProbe, "-v"}, env); // names what is missing
+        std::fprintf(stderr,
+                     "cdm: --report needs the cdm Python package with numpy and matplotlib for %s: install it with "
+                     "`pip install ./bindings/python` (or the cdm .deb, or `apt install python3-numpy "
+                     "python3-matplotlib`), or set PYTHON to a Python 3 that has them\n",
+                     py.c_str());
+        return 1;
+    }
+    std::vector<std::string> args{py, "-m", "cdm.report"};
+    args.insert(args.end(), before.begin(), before.end());
+    args.insert(args.end(), {json_path, "--out", dir});
+    const int rc = spawn_wait(args, env);
+    if (rc != 0) {
+        std::fprintf(stderr, "cdm: --report: %s -m cdm.report failed (exit status %d)\n", py.c_str(), rc);
+        return 1;
+    }
+    return 0;
+}
+
+} // namespace cdm::cli

@@ -1,0 +1,148 @@
+"""Exit codes (0 success, 1 runtime failure, 2 usage error) of every subcommand,
+and the messages a user reads: usage, unknown commands, defaults, numbers,
+--json, the report started without a shell."""
+import json
+import os
+import re
+
+import pytest
+
+from conftest import cdm
+
+MISSING = "/nonexistent/cdm-test/missing"
+
+
+def test_no_command_prints_usage():
+    r = cdm()
+    assert r.returncode == 2
+    assert "Usage: cdm" in r.stderr and "Exit status" in r.stderr
+
+
+@pytest.mark.parametrize("args,name", [(["bogus"], "bogus"), (["calib", "frobnicate"], "frobnicate")])
+def test_unknown_command_is_named(args, name):
+    r = cdm(*args)
+    assert r.returncode == 2
+    assert '"%s"' % name in r.stderr and "unknown command" in r.stderr
+
+
+def test_group_without_subcommand_is_usage():
+    r = cdm("calib")
+    assert r.returncode == 2 and "diagnose" in r.stderr
+
+
+# (arguments, expected exit code); None = a runtime failure this command
+# cannot be brought to by arguments alone (list and effects read nothing).
+CASES = {
+    "list": [(["list"], 0), (["list", "--bogus"], 2)],
+    "info": [(["info", "sim:"], 0), (["info", "replay:" + MISSING], 1), (["info"], 2)],
+    "stream": [(["stream", "sim:", "--seconds", "0.2"], 0), (["stream", "replay:" + MISSING], 1),
+               (["stream", "sim:", "--rate", "0.1"], 2)],
+    "record": [(["record", "sim:", "{tmp}/r.cdmrec", "--seconds", "0.2"], 0),
+               (["record", "replay:" + MISSING, "{tmp}/r2.cdmrec"], 1), (["record", "sim:"], 2)],
+    "calib diagnose": [(["calib", "diagnose", "{data}", "--quiet", "--no-candidates"], 0),
+                       (["calib", "diagnose", MISSING + ".csv", "--quiet"], 1),
+                       (["calib", "diagnose", "{data}", "--jig-tolerance-mm", "abc"], 2)],
+    "calib fit": [(["calib", "fit", "{data}", "--effects", "cable_offset", "--out", "{tmp}/c.json", "--quiet"], 0),
+                  (["calib", "fit", MISSING + ".csv", "--effects", "cable_offset", "--out", "{tmp}/c2.json"], 1),
+                  (["calib", "fit", "{data}", "--out", "{tmp}/c3.json"], 2)],
+    "calib simulate": [(["calib", "simulate", "{tmp}/s.csv", "--holes", "3", "--heights", "40", "--samples", "2"], 0),
+                       (["calib", "simulate", MISSING + ".csv", "--holes", "3"], 1),
+                       (["calib", "simulate", "{tmp}/s2.csv", "--heights", "abc"], 2)],
+    "calib effects": [(["calib", "effects"], 0), (["calib", "effects", "extra"], 2)],
+}
+
+
+@pytest.mark.parametrize("command,args,code",
+                         [(c, a, k) for c, cases in CASES.items() for a, k in cases],
+                         ids=lambda v: v if isinstance(v, str) else None)
+def test_exit_code(command, args, code, tmp_path, small_dataset):
+    argv = [a.format(tmp=tmp_path, data=small_dataset) for a in args]
+    r = cdm(*argv)
+    assert r.returncode == code, (argv, r.stdout, r.stderr)
+    if code:
+        assert r.stderr.strip(), "a failure says why on stderr"
+        assert "Traceback" not in r.stderr and "terminate called" not in r.stderr
+
+
+def test_heights_not_a_number_names_the_option(tmp_path):
+    r = cdm("calib", "simulate", str(tmp_path / "x.csv"), "--heights", "abc")
+    assert r.returncode == 2
+    assert "--heights" in r.stderr and '"abc"' in r.stderr
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_fit_without_effects_is_usage(tmp_path, small_dataset):
+    r = cdm("calib", "fit", str(small_dataset), "--out", str(tmp_path / "c.json"))
+    assert r.returncode == 2 and "--effects" in r.stderr
+    assert not (tmp_path / "c.json").exists()
+
+
+def test_numbers_as_a_person_writes_them():
+    r = cdm("stream", "sim:", "--rate", "5000")
+    assert r.returncode == 2
+    assert "[0.5, 1000]" in r.stderr
+    assert not re.search(r"\d\.\d{6}", r.stderr) and "18446744073709551615" not in r.stderr
+
+
+@pytest.mark.parametrize("sub", [[], ["list"], ["info"], ["stream"], ["record"], ["calib"], ["calib", "diagnose"],
+                                 ["calib", "fit"], ["calib", "simulate"], ["calib", "effects"]])
+def test_help_shows_exit_codes(sub):
+    r = cdm(*sub, "--help")
+    assert r.returncode == 0
+    assert "0 success, 1 runtime failure" in r.stdout and "2 usage error" in r.stdout
+
+
+def test_help_shows_defaults():
+    sim = cdm("calib", "simulate", "--help").stdout
+    for default in ["--noise-mm FLOAT:in [0, 100]=0.05", "--holes INT:in [1, 1000]=25", "--seed UINT=1",
+                    "default: 30,40,50,60,70"]:
+        assert default in sim
+    assert "comma-separated list" in sim.split("--effects", 1)[1].split("\n")[0]
+    assert "--rate FLOAT:in [0.5, 1000]=10" in cdm("stream", "--help").stdout
+    diag = cdm("calib", "diagnose", "--help").stdout
+    assert "default: the nominal" in diag and "comma-separated list" in diag and "PYTHON" in diag
+
+
+def test_diagnose_without_device_uses_nominal(small_dataset):
+    r = cdm("calib", "diagnose", str(small_dataset), "--quiet", "--no-candidates")
+    assert r.returncode == 0, r.stderr
+    assert "no --device: using the nominal geometry (a 150 mm, b 150 mm, m 30 mm)" in r.stderr
+
+
+@pytest.mark.parametrize("args", [["list", "--json"], ["info", "sim:", "--json"], ["calib", "effects", "--json"]])
+def test_json_parses(args):
+    r = cdm(*args)
+    assert r.returncode == 0, r.stderr
+    v = json.loads(r.stdout)
+    if args[0] == "info":
+        assert v["transport"] == "sim" and v["a_mm"] > 0
+    if args[-2:] == ["effects", "--json"]:
+        names = [e["name"] for e in v]
+        assert "cable_offset" in names
+        assert all(p["unit"] and p["lower"] < p["upper"] for e in v for p in e["parameters"])
+
+
+def test_stream_json_is_one_object_per_line():
+    r = cdm("stream", "sim:", "--seconds", "0.5", "--rate", "20", "--json", "--truth")
+    assert r.returncode == 0, r.stderr
+    lines = [json.loads(line) for line in r.stdout.splitlines()]
+    poses = [x for x in lines if "sequence" in x]
+    assert len(poses) >= 3 and lines[-1]["summary"] is True and lines[-1]["reports"] > 0
+    # The truth is on: the simulated driver's error is reported per line.
+    assert all(len(p["error_mm"]) == 3 for p in poses)
+
+
+def test_report_path_with_quote_and_space(tmp_path, small_dataset):
+    out = tmp_path / "it's a dir" / "rep"
+    os.makedirs(out.parent)
+    r = cdm("calib", "diagnose", str(small_dataset), "--quiet", "--no-candidates", "--report", str(out), timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert (out / "index.html").is_file()
+
+
+def test_report_says_what_to_install(tmp_path, small_dataset):
+    env = dict(os.environ, PYTHON="/bin/false")
+    r = cdm("calib", "diagnose", str(small_dataset), "--quiet", "--no-candidates", "--report",
+            str(tmp_path / "rep"), env=env)
+    assert r.returncode == 1
+    assert "pip install" in r.stderr and "PYTHON" in r.stderr

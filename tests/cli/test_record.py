@@ -1,0 +1,98 @@
+"""`cdm record` is kill-safe: a stop signal finishes a playable recording; it
+never writes over its input or a non-regular file."""
+import json
+import os
+import signal
+import subprocess
+import time
+
+import pytest
+
+from conftest import CLI, cdm
+
+
+def record_then_signal(tmp_path, sig, uri="sim:", name="r.cdmrec", extra=()):
+    out = tmp_path / name
+    p = subprocess.Popen([CLI, "record", uri, str(out), *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    # Wait for the first progress line: the device is open and recording.
+    deadline = time.monotonic() + 30
+    line = ""
+    while "recorded" not in line and "jig position" not in line and time.monotonic() < deadline:
+        line = p.stderr.readline()
+        assert line or p.poll() is None, "record exited early"
+    time.sleep(0.3)
+    p.send_signal(sig)
+    stdout, stderr = p.communicate(timeout=30)
+    return p.returncode, stdout, stderr, out
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
+def test_signal_leaves_a_playable_recording(tmp_path, sig):
+    rc, stdout, stderr, out = record_then_signal(tmp_path, sig)
+    assert rc == 0, stderr
+    assert out.is_file() and not (tmp_path / (out.name + ".tmp")).exists()
+    n = int(stdout.split("wrote ", 1)[1].split(": ", 1)[1].split(" reports")[0])
+    assert n > 0
+    r = cdm("stream", "replay:" + str(out), "--json", "--rate", "50", "--seconds", "60")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout.splitlines()[-1])
+    # Every recorded report plays back, and the replay reaches its end.
+    assert summary["end_of_stream"] is True
+    assert summary["reports"] == n
+
+
+def test_jig_record_finishes_on_sigterm(tmp_path):
+    uri = "sim:?motion=jig&jig_n=3&jig_heights=30,40&jig_samples=5"
+    rc, _, stderr, out = record_then_signal(tmp_path, signal.SIGTERM, uri, "jig.csv", ["--jig"])
+    # Stopped before the plan was complete, or completed first: either way
+    # the CSV is in place with its header, and the stop is reported honestly.
+    assert rc in (0, 1), stderr
+    assert out.read_text().startswith("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n")
+    if rc == 1:
+        assert "before the jig plan was complete" in stderr
+
+
+def test_jig_options_contradicting_the_uri_are_usage(tmp_path):
+    r = cdm("record", "sim:?motion=jig&jig_n=3", str(tmp_path / "j.csv"), "--jig", "--jig-n", "5")
+    assert r.returncode == 2 and "jig_" in r.stderr
+    r = cdm("record", "sim:", str(tmp_path / "j.csv"), "--jig", "--jig-heights", "30,x")
+    assert r.returncode == 2 and "--jig-heights" in r.stderr
+
+
+def test_never_writes_over_its_input(tmp_path):
+    rec = tmp_path / "in.cdmrec"
+    assert cdm("record", "sim:", str(rec), "--seconds", "0.2").returncode == 0
+    before = rec.read_bytes()
+    r = cdm("record", "replay:" + str(rec), str(rec))
+    assert r.returncode == 2 and "input" in r.stderr
+    assert rec.read_bytes() == before
+    link = tmp_path / "link.cdmrec"
+    os.symlink(rec, link)
+    r = cdm("record", "replay:" + str(link), str(rec))
+    assert r.returncode == 2 and rec.read_bytes() == before
+
+
+def test_never_writes_over_a_non_regular_file(tmp_path):
+    r = cdm("record", "sim:", "/dev/null", "--seconds", "0.2")
+    assert r.returncode == 2 and "not a regular file" in r.stderr
+    r = cdm("record", "sim:", str(tmp_path), "--seconds", "0.2")
+    assert r.returncode == 2 and "not a regular file" in r.stderr
+
+
+def test_write_error_keeps_what_was_written_and_names_the_cause(tmp_path):
+    # A file-size limit stands in for a full disk: the write fails with
+    # EFBIG as it would with ENOSPC, without needing a small filesystem.
+    import resource
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000))
+
+    out = tmp_path / "full.cdmrec"
+    r = subprocess.run([CLI, "record", "sim:", str(out), "--seconds", "5"], preexec_fn=limit, capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 1
+    assert os.strerror(27) in r.stderr  # EFBIG, the real cause (not a stale errno)
+    assert "keeps what was written" in r.stderr
+    assert out.is_file() and out.stat().st_size > 12  # the header and the reports before the error

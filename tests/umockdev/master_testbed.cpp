@@ -131,7 +131,7 @@ struct MasterTestbed::Impl {
         return so;
     }
 
-    std::string tree_text() const;
+    std::string tree_text(bool with_node) const;
     void add_tree();
     void write_readable_line();
     bool attached = false;
@@ -145,11 +145,11 @@ struct MasterTestbed::Impl {
 
 // umockdev's record format: devices child first, E: properties, A: text
 // attributes, H: binary attributes in hex, L: links, N: the /dev node.
-std::string MasterTestbed::Impl::tree_text() const {
+std::string MasterTestbed::Impl::tree_text(bool with_node) const {
     const std::string sn = o.serial;
     const std::vector<uint8_t> desc = usb_descriptors();
     std::string t;
-    t += std::string("P: ") + (kHidraw + 4) + "\nN: hidraw0\nE: DEVNAME=/dev/hidraw0\nE: MAJOR=243\nE: MINOR=0\n"
+    t += std::string("P: ") + (kHidraw + 4) + (with_node ? "\nN: hidraw0" : "") + "\nE: DEVNAME=/dev/hidraw0\nE: MAJOR=243\nE: MINOR=0\n"
          "E: SUBSYSTEM=hidraw\nA: dev=243:0\n";
     // The kernel links every class device to its parent as `device`;
     // umockdev does not make that link by itself, and hidapi's filtered
@@ -182,7 +182,7 @@ std::string MasterTestbed::Impl::tree_text() const {
 
 void MasterTestbed::Impl::add_tree() {
     GError *e = nullptr;
-    if (!umockdev_testbed_add_from_string(tb, tree_text().c_str(), &e)) {
+    if (!umockdev_testbed_add_from_string(tb, tree_text(!attached).c_str(), &e)) {
         std::string m = e ? e->message : "unknown";
         g_clear_error(&e);
         throw std::runtime_error("umockdev_testbed_add_from_string: " + m);
@@ -472,9 +472,25 @@ void MasterTestbed::unplug() {
         p_->plugged = false;
         ++p_->generation;
         p_->queue.clear();
-        p_->serve_reads(); // pending reads fail with ENODEV
+        // Tree and node go first, then the open fd's pending read fails:
+        // the driver reacts to the failed read by reopening at once, and
+        // must find no node then, as on a real unplug.
         for (const char *path : {kHidraw, kHidDev, kUsbIntf, kUsbDev}) umockdev_testbed_uevent(p_->tb, path, "remove");
+        // umockdev 0.17.16 cannot give a removed device's node back: its
+        // pty stays registered and a re-add with the same node asserts. So
+        // the tree goes (the USB device's removal takes the children's
+        // directories; their /sys/class and /sys/dev links are dropped by
+        // hand, or the re-add fails on them) and the node stays, answering
+        // ENODEV to everything until the replug, as an fd of an unplugged
+        // hidraw device does. What a reopen meets meanwhile is therefore a
+        // node without sysfs device: the case the driver must check for
+        // before calling hid_open_path (issue 13 item 3).
         umockdev_testbed_remove_device(p_->tb, kUsbDev);
+        const std::string root = umockdev_testbed_get_root_dir(p_->tb);
+        for (const char *l : {"/sys/class/hidraw/hidraw0", "/sys/dev/char/243:0", "/sys/bus/hid/devices/0003:1209:CD01.0001",
+                              "/sys/bus/usb/devices/1-1:1.0", "/sys/bus/usb/devices/1-1", "/dev/.node/hidraw0"})
+            unlink((root + l).c_str());
+        p_->serve_reads(); // pending reads fail with ENODEV
     });
 }
 

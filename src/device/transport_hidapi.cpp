@@ -190,9 +190,14 @@ int open_hid(const Uri &u, TransportPtr &out, std::string &err) {
 void hid_list_masters(std::vector<cdm_device_info> &out, std::string &err) {
     out.clear();
     if (ensure_hid_init(err) != CDM_OK) return;
-    hid_device_info *list = hid_enumerate(proto::kVendorId, proto::kProductId);
+    // Unfiltered, then filtered here: hidapi-hidraw 0.13's filtered path
+    // reads <hidraw>/device/uevent by plain open(), while the unfiltered
+    // one walks the parents through libudev; a sysfs without the class
+    // device's `device` link (containers, emulators) hides the master from
+    // the former only. `cdm list` must not miss what hidapi can see.
+    hid_device_info *list = hid_enumerate(0, 0);
     for (hid_device_info *d = list; d; d = d->next) {
-        if (!d->path) continue;
+        if (!d->path || d->vendor_id != proto::kVendorId || d->product_id != proto::kProductId) continue;
         const std::string serial = narrow(d->serial_number);
         const std::string uri = std::string("hid:") + d->path;
         cdm_device_info info{};

@@ -225,8 +225,14 @@ void MasterTestbed::Impl::write_readable_line() {
 // kernel queues it (dropping the oldest past 64, as hidraw does) and hands
 // it to a waiting reader.
 void MasterTestbed::Impl::produce() {
-    if (!plugged) return;
     std::vector<uint8_t> r(kInputReportSize);
+    if (!plugged) {
+        // A self-powered master keeps sampling while its cable is out: its
+        // sequence runs on, and the host sees the gap after the replug.
+        cdm::SimTruth t;
+        if (o.mode != NodeMode::Garbage) sim.next(r.data(), t);
+        return;
+    }
     if (o.mode == NodeMode::Garbage) {
         for (auto &b : r) b = uint8_t(garbage_rng());
     } else {

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <cwchar>
 #include <mutex>
+#include <set>
 
 #include "cdm/cdm.h"
 #include "device/device.h"
@@ -190,43 +191,48 @@ int open_hid(const Uri &u, TransportPtr &out, std::string &err) {
 void hid_list_masters(std::vector<cdm_device_info> &out, std::string &err) {
     out.clear();
     if (ensure_hid_init(err) != CDM_OK) return;
-    // Unfiltered, then filtered here: hidapi-hidraw 0.13's filtered path
-    // reads <hidraw>/device/uevent by plain open(), while the unfiltered
-    // one walks the parents through libudev; a sysfs without the class
-    // device's `device` link (containers, emulators) hides the master from
-    // the former only. `cdm list` must not miss what hidapi can see.
-    hid_device_info *list = hid_enumerate(0, 0);
-    for (hid_device_info *d = list; d; d = d->next) {
-        if (!d->path || d->vendor_id != proto::kVendorId || d->product_id != proto::kProductId) continue;
-        const std::string serial = narrow(d->serial_number);
-        const std::string uri = std::string("hid:") + d->path;
-        cdm_device_info info{};
-        bool full = false;
-        if (hid_device *h = hid_open_path(d->path)) {
-            uint8_t buf[proto::kDeviceInfoReportSize] = {proto::kDeviceInfoReportId};
-            const int n = hid_get_feature_report(h, buf, sizeof buf);
-            proto::DeviceInfoReport r;
-            if (n > 0 && proto::parse_device_info(buf, size_t(n), r, nullptr) == proto::Reject::None) {
-                device_info_from_report(r, "hid", uri, info);
-                full = true;
+    // Filtered, then unfiltered and filtered here, each node once:
+    // hidapi-hidraw 0.13's filtered path reads <hidraw>/device/uevent by
+    // plain open(), the unfiltered one walks the parents through libudev;
+    // a sysfs without the class device's `device` link (containers,
+    // emulators) hides the master from the former only. `cdm list` must
+    // not miss what hidapi can see (docs/testing.md).
+    std::set<std::string> seen;
+    for (int pass = 0; pass < 2; ++pass) {
+        hid_device_info *list = pass == 0 ? hid_enumerate(proto::kVendorId, proto::kProductId) : hid_enumerate(0, 0);
+        for (hid_device_info *d = list; d; d = d->next) {
+            if (!d->path || d->vendor_id != proto::kVendorId || d->product_id != proto::kProductId) continue;
+            if (!seen.insert(d->path).second) continue; // one entry per usage pair, and the first pass's
+            const std::string serial = narrow(d->serial_number);
+            const std::string uri = std::string("hid:") + d->path;
+            cdm_device_info info{};
+            bool full = false;
+            if (hid_device *h = hid_open_path(d->path)) {
+                uint8_t buf[proto::kDeviceInfoReportSize] = {proto::kDeviceInfoReportId};
+                const int n = hid_get_feature_report(h, buf, sizeof buf);
+                proto::DeviceInfoReport r;
+                if (n > 0 && proto::parse_device_info(buf, size_t(n), r, nullptr) == proto::Reject::None) {
+                    device_info_from_report(r, "hid", uri, info);
+                    full = true;
+                }
+                hid_close(h);
             }
-            hid_close(h);
+            if (!full) {
+                // Busy or not answering: what enumeration knows (bcdDevice is
+                // the firmware's major.minor).
+                info.struct_size = sizeof info;
+                std::snprintf(info.uri, sizeof info.uri, "%s", uri.c_str());
+                std::snprintf(info.serial, sizeof info.serial, "%s", serial.c_str());
+                std::snprintf(info.firmware, sizeof info.firmware, "%x.%x", d->release_number >> 8,
+                              d->release_number & 0xFF);
+                std::snprintf(info.transport, sizeof info.transport, "hid");
+            }
+            info.vendor_id = d->vendor_id;
+            info.product_id = d->product_id;
+            out.push_back(info);
         }
-        if (!full) {
-            // Busy or not answering: what enumeration knows (bcdDevice is
-            // the firmware's major.minor).
-            info.struct_size = sizeof info;
-            std::snprintf(info.uri, sizeof info.uri, "%s", uri.c_str());
-            std::snprintf(info.serial, sizeof info.serial, "%s", serial.c_str());
-            std::snprintf(info.firmware, sizeof info.firmware, "%x.%x", d->release_number >> 8,
-                          d->release_number & 0xFF);
-            std::snprintf(info.transport, sizeof info.transport, "hid");
-        }
-        info.vendor_id = d->vendor_id;
-        info.product_id = d->product_id;
-        out.push_back(info);
+        hid_free_enumeration(list);
     }
-    hid_free_enumeration(list);
 }
 
 } // namespace cdm

@@ -6,8 +6,7 @@ import sys
 import cdm
 
 with cdm.open("hid:/dev/hidraw0") as dev:
-    info = dev.info
-    info = info() if callable(info) else info
+    info = dev.info()
     assert info.serial == "UMOCK0001", info.serial
     seqs = set()
     for _ in range(200):
@@ -16,8 +15,7 @@ with cdm.open("hid:/dev/hidraw0") as dev:
         seqs.add(p.sequence)
         if len(seqs) >= 20:
             break
-    st = dev.stats
-    st = st() if callable(st) else st
+    st = dev.stats()
     assert len(seqs) >= 20, len(seqs)
     assert st.malformed == 0, st
 print("python: serial %s, %d distinct poses, %d reports" % (info.serial, len(seqs), st.reports))

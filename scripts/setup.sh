@@ -8,7 +8,7 @@ SUDO=""
 [ "$(id -u)" -eq 0 ] || SUDO="sudo"
 
 DEB_PKGS=(build-essential cmake ninja-build pkg-config git
-  libhidapi-dev libusb-1.0-0-dev libeigen3-dev libnlopt-dev libnlopt-cxx-dev libcmocka-dev
+  libhidapi-dev libusb-1.0-0-dev umockdev libumockdev-dev libudev-dev libeigen3-dev libnlopt-dev libnlopt-cxx-dev libcmocka-dev
   nlohmann-json3-dev libboost-math-dev libcli11-dev libfmt-dev libbenchmark-dev
   mono-mcs mono-runtime python3 python3-pip)
 

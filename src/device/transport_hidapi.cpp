@@ -10,6 +10,7 @@
 #include <cstring>
 #include <cwchar>
 #include <mutex>
+#include <set>
 
 #include "cdm/cdm.h"
 #include "device/device.h"
@@ -47,17 +48,32 @@ std::string hid_err(hid_device *d) {
     return w ? narrow(w) : std::string("unknown hidapi error");
 }
 
+// Every connected master, each node once: the filtered enumeration, then
+// the unfiltered one filtered here. hidapi-hidraw 0.13's filtered path reads
+// <hidraw>/device/uevent by plain open(), the unfiltered one walks the
+// parents through libudev; a sysfs without the class device's `device` link
+// (containers, emulators) hides the master from the former only. Neither
+// `cdm list` nor a reconnection by serial may miss what hidapi can see
+// (docs/testing.md).
+template <class F> void for_each_master(F &&f) {
+    std::set<std::string> seen;
+    for (int pass = 0; pass < 2; ++pass) {
+        hid_device_info *list = pass == 0 ? hid_enumerate(proto::kVendorId, proto::kProductId) : hid_enumerate(0, 0);
+        for (hid_device_info *d = list; d; d = d->next) {
+            if (!d->path || d->vendor_id != proto::kVendorId || d->product_id != proto::kProductId) continue;
+            if (!seen.insert(d->path).second) continue; // one entry per node (several usage pairs)
+            f(*d);
+        }
+        hid_free_enumeration(list);
+    }
+}
+
 // Path of the connected master with this serial number, or "".
 std::string find_by_serial(const std::string &serial) {
     std::string path;
-    hid_device_info *list = hid_enumerate(proto::kVendorId, proto::kProductId);
-    for (hid_device_info *d = list; d; d = d->next) {
-        if (d->path && narrow(d->serial_number) == serial) {
-            path = d->path;
-            break;
-        }
-    }
-    hid_free_enumeration(list);
+    for_each_master([&](const hid_device_info &d) {
+        if (path.empty() && narrow(d.serial_number) == serial) path = d.path;
+    });
     return path;
 }
 
@@ -206,9 +222,8 @@ int open_hid(const Uri &u, TransportPtr &out, std::string &err) {
 void hid_list_masters(std::vector<cdm_device_info> &out, std::string &err) {
     out.clear();
     if (ensure_hid_init(err) != CDM_OK) return;
-    hid_device_info *list = hid_enumerate(proto::kVendorId, proto::kProductId);
-    for (hid_device_info *d = list; d; d = d->next) {
-        if (!d->path) continue;
+    for_each_master([&](const hid_device_info &dv) {
+        const hid_device_info *d = &dv;
         const std::string serial = narrow(d->serial_number);
         const std::string uri = std::string("hid:") + d->path;
         cdm_device_info info{};
@@ -238,8 +253,7 @@ void hid_list_masters(std::vector<cdm_device_info> &out, std::string &err) {
         info.vendor_id = d->vendor_id;
         info.product_id = d->product_id;
         out.push_back(info);
-    }
-    hid_free_enumeration(list);
+    });
 }
 
 } // namespace cdm

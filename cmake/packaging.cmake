@@ -55,3 +55,24 @@ set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "pkg-config, udev")
 # One package with everything `cmake --install` installs (the wheel's
 # "python" component exists only under scikit-build-core).
 include(CPack)
+
+# --- NuGet package: `ninja cdm_nupkg` writes build/nuget/Cdm.<version>.nupkg.
+# Debian's nuget (Mono) packs it. Cdm.dll.config there maps "cdm" to the
+# SONAME, which Mono finds beside the assembly: the layout a consumer gets
+# when NuGet copies lib/ and runtimes/linux-x64/native/ to its output.
+find_program(CDM_NUGET nuget)
+if(CDM_NUGET AND TARGET cdm_csharp)
+  set(_nu ${PROJECT_BINARY_DIR}/nuget)
+  configure_file(${PROJECT_SOURCE_DIR}/bindings/csharp/Cdm.nuspec.in ${_nu}/stage/Cdm.nuspec @ONLY)
+  add_custom_command(
+    OUTPUT ${_nu}/Cdm.${PROJECT_VERSION}.nupkg
+    COMMAND ${CMAKE_COMMAND} -E copy ${PROJECT_BINARY_DIR}/bindings/csharp/Cdm.dll
+            ${PROJECT_BINARY_DIR}/bindings/csharp/Cdm.dll.config ${_nu}/stage/
+    COMMAND ${CMAKE_STRIP} --strip-debug -o ${_nu}/stage/libcdm.so.${CDM_SOVERSION} $<TARGET_FILE:cdm>
+    COMMAND ${CDM_NUGET} pack ${_nu}/stage/Cdm.nuspec -BasePath ${_nu}/stage -OutputDirectory ${_nu}
+            -NonInteractive -Verbosity quiet
+    DEPENDS cdm cdm_csharp ${_nu}/stage/Cdm.nuspec
+    COMMENT "nuget: Cdm.${PROJECT_VERSION}.nupkg"
+    VERBATIM)
+  add_custom_target(cdm_nupkg DEPENDS ${_nu}/Cdm.${PROJECT_VERSION}.nupkg)
+endif()

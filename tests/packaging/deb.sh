@@ -8,15 +8,15 @@
 set -euo pipefail
 build=$1 work=$2
 [ "$(id -u)" -eq 0 ] || { echo "deb: needs root (dpkg -i); skipped"; exit 77; }
-if dpkg-query -W -f='${Status}' cdm 2>/dev/null | grep -q "install ok"; then
+if [ "$(dpkg-query -W -f='${db:Status-Status}' cdm 2>/dev/null || true)" = installed ]; then
   echo "deb: a cdm package is already installed; not touching it"; exit 77
 fi
 unset CDM_LIBRARY CDM_BUILD_DIR LD_LIBRARY_PATH PKG_CONFIG_PATH CMAKE_PREFIX_PATH
 rm -rf "$work" && mkdir -p "$work"
 (cd "$build" && cpack -G DEB -B "$work" >/dev/null)
 deb=$(ls "$work"/cdm_*.deb)
-dpkg-deb -f "$deb" Depends | grep -q libhidapi-hidraw0
-trap 'dpkg -r cdm >/dev/null || true' EXIT
+dpkg-deb -f "$deb" Depends | grep libhidapi-hidraw0 >/dev/null
+trap 'dpkg --purge cdm >/dev/null || true' EXIT
 apt-get install -y -qq "$deb" >/dev/null 2>&1 || dpkg -i "$deb"
 test -f /usr/lib/udev/rules.d/70-cdm.rules
 command -v cdm >/dev/null

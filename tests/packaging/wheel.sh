@@ -16,7 +16,7 @@ command -v ccache >/dev/null && launch="-DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMA
 CMAKE_ARGS="$launch" "$work/venv/bin/pip" wheel -q --no-deps -w "$work/dist" \
   --config-settings=build-dir="$work/cmake" "$src/bindings/python"
 whl=$(ls "$work"/dist/cdm_haptics-*.whl)
-unzip -l "$whl" | grep -q "cdm/libcdm.so.1$"
+unzip -l "$whl" | grep "cdm/libcdm.so.1$" >/dev/null
 if "$PY" -m auditwheel --version >/dev/null 2>&1; then
   "$PY" -m auditwheel show "$whl"
   "$PY" -m auditwheel repair -w "$work/dist/repaired" "$whl"

@@ -8,9 +8,15 @@ SUDO=""
 [ "$(id -u)" -eq 0 ] || SUDO="sudo"
 
 DEB_PKGS=(build-essential cmake ninja-build pkg-config git
-  libhidapi-dev libusb-1.0-0-dev umockdev libumockdev-dev libudev-dev libeigen3-dev libnlopt-dev libnlopt-cxx-dev libcmocka-dev
+  libhidapi-dev libusb-1.0-0-dev libeigen3-dev libnlopt-dev libnlopt-cxx-dev libcmocka-dev
   nlohmann-json3-dev libboost-math-dev libcli11-dev libfmt-dev libbenchmark-dev
-  mono-mcs mono-runtime python3 python3-pip)
+  mono-mcs mono-runtime python3 python3-pip
+  # the emulated kernel device (tests/umockdev): umockdev's wrapper and library
+  umockdev libumockdev-dev libudev-dev
+  # packaging tests (tests/packaging): cpack -G DEB computes Depends with
+  # dpkg-shlibdeps (dpkg-dev) and file; nuget packs Cdm.nupkg; the wheel
+  # test needs venv, unzip, and patchelf for auditwheel repair.
+  dpkg-dev file nuget unzip python3-venv patchelf)
 
 missing=()
 for p in "${DEB_PKGS[@]}"; do
@@ -27,6 +33,8 @@ need_py=()
 for m in numpy matplotlib pytest mujoco; do
   "$PY" -c "import $m" 2>/dev/null || need_py+=("$m")
 done
+# auditwheel: the wheel test repairs the wheel with it (skipped without it).
+"$PY" -c "import auditwheel" 2>/dev/null || need_py+=(auditwheel)
 if [ ${#need_py[@]} -gt 0 ]; then
   echo "setup: installing Python packages for $("$PY" -c 'import sys; print(sys.executable)'): ${need_py[*]}"
   if ! "$PY" -m pip install -q "${need_py[@]}" 2>/tmp/cdm-pip.log; then

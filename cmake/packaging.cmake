@@ -1,0 +1,78 @@
+# Packaging: the Python wheel's copy of libcdm, the .deb (CPack) and the
+# NuGet package. Included at the end of the top-level CMakeLists.txt, after
+# every install() rule of the ordinary `cmake --install`.
+
+# --- Python wheel (scikit-build-core sets SKBUILD; pyproject asks for the
+# "python" component only). One real file named by the SONAME, beside the
+# package, where cdm/_native.py looks second: a wheel cannot hold symlinks.
+if(SKBUILD)
+  install(FILES $<TARGET_FILE:cdm> DESTINATION cdm RENAME libcdm.so.${CDM_SOVERSION}
+          COMPONENT python)
+  # install(FILES) does not strip: without this the wheel carries ~70 MB of DWARF.
+  install(CODE "execute_process(COMMAND \"${CMAKE_STRIP}\" --strip-debug
+                \"\${CMAKE_INSTALL_PREFIX}/cdm/libcdm.so.${CDM_SOVERSION}\")" COMPONENT python)
+endif()
+
+# --- Mono: the installed Cdm.dll.config maps "cdm" to the installed library
+# by absolute path, so an installed program needs no LD_LIBRARY_PATH even
+# under a prefix the dynamic linker does not search. Written at install time
+# because `cmake --install --prefix` may differ from CMAKE_INSTALL_PREFIX.
+if(CDM_BUILD_CSHARP AND TARGET cdm_csharp)
+  install(CODE "
+    set(_lib \"\${CMAKE_INSTALL_PREFIX}/${CMAKE_INSTALL_LIBDIR}/libcdm.so.${CDM_SOVERSION}\")
+    file(WRITE \"\$ENV{DESTDIR}\${CMAKE_INSTALL_PREFIX}/${CMAKE_INSTALL_LIBDIR}/cdm/csharp/Cdm.dll.config\"
+\"<!-- Written by cmake --install: the library installed with this Cdm.dll. -->
+<configuration>
+  <dllmap dll=\\\"cdm\\\" os=\\\"linux\\\" target=\\\"\${_lib}\\\"/>
+</configuration>
+\")")
+endif()
+
+# --- Debian package (cpack -G DEB in the build directory).
+# Licence text: the copyright file Debian policy wants in /usr/share/doc.
+configure_file(${CMAKE_CURRENT_LIST_DIR}/copyright.in ${CMAKE_CURRENT_BINARY_DIR}/copyright @ONLY)
+install(FILES ${CMAKE_CURRENT_BINARY_DIR}/copyright DESTINATION ${CMAKE_INSTALL_DOCDIR})
+
+set(CPACK_PACKAGE_NAME "cdm")
+set(CPACK_PACKAGE_VENDOR "cdm project")
+set(CPACK_PACKAGE_VERSION ${PROJECT_VERSION})
+set(CPACK_PACKAGE_DESCRIPTION_SUMMARY "${PROJECT_DESCRIPTION}")
+set(CPACK_PACKAGE_CONTACT "cdm maintainers <cdm@localhost>")
+set(CPACK_RESOURCE_FILE_LICENSE ${CMAKE_CURRENT_BINARY_DIR}/copyright)
+set(CPACK_GENERATOR "DEB")
+set(CPACK_PACKAGING_INSTALL_PREFIX "/usr")
+set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
+set(CPACK_DEBIAN_PACKAGE_SECTION "libs")
+set(CPACK_DEBIAN_PACKAGE_HOMEPAGE "https://example.invalid/cdm")
+# The Depends line (libhidapi-hidraw0, libnlopt0, libstdc++6, libc6, ...)
+# comes from dpkg-shlibdeps on the packaged binaries, not from a list here.
+set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)
+# RelWithDebInfo carries ~300 MB of DWARF; a package ships stripped binaries.
+set(CPACK_STRIP_FILES ON)
+set(CPACK_DEBIAN_PACKAGE_GENERATE_SHLIBS ON)
+# pkg-config is what cdm.pc is for; udev reads the rule.
+set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "pkg-config, udev")
+# One package with everything `cmake --install` installs (the wheel's
+# "python" component exists only under scikit-build-core).
+include(CPack)
+
+# --- NuGet package: `ninja cdm_nupkg` writes build/nuget/Cdm.<version>.nupkg.
+# Debian's nuget (Mono) packs it. Cdm.dll.config there maps "cdm" to the
+# SONAME, which Mono finds beside the assembly: the layout a consumer gets
+# when NuGet copies lib/ and runtimes/linux-x64/native/ to its output.
+find_program(CDM_NUGET nuget)
+if(CDM_NUGET AND TARGET cdm_csharp)
+  set(_nu ${PROJECT_BINARY_DIR}/nuget)
+  configure_file(${PROJECT_SOURCE_DIR}/bindings/csharp/Cdm.nuspec.in ${_nu}/stage/Cdm.nuspec @ONLY)
+  add_custom_command(
+    OUTPUT ${_nu}/Cdm.${PROJECT_VERSION}.nupkg
+    COMMAND ${CMAKE_COMMAND} -E copy ${PROJECT_BINARY_DIR}/bindings/csharp/Cdm.dll
+            ${PROJECT_BINARY_DIR}/bindings/csharp/Cdm.dll.config ${_nu}/stage/
+    COMMAND ${CMAKE_STRIP} --strip-debug -o ${_nu}/stage/libcdm.so.${CDM_SOVERSION} $<TARGET_FILE:cdm>
+    COMMAND ${CDM_NUGET} pack ${_nu}/stage/Cdm.nuspec -BasePath ${_nu}/stage -OutputDirectory ${_nu}
+            -NonInteractive -Verbosity quiet
+    DEPENDS cdm cdm_csharp ${_nu}/stage/Cdm.nuspec
+    COMMENT "nuget: Cdm.${PROJECT_VERSION}.nupkg"
+    VERBATIM)
+  add_custom_target(cdm_nupkg DEPENDS ${_nu}/Cdm.${PROJECT_VERSION}.nupkg)
+endif()

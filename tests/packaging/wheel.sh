@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# pip install ./bindings/python in a fresh venv (the wheel builds libcdm with
+# CMake), then import cdm and open sim: from outside the tree with no
+# CDM_LIBRARY; auditwheel show/repair when it is installed.
+set -euo pipefail
+src=$1 work=$2
+unset CDM_LIBRARY CDM_BUILD_DIR LD_LIBRARY_PATH
+PY=${PYTHON:-python3}
+"$PY" -m venv --help >/dev/null 2>&1 || { echo "no venv module"; exit 77; }
+rm -rf "$work/venv" "$work/dist" && mkdir -p "$work"
+"$PY" -m venv "$work/venv"
+# The wheel's CMake build keeps its tree in $work/cmake (incremental on the
+# next run) and compiles through ccache when there is one.
+launch=""
+command -v ccache >/dev/null && launch="-DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_CXX_COMPILER_LAUNCHER=ccache"
+CMAKE_ARGS="$launch" "$work/venv/bin/pip" wheel -q --no-deps -w "$work/dist" \
+  --config-settings=build-dir="$work/cmake" "$src/bindings/python"
+whl=$(ls "$work"/dist/cdm_haptics-*.whl)
+unzip -l "$whl" | grep "cdm/libcdm.so.1$" >/dev/null
+if "$PY" -m auditwheel --version >/dev/null 2>&1; then
+  "$PY" -m auditwheel show "$whl"
+  "$PY" -m auditwheel repair -w "$work/dist/repaired" "$whl"
+  whl=$(ls "$work"/dist/repaired/cdm_haptics-*.whl)
+fi
+"$work/venv/bin/pip" install -q "$whl"
+cd "$work"
+"$work/venv/bin/python" - <<'PY'
+import cdm, os
+here = os.path.dirname(cdm.__file__)
+assert "site-packages" in here, here
+with cdm.open("sim:") as d:
+    p = d.wait_pose(2.0)
+    assert p is not None
+print("wheel: ok", d, here)
+PY
+test -x "$work/venv/bin/cdm-report"

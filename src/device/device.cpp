@@ -395,8 +395,11 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len) {
     }
 }
 
-int cdm_device::finish(cdm_pose &pose, bool have) const {
-    const uint32_t st = state_flags_.load(std::memory_order_acquire);
+// `st`: the state flags loaded *before* the pose snapshot. The reader
+// publishes its last pose before it sets END_OF_STREAM (or DISCONNECTED), so
+// a flag seen first guarantees the snapshot that follows holds every pose
+// published before it: an ended stream never looks empty.
+int cdm_device::finish(cdm_pose &pose, bool have, uint32_t st) const {
     if (!have) {
         pose = cdm_pose{};
         pose.struct_size = sizeof(cdm_pose);
@@ -418,18 +421,20 @@ int cdm_device::finish(cdm_pose &pose, bool have) const {
 }
 
 int cdm_device::get_pose(cdm_pose &out) const {
+    const uint32_t st = state_flags_.load(std::memory_order_acquire);
     Snapshot s;
     const bool have = snap_.load(s);
     if (have) out = s.pose;
-    return finish(out, have);
+    return finish(out, have, st);
 }
 
 int cdm_device::get_raw(cdm_raw &out) const {
+    const uint32_t st = state_flags_.load(std::memory_order_acquire);
     Snapshot s;
     const bool have = snap_.load(s);
     cdm_pose p{};
     if (have) p = s.pose;
-    const int rc = finish(p, have);
+    const int rc = finish(p, have, st);
     if (have) {
         out = s.raw;
     } else {

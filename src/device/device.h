@@ -108,7 +108,7 @@ private:
     bool wait_until(const std::function<bool()> &ready, int timeout_ms);
     void set_state_flag(uint32_t flag, bool on);
     void notify_waiters();
-    int finish(cdm_pose &pose, bool have) const;
+    int finish(cdm_pose &pose, bool have, uint32_t state_before_snapshot) const;
     static Conversion conversion_from(const cdm::proto::DeviceInfoReport &r);
 
     cdm::TransportPtr transport_;

@@ -11,8 +11,8 @@ for san in address,undefined thread; do
   cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCDM_SANITIZE="$san" \
         -DCDM_BUILD_BINDINGS_TESTS=OFF -DCDM_BUILD_BENCHMARKS=OFF -DCDM_WERROR=OFF > /dev/null
   cmake --build "$dir" -j"$(nproc)"
-  # model_*, calib_*, device_* are the C/C++ programs; the bindings' tests run
+  # jig_*, model_*, io_*, device_*, calib_*, api_* are the C/C++ programs; the bindings' tests run
   # in the plain build (an instrumented libcdm inside python or mono needs
   # the sanitizer runtime preloaded, which tests nothing more of our code).
-  ctest --test-dir "$dir" -R '^(model|calib|device)_' --output-on-failure -j"$(nproc)"
+  ctest --test-dir "$dir" -R '^(jig|model|io|device|calib|api)_' --output-on-failure -j"$(nproc)"
 done

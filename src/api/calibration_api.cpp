@@ -101,7 +101,9 @@ int cdm_calibration_lengths(const cdm_calibration *cal, const double position_mm
         if (!cal || !lengths_mm || !position_mm)
             return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_lengths: NULL argument");
         double l[4];
-        cal->model->readings(position_mm, l);
+        if (cal->model->readings(position_mm, l) != 0)
+            return cdm::fail(CDM_ERR_NUMERIC, "cdm_calibration_lengths: a user effect of the calibration failed at "
+                                              "this position");
         for (int k = 0; k < 4; ++k)
             if (!std::isfinite(l[k]))
                 return cdm::fail(CDM_ERR_NUMERIC, "cdm_calibration_lengths: non-finite length at this position");

@@ -1,21 +1,19 @@
 // See diag_eval.h.
 #include "calib/diag_eval.h"
 
+#include <limits>
+
 namespace cdm {
 namespace diag {
 
 namespace {
 Eigen::Matrix<double, 4, 3> reading_jacobian(const Model &m, const double p[3]) {
-    Eigen::Matrix<double, 4, 3> J;
-    for (int k = 0; k < 3; ++k) {
-        double pp[3] = {p[0], p[1], p[2]}, pm[3] = {p[0], p[1], p[2]};
-        pp[k] += 1e-4;
-        pm[k] -= 1e-4;
-        double yp[4], ym[4];
-        m.readings(pp, yp);
-        m.readings(pm, ym);
-        for (int i = 0; i < 4; ++i) J(i, k) = (yp[i] - ym[i]) / 2e-4;
-    }
+    // The model's own derivative (automatic differentiation through the
+    // built-ins); NaN when a user effect fails, so nothing downstream
+    // mistakes it for a number.
+    Eigen::Matrix<double, 4, 3, Eigen::RowMajor> J;
+    double y[4];
+    if (m.readings_jacobian(p, 0.0, y, J.data()) != 0) J.setConstant(std::numeric_limits<double>::quiet_NaN());
     return J;
 }
 } // namespace

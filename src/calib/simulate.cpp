@@ -28,7 +28,10 @@ template <class Sink> bool run(const Model &truth, const JigSimOptions &o, Sink 
     for (size_t k = 0; k < plan.size(); ++k) {
         double p[3], L[4];
         truth.jig_to_device(where[k].data(), p);
-        truth.readings(p, L);
+        if (truth.readings(p, L) != 0) {
+            err = "a user effect of the true model failed at point " + std::to_string(plan[k].point);
+            return false;
+        }
         for (int c = 0; c < 4; ++c)
             if (!std::isfinite(L[c])) {
                 err = "simulated readings are not finite at point " + std::to_string(plan[k].point);

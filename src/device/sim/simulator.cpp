@@ -26,7 +26,11 @@ bool Simulator::next(uint8_t *report, SimTruth &truth) {
     r.device_time_us = uint64_t(std::llround(double(index_) * 1e6 / o_.rate_hz));
 
     double readings[4];
-    model_->readings(s.p, readings);
+    // A truth whose user effect cannot give readings here is a simulation
+    // that cannot go on: the stream ends (never a NaN turned into counts).
+    if (model_->readings(s.p, readings) != 0) return false;
+    for (double v : readings)
+        if (!std::isfinite(v)) return false;
     const double full_scale = double((1u << info.adc_bits) - 1);
     for (int i = 0; i < 4; ++i) {
         const double v = readings[i] + o_.noise_mm * normal_(rng_);

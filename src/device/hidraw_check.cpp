@@ -13,21 +13,13 @@
 #include <string>
 
 #include "cdm/cdm.h"
+#include "io/file.h"
 
 namespace {
 
 int fail(char *why, size_t cap, int code, const std::string &text) {
     if (why && cap) std::snprintf(why, cap, "%s", text.c_str());
     return code;
-}
-
-const char *kind_of(mode_t m) {
-    if (S_ISREG(m)) return "a regular file";
-    if (S_ISDIR(m)) return "a directory";
-    if (S_ISFIFO(m)) return "a FIFO";
-    if (S_ISSOCK(m)) return "a socket";
-    if (S_ISBLK(m)) return "a block device";
-    return "not a character device";
 }
 
 // The subsystem a character device belongs to, from sysfs ("" if unknown).
@@ -53,7 +45,7 @@ extern "C" int cdm_hidraw_node_check(const char *path, char *why, size_t cap) {
     if (::stat(p.c_str(), &st) != 0)
         return fail(why, cap, CDM_ERR_NO_DEVICE, p + ": " + std::strerror(errno));
     if (!S_ISCHR(st.st_mode))
-        return fail(why, cap, CDM_ERR_NO_DEVICE, p + " is " + kind_of(st.st_mode) + ", not a hidraw device");
+        return fail(why, cap, CDM_ERR_NO_DEVICE, p + " is " + cdm::io::file_kind(st.st_mode) + ", not a hidraw device");
     std::string detail;
     const std::string sub = char_subsystem(st.st_rdev, detail);
     if (sub != "hidraw")

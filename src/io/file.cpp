@@ -15,15 +15,6 @@ namespace cdm::io {
 namespace {
 std::string why() { return std::strerror(errno); }
 
-const char *kind(mode_t m) {
-    if (S_ISDIR(m)) return "a directory";
-    if (S_ISFIFO(m)) return "a FIFO (named pipe)";
-    if (S_ISCHR(m)) return "a character device";
-    if (S_ISBLK(m)) return "a block device";
-    if (S_ISSOCK(m)) return "a socket";
-    return "not a regular file";
-}
-
 std::string dir_of(const std::string &path) {
     auto s = path.find_last_of('/');
     if (s == std::string::npos) return ".";
@@ -50,6 +41,16 @@ bool fsync_dir(const std::string &dir, std::string &err) {
 }
 } // namespace
 
+const char *file_kind(mode_t m) {
+    if (S_ISREG(m)) return "a regular file";
+    if (S_ISDIR(m)) return "a directory";
+    if (S_ISFIFO(m)) return "a FIFO (named pipe)";
+    if (S_ISCHR(m)) return "a character device";
+    if (S_ISBLK(m)) return "a block device";
+    if (S_ISSOCK(m)) return "a socket";
+    return "a file of unknown kind";
+}
+
 bool read_file(const std::string &path, size_t max_bytes, std::string &out, std::string &err, const char *what) {
     // O_NONBLOCK: opening a FIFO without a writer must not hang; fstat then
     // refuses it (and every other special file) before any read.
@@ -65,7 +66,7 @@ bool read_file(const std::string &path, size_t max_bytes, std::string &out, std:
         return false;
     }
     if (!S_ISREG(st.st_mode)) {
-        err = path + ": the " + std::string(what) + " is " + kind(st.st_mode) + ", not a regular file";
+        err = path + ": the " + std::string(what) + " is " + file_kind(st.st_mode) + ", not a regular file";
         ::close(fd);
         return false;
     }
@@ -133,7 +134,7 @@ bool AtomicFile::open(const std::string &path, const std::vector<std::string> &p
     mode_t mode = 0644;
     if (::stat(path.c_str(), &st) == 0) {
         if (!S_ISREG(st.st_mode)) {
-            err = path + ": refusing to write over " + kind(st.st_mode) + " (outputs replace regular files only)";
+            err = path + ": refusing to write over " + file_kind(st.st_mode) + " (outputs replace regular files only)";
             return false;
         }
         for (const auto &in : protect) {

@@ -5,6 +5,8 @@
 #pragma once
 
 #include <cstddef>
+#include <sys/types.h>
+
 #include <string>
 #include <vector>
 
@@ -24,6 +26,10 @@ constexpr size_t kDatasetMaxBytes = size_t(1) << 30;
 // messages ("calibration", "device description", "dataset").
 bool read_file(const std::string &path, size_t max_bytes, std::string &out, std::string &err,
                const char *what = "file");
+
+// "a directory", "a FIFO (named pipe)", ...: what a stat mode is, for
+// messages that say why a path was refused.
+const char *file_kind(mode_t m);
 
 // Identity of an existing file (st_dev, st_ino), through symlinks.
 struct FileId {

@@ -30,7 +30,7 @@ fi
 
 PY=${PYTHON:-python3}
 need_py=()
-for m in numpy matplotlib pytest mujoco; do
+for m in numpy matplotlib pytest mujoco mypy; do
   "$PY" -c "import $m" 2>/dev/null || need_py+=("$m")
 done
 # auditwheel: the wheel test repairs the wheel with it (skipped without it).
@@ -40,7 +40,7 @@ if [ ${#need_py[@]} -gt 0 ]; then
   if ! "$PY" -m pip install -q "${need_py[@]}" 2>/tmp/cdm-pip.log; then
     if grep -q externally-managed /tmp/cdm-pip.log; then
       # Debian's system python: its own packages, mujoco from PyPI beside them.
-      DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-numpy python3-matplotlib python3-pytest
+      DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-numpy python3-matplotlib python3-pytest python3-mypy
       "$PY" -m pip install -q --break-system-packages mujoco
     else
       cat /tmp/cdm-pip.log >&2

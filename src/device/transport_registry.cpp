@@ -3,6 +3,7 @@
 
 #include "cdm/cdm.h"
 #include "device/transport.h"
+#include "io/text.h"
 
 namespace cdm {
 
@@ -94,7 +95,7 @@ bool option_double(const Uri &u, const std::string &key, const std::string &valu
     const double v = value.empty() ? 0.0 : std::strtod(value.c_str(), &end);
     if (value.empty() || errno != 0 || *end != '\0' || !(v >= lo && v <= hi)) {
         err = "URI \"" + u.text + "\": option " + key + "=\"" + value + "\" must be a number in [" +
-              std::to_string(lo) + ", " + std::to_string(hi) + "]";
+              io::number_text(lo) + ", " + io::number_text(hi) + "]";
         return false;
     }
     out = v;

@@ -54,7 +54,7 @@ class Button(enum.IntFlag):
 
 
 # The header's names, flat, as module attributes (cdm.CDM_ERR_NO_DEVICE, ...).
-globals().update({m.name: int(m) for e in (Error, PoseFlag, Button) for m in e})
+globals().update({str(m.name): int(m) for e in (Error, PoseFlag, Button) for m in e})
 
 __all__ = ["Error", "PoseFlag", "Button", "CDM_ERROR_COUNT", "CDM_VERSION_MAJOR", "CDM_VERSION_MINOR",
-           "CDM_VERSION_PATCH", "CDM_VERSION_NUMBER"] + [m.name for e in (Error, PoseFlag, Button) for m in e]
+           "CDM_VERSION_PATCH", "CDM_VERSION_NUMBER"] + [str(m.name) for e in (Error, PoseFlag, Button) for m in e]

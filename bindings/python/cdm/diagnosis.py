@@ -3,6 +3,7 @@ import ctypes
 import json
 import numbers
 import os
+from typing import Any, Callable, Dict, Iterable, Optional, Union
 
 from . import _native
 from .constants import Error
@@ -12,11 +13,66 @@ from . import effects as _effects
 try:
     import numpy as _np
 except ImportError:  # numpy is optional: per-position data stay lists
-    _np = None
+    _np = None  # type: ignore[assignment]
 
 
 def _is_number(v):
     return isinstance(v, numbers.Real) and not isinstance(v, bool)
+
+
+PathLike = Union[str, "os.PathLike[str]"]
+Progress = Callable[[str, float], Any]
+
+__all__ = ["Diagnosis", "diagnose", "fit", "load_diagnosis"]
+
+
+class Diagnosis(dict):
+    """What cdm.diagnose() returns: the library's result (docs/calibration.md
+    gives the schema) as a dict, with the per-position data under
+    ["positions"] as numpy arrays when numpy is installed. Saved and loaded
+    as the same JSON `cdm calib diagnose --json` writes."""
+
+    @property
+    def verdict(self) -> str:
+        return str(self.get("verdict", ""))
+
+    def to_json(self, path: Optional[PathLike] = None, indent: Optional[int] = None) -> str:
+        """The JSON text (arrays back to lists); with `path`, also written
+        there atomically (libcdm's writer: an exclusive temporary, fsync,
+        rename; the old file survives any failure)."""
+        text = json.dumps(_plain(self), indent=indent) + "\n"
+        if path is not None:
+            data = text.encode("utf-8")
+            L = _native.lib()
+            rc = L.cdm_write_file_atomic(_native.c_path(path, "path"), data, len(data), None, 0)
+            _native.check(rc, "cdm_write_file_atomic")
+        return text
+
+
+def load_diagnosis(path: PathLike) -> Diagnosis:
+    """A Diagnosis saved by Diagnosis.to_json() or `cdm calib diagnose --json`."""
+    with open(os.fspath(path), encoding="utf-8") as f:
+        result = json.load(f)
+    if not isinstance(result, dict) or "verdict" not in result:
+        raise ValueError("%s: not a cdm diagnosis (no \"verdict\")" % os.fspath(path))
+    return _as_diagnosis(result)
+
+
+def _as_diagnosis(result: Dict[str, Any]) -> Diagnosis:
+    d = Diagnosis(result)
+    if _np is not None and "positions" in d:
+        d["positions"] = _arrays(d["positions"])
+    return d
+
+
+def _plain(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if _np is not None and isinstance(obj, _np.ndarray):
+        return obj.tolist()
+    return obj
 
 
 def _arrays(obj):
@@ -33,7 +89,9 @@ def _arrays(obj):
     return obj
 
 
-def diagnose(data_csv, device_json, effects=None, jig_tolerance_mm=None, progress=None, **options):
+def diagnose(data_csv: PathLike, device_json: PathLike, effects: Optional[Union[str, Iterable[str]]] = None,
+             jig_tolerance_mm: Optional[float] = None, progress: Optional[Progress] = None,
+             **options: Any) -> Diagnosis:
     """Runs cdm_diagnose and returns its result (docs/calibration.md gives the
     schema) as a dict. Under result["positions"], lists of numbers become numpy
     arrays when numpy is installed.
@@ -43,22 +101,25 @@ def diagnose(data_csv, device_json, effects=None, jig_tolerance_mm=None, progres
     progress          progress(stage: str, fraction: float) -> truthy to cancel
     **options         any other option of cdm_diagnose (candidates=True,
                       per_position=True, calibration_out="calib.json", ...)"""
-    return _run("cdm_diagnose", data_csv, device_json, effects, jig_tolerance_mm, progress, options)
+    return _as_diagnosis(_run("cdm_diagnose", data_csv, device_json, effects, jig_tolerance_mm, progress, options))
 
 
-def fit(data_csv, device_json, effects, jig_tolerance_mm=None, calibration_out=None, progress=None):
+def fit(data_csv: PathLike, device_json: PathLike, effects: Union[str, Iterable[str]],
+        jig_tolerance_mm: Optional[float] = None, calibration_out: Optional[PathLike] = None,
+        progress: Optional[Progress] = None) -> Dict[str, Any]:
     """Runs cdm_fit (experimental, since 1.1): the calibration fit alone,
     without the diagnosis's candidates, review and validation. Returns
     {"effects": [{"name", "params": {p: {value, std, unit}}}], "fit": {...},
     "jig_tolerance_mm", "nominal_error_mm", "error_mm"}; writes the
     calibration atomically to calibration_out when given."""
-    options = {}
+    options: Dict[str, Any] = {}
     if calibration_out is not None:
         options["calibration_out"] = os.fspath(calibration_out)
     return _run("cdm_fit", data_csv, device_json, effects, jig_tolerance_mm, progress, options)
 
 
-def _run(fn, data_csv, device_json, effects, jig_tolerance_mm, progress, options):
+def _run(fn: str, data_csv: PathLike, device_json: PathLike, effects: Optional[Union[str, Iterable[str]]],
+         jig_tolerance_mm: Optional[float], progress: Optional[Progress], options: Dict[str, Any]) -> Dict[str, Any]:
     if effects is not None:
         if isinstance(effects, str):
             effects = [effects]
@@ -110,6 +171,7 @@ def _run(fn, data_csv, device_json, effects, jig_tolerance_mm, progress, options
                        "is not trustworthy" % (name, type(exc).__name__, exc, len(effect_errors)),
                        function=fn) from exc
     result = json.loads(text)
-    if _np is not None and isinstance(result, dict) and "positions" in result:
-        result["positions"] = _arrays(result["positions"])
+    if not isinstance(result, dict):
+        raise CdmError(Error.CDM_ERR_INTERNAL, "%s returned %s, not a JSON object" % (fn, type(result).__name__),
+                       function=fn)
     return result

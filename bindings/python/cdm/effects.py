@@ -11,11 +11,11 @@ from .constants import Error
 try:
     import numpy as _np
 except ImportError:  # numpy is optional
-    _np = None
+    _np = None  # type: ignore[assignment]
 
 # name -> _Registration. Holds every object native code may still reach
 # (the apply trampoline, the parameter arrays) until unregister_effect.
-_registry = {}
+_registry: dict = {}
 _registry_lock = threading.Lock()
 
 

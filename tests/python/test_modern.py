@@ -78,3 +78,30 @@ def test_exports_and_types():
     r = subprocess.run([sys.executable, "-m", "mypy", "--cache-dir=/dev/null", "-p", "cdm"], cwd=PKG_DIR,
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+SIGINT_SCRIPT = """
+import os, signal, sys, threading, cdm
+threading.Timer(0.1, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
+try:
+    cdm.diagnose(sys.argv[1], sys.argv[2])
+    print("finished")
+except KeyboardInterrupt:
+    print("interrupted")
+"""
+
+
+def test_ctrl_c_cancels_a_diagnosis(tmp_path):
+    """SIGINT during cdm.diagnose (a single long C call) cancels it at the
+    next fit iteration and raises KeyboardInterrupt; the handler is restored."""
+    cli = os.environ.get("CDM_CLI")
+    if not cli:
+        pytest.skip("CDM_CLI (the built `cdm` program) is not set; ctest sets it")
+    ds = tmp_path / "ds.csv"
+    # 62,500 rows: the diagnosis takes over a second here, far beyond the 0.1 s
+    # at which the signal arrives.
+    subprocess.run([cli, "calib", "simulate", str(ds), "--effects", "exit_pulley", "--samples", "20"], check=True,
+                   capture_output=True)
+    r = subprocess.run([sys.executable, "-c", SIGINT_SCRIPT, str(ds), DEVICE_JSON], capture_output=True, text=True,
+                       env=dict(os.environ), timeout=120)
+    assert r.stdout.strip() == "interrupted", r.stdout + r.stderr

@@ -3,6 +3,8 @@ import ctypes
 import json
 import numbers
 import os
+import signal
+import threading
 from typing import Any, Callable, Dict, Iterable, Optional, Union
 
 from . import _native
@@ -128,22 +130,43 @@ def _run(fn: str, data_csv: PathLike, device_json: PathLike, effects: Optional[U
         options["jig_tolerance_mm"] = float(jig_tolerance_mm)
     options_json = json.dumps(options).encode("utf-8") if options else None
 
-    raised = []
-    cb = _native.cdm_progress_fn()  # NULL
-    if progress is not None:
-        def trampoline(_user, stage, fraction):
-            try:
-                return 1 if progress((stage or b"").decode("utf-8", "replace"), fraction) else 0
-            except BaseException as e:  # cancel, and re-raise once back in Python
-                raised.append(e)
-                return 1
-        cb = _native.cdm_progress_fn(trampoline)
+    # Ctrl-C cancels a long run: while the library works, SIGINT (in the
+    # main thread, with Python's default handler) only sets a flag; the
+    # progress callback, which the library calls between fit iterations,
+    # cancels on it, and KeyboardInterrupt is raised once back in Python. A
+    # KeyboardInterrupt raised inside a ctypes callback would be swallowed.
+    raised: list = []
+    interrupted: list = []
+
+    def trampoline(_user, stage, fraction):
+        if interrupted:
+            return 1
+        try:
+            if progress is None:
+                return 0
+            return 1 if progress((stage or b"").decode("utf-8", "replace"), fraction) else 0
+        except BaseException as e:  # cancel, and re-raise once back in Python
+            raised.append(e)
+            return 1
+    cb = _native.cdm_progress_fn(trampoline)
 
     L = _native.lib()
     out = ctypes.c_void_p()
     _effects._take_errors()
-    rc = getattr(L, fn)(_native.c_path(data_csv, "dataset path"), _native.c_path(device_json, "device path"),
-                        options_json, cb, None, ctypes.byref(out))
+    data_path, device_path = _native.c_path(data_csv, "dataset path"), _native.c_path(device_json, "device path")
+    previous = None
+    if (threading.current_thread() is threading.main_thread()
+            and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: interrupted.append(signum))
+    try:
+        rc = getattr(L, fn)(data_path, device_path, options_json, cb, None, ctypes.byref(out))
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+    if interrupted:
+        if out.value:
+            L.cdm_free_string(out)
+        raise KeyboardInterrupt
     if rc < 0:
         err = _native.fail(rc, fn)
         L.cdm_free_string(out)

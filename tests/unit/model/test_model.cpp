@@ -31,8 +31,21 @@ void *operator new(size_t n) {
     if (void *p = std::malloc(n ? n : 1)) return p;
     throw std::bad_alloc();
 }
+// Every form a library may call (std::stable_sort's buffer uses the nothrow
+// one): all on malloc/free, so no pair mixes allocators (AddressSanitizer
+// checks that).
+void *operator new(size_t n, const std::nothrow_t &) noexcept {
+    ++g_allocations;
+    return std::malloc(n ? n : 1);
+}
+void *operator new[](size_t n) { return operator new(n); }
+void *operator new[](size_t n, const std::nothrow_t &t) noexcept { return operator new(n, t); }
 void operator delete(void *p) noexcept { std::free(p); }
 void operator delete(void *p, size_t) noexcept { std::free(p); }
+void operator delete(void *p, const std::nothrow_t &) noexcept { std::free(p); }
+void operator delete[](void *p) noexcept { std::free(p); }
+void operator delete[](void *p, size_t) noexcept { std::free(p); }
+void operator delete[](void *p, const std::nothrow_t &) noexcept { std::free(p); }
 
 // The seed's triangulation inverts the ideal geometry exactly: over the
 // whole workspace (y, z in +-60 mm, x 20..80 mm) the error is rounding

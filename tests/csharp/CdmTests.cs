@@ -47,12 +47,57 @@ static class CdmTests
                     break;
                 case "calibration":
                     Run("calibration_errors", CalibrationErrors);
+                    Run("frames", FramesCarryRotations);
                     break;
                 default: Console.Error.WriteLine("unknown group " + group); return 100;
             }
         }
         Console.WriteLine("{0} checks, {1} failed", checks, failures);
         return Math.Min(failures, 99);
+    }
+
+    // A vector rotated in the device frame and carried into ROS's or Unity's
+    // equals the carried vector rotated by the carried quaternion (the
+    // component formula both engines apply); exact up to rounding.
+    static double[] QRot(double[] q, double[] v)
+    {
+        double x = q[0], y = q[1], z = q[2], w = q[3];
+        double[] c1 = { y * v[2] - z * v[1], z * v[0] - x * v[2], x * v[1] - y * v[0] };
+        double[] c2 = { y * c1[2] - z * c1[1], z * c1[0] - x * c1[2], x * c1[1] - y * c1[0] };
+        return new[] { v[0] + 2 * w * c1[0] + 2 * c2[0], v[1] + 2 * w * c1[1] + 2 * c2[1], v[2] + 2 * w * c1[2] + 2 * c2[2] };
+    }
+
+    static void FramesCarryRotations()
+    {
+        var rng = new Random(7);
+        foreach (var frame in new[] { Cdm.Frames.RosFromDevice, Cdm.Frames.UnityFromDevice })
+            for (int k = 0; k < 100; ++k)
+            {
+                double[] q = { rng.NextDouble() - 0.5, rng.NextDouble() - 0.5, rng.NextDouble() - 0.5, rng.NextDouble() - 0.5 };
+                double n = Math.Sqrt(q.Sum(c => c * c));
+                var pose = new Cdm.Pose();
+                pose.Orientation = new Cdm.Quaterniond(q[3] / n, q[0] / n, q[1] / n, q[2] / n);
+                pose.Position = new Cdm.Vector3d(rng.NextDouble() * 100, rng.NextDouble() * 100 - 50, rng.NextDouble() * 100 - 50);
+                Cdm.Vector3d pm;
+                double[] q2;
+                Cdm.Frames.ToFrame(pose, frame, out pm, out q2);
+                double[] dev = { pose.Orientation.X, pose.Orientation.Y, pose.Orientation.Z, pose.Orientation.W };
+                double[] r = QRot(dev, pose.Position.ToArray());
+                double[] a = { 0, 0, 0 };
+                for (int i = 0; i < 3; ++i) a[i] = frame[i, 0] * r[0] + frame[i, 1] * r[1] + frame[i, 2] * r[2];
+                double[] b = QRot(q2, new[] { pm.X * 1000, pm.Y * 1000, pm.Z * 1000 });
+                for (int i = 0; i < 3; ++i) Expect(Math.Abs(a[i] - b[i]) < 1e-9, "frames: rotation carried, axis " + i);
+            }
+        var p0 = new Cdm.Pose();
+        p0.Position = new Cdm.Vector3d(100, 20, 30);
+        p0.Orientation = new Cdm.Quaterniond(1, 0, 0, 0);
+        Cdm.Vector3d ros, unity;
+        double[] qr, qu;
+        Cdm.Frames.ToRos(p0, out ros, out qr);
+        Cdm.Frames.ToUnity(p0, out unity, out qu);
+        Expect(Math.Abs(ros.X + 0.1) < 1e-12 && Math.Abs(ros.Y + 0.02) < 1e-12 && Math.Abs(ros.Z - 0.03) < 1e-12, "frames: ROS axes");
+        Expect(Math.Abs(unity.X - 0.02) < 1e-12 && Math.Abs(unity.Y - 0.03) < 1e-12 && Math.Abs(unity.Z + 0.1) < 1e-12, "frames: Unity axes");
+        Expect(qr[3] == 1 && qu[3] == 1, "frames: identity stays identity");
     }
 
     // ------------------------------------------------------------ layouts

@@ -19,6 +19,7 @@ from .constants import Button, Error, PoseFlag
 from .device import Device, DeviceInfo, Pose, Raw, Sample, Stats, enumerate_devices, open  # noqa: A004
 from .diagnosis import Diagnosis, diagnose, fit, load_diagnosis
 from .effects import effect_names, load_plugin, register_effect, unregister_effect
+from . import frames
 from .errors import (CdmError, CdmFileNotFoundError, CdmIOError, CdmMemoryError, CdmTimeoutError,
                      DisconnectedError, InvalidArgumentError, LibraryNotFoundError, NoDeviceError, ParseError)
 from . import constants as _constants
@@ -28,7 +29,7 @@ __all__ = ["open", "enumerate", "enumerate_devices", "Device", "DeviceInfo", "Po
            "effect_names", "load_plugin", "register_effect", "unregister_effect",
            "CdmError", "InvalidArgumentError", "ParseError", "NoDeviceError", "CdmIOError", "CdmFileNotFoundError",
            "CdmTimeoutError", "DisconnectedError", "CdmMemoryError", "LibraryNotFoundError",
-           "version", "version_number", "library_path"] + list(_constants.__all__)
+           "frames", "version", "version_number", "library_path"] + list(_constants.__all__)
 
 
 

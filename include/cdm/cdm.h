@@ -114,7 +114,7 @@ enum cdm_button {
 
 /**
  * The master's state, as a generic haptic input device. Size 104 (1.0),
- * 112 (1.1).
+ * 136 (1.1).
  * Set struct_size = sizeof(cdm_pose) before the call.
  */
 typedef struct cdm_pose {
@@ -133,6 +133,12 @@ typedef struct cdm_pose {
      *  on the host (1 for the first); monotonic, never reset by the device or
      *  a reconnection. 0: no pose yet. Pass it to cdm_wait_pose_after. */
     uint64_t host_sequence;
+    /** since 1.1 (size 136): holder velocity, mm/s, device frame: the
+     *  backward difference of successive positions over the device clock
+     *  through a first-order low-pass at 50 Hz (about 3.7 ms of lag at
+     *  1 kHz: docs/protocol.md, "Velocity"). Zero until two positions, after
+     *  a gap over 50 ms, and while the position is held (out of workspace). */
+    double velocity[3];
 } cdm_pose;
 
 /** Raw sensor values of the newest report. Size 80 (1.0). */

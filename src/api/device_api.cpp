@@ -17,7 +17,7 @@
 // The 1.0 sizes are part of the ABI: a caller passing less is refused, a
 // newer caller passing more gets the 1.0 fields and the rest untouched.
 static_assert(offsetof(cdm_pose, host_sequence) == 104, "cdm_pose 1.0 is 104 bytes");
-static_assert(sizeof(cdm_pose) == 112, "cdm_pose 1.1 is 112 bytes");
+static_assert(offsetof(cdm_pose, velocity) == 112 && sizeof(cdm_pose) == 136, "cdm_pose 1.1 is 136 bytes");
 static_assert(sizeof(cdm_raw) == 80, "cdm_raw 1.0 is 80 bytes");
 static_assert(sizeof(cdm_device_info) == 456, "cdm_device_info 1.0 is 456 bytes");
 static_assert(offsetof(cdm_stats, sequence_jumps) == 48, "cdm_stats 1.0 is 48 bytes");

@@ -352,8 +352,9 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len) {
     // cable's length: no position from it.
     bool saturated = false;
     for (int i = 0; i < 4; ++i) saturated = saturated || r.pot_adc[i] >= conv_.adc_full_scale;
-    if (!saturated && model_->position(raw.lengths_mm, p) == 0 && std::isfinite(p[0]) && std::isfinite(p[1]) &&
-        std::isfinite(p[2])) {
+    const bool fresh = !saturated && model_->position(raw.lengths_mm, p) == 0 && std::isfinite(p[0]) &&
+                       std::isfinite(p[1]) && std::isfinite(p[2]);
+    if (fresh) {
         std::memcpy(last_good_p_, p, sizeof p);
         have_good_p_ = true;
     } else {
@@ -363,6 +364,7 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len) {
         n_oow_.fetch_add(1, std::memory_order_relaxed);
     }
     std::memcpy(pose.position, last_good_p_, sizeof last_good_p_);
+    velocity_.update(last_good_p_, double(r.device_time_us) * 1e-6, fresh, pose.velocity);
     if (compensated_) pose.flags |= CDM_POSE_COMPENSATED;
     double qn = 0;
     for (int i = 0; i < 4; ++i) qn += double(r.quat_q14[i]) * r.quat_q14[i];

@@ -28,6 +28,7 @@
 #include "device/protocol.h"
 #include "device/seqlock.h"
 #include "device/transport.h"
+#include "device/velocity.h"
 #include "model/model.h"
 
 namespace cdm {
@@ -157,6 +158,7 @@ private:
     bool after_reconnect_ = false;
     double last_good_p_[3] = {0, 0, 0};
     bool have_good_p_ = false;
+    cdm::VelocityFilter velocity_;
     uint64_t malformed_by_kind_[8] = {};
 
     std::atomic<bool> stop_{false};

@@ -215,3 +215,16 @@ def test_wait_pose_without_limit_is_interrupted_by_ctrl_c():
             timer.cancel()
         waited = time.monotonic() - t0
         assert 0.25 < waited < 0.3 + 0.1 + 0.2, waited  # interrupt + one slice + scheduling
+
+
+def test_velocity_on_the_circle():
+    """Pose.velocity (since 1.1) on the sim's circle: speed 40 mm x 2 pi x
+    0.25 Hz = 62.8 mm/s; within 8 mm/s (the ADC quantisation's difference
+    noise after the 50 Hz filter is ~1.6 mm/s rms: 5 sigma)."""
+    import math
+    with cdm.open("sim:?motion=circle&noise=0&imu_noise=0&hall_noise=0") as dev:
+        p = dev.wait_pose(1.0, after=0)
+        while p.host_sequence < 150:
+            p = dev.wait_pose(1.0, after=p.host_sequence)
+        assert abs(p.velocity[0]) < 8.0
+        assert math.hypot(p.velocity[1], p.velocity[2]) == pytest.approx(2 * math.pi * 0.25 * 40, abs=8.0)

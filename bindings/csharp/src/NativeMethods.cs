@@ -42,6 +42,7 @@ namespace Cdm
         public uint dropped;
         public uint reserved0;
         public ulong host_sequence; // since 1.1
+        public double velocity_0, velocity_1, velocity_2; // since 1.1
     }
 
     [CStruct("cdm_raw"), StructLayout(LayoutKind.Sequential)]

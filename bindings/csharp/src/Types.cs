@@ -46,6 +46,9 @@ namespace Cdm
         /// <summary>since 1.1: poses this handle has published so far (host side,
         /// monotonic); pass it to Device.WaitPoseAfter.</summary>
         public ulong HostSequence;
+        /// <summary>since 1.1: holder velocity, mm/s, device frame (a low-passed
+        /// difference: 50 Hz, about 3.7 ms of lag; docs/protocol.md).</summary>
+        public Vector3d Velocity;
         public ErrorCode Status;
 
         public bool IsStale { get { return (Flags & PoseFlags.Stale) != 0; } }
@@ -68,6 +71,7 @@ namespace Cdm
             r.DeviceTimeUs = p.device_time_us;
             r.HostTimeNs = p.host_time_ns;
             r.HostSequence = p.host_sequence;
+            r.Velocity = new Vector3d(p.velocity_0, p.velocity_1, p.velocity_2);
             r.Status = (ErrorCode)status;
             return r;
         }

@@ -38,6 +38,7 @@ class cdm_pose(_Sized):
         ("dropped", ctypes.c_uint32),
         ("reserved0", ctypes.c_uint32),
         ("host_sequence", ctypes.c_uint64),  # since 1.1
+        ("velocity", ctypes.c_double * 3),  # since 1.1
     ]
 
 

@@ -33,11 +33,14 @@ class Pose:
     host_time_ns: int
     status: int = 0
     host_sequence: int = 0  # since 1.1: poses published by this handle so far; pass to wait_pose(after=)
+    # since 1.1: mm/s, device frame; a low-passed difference (50 Hz, ~3.7 ms lag: docs/protocol.md)
+    velocity: Tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @classmethod
     def _from_c(cls, p, status=0):
         return cls(tuple(p.position), tuple(p.orientation), p.grip, p.buttons, p.sequence, p.dropped,
-                   p.flags, p.device_time_us, p.host_time_ns, int(status), int(p.host_sequence))
+                   p.flags, p.device_time_us, p.host_time_ns, int(status), int(p.host_sequence),
+                   tuple(p.velocity))
 
     @property
     def is_stale(self):

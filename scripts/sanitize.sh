@@ -14,5 +14,5 @@ for san in address,undefined thread; do
   # jig_*, model_*, io_*, device_*, calib_*, api_* are the C/C++ programs; the bindings' tests run
   # in the plain build (an instrumented libcdm inside python or mono needs
   # the sanitizer runtime preloaded, which tests nothing more of our code).
-  ctest --test-dir "$dir" -R '^(jig|model|io|device|calib|api)_' --output-on-failure -j"$(nproc)"
+  ctest --test-dir "$dir" -R '^(jig|model|io|device|calib|api|fuzz)_' --output-on-failure -j"$(nproc)"
 done

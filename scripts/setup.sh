@@ -16,7 +16,9 @@ DEB_PKGS=(build-essential cmake ninja-build pkg-config git
   # packaging tests (tests/packaging): cpack -G DEB computes Depends with
   # dpkg-shlibdeps (dpkg-dev) and file; nuget packs Cdm.nupkg; the wheel
   # test needs venv, unzip, and patchelf for auditwheel repair.
-  dpkg-dev file nuget unzip python3-venv patchelf)
+  dpkg-dev file nuget unzip python3-venv patchelf
+  # fuzzing (scripts/fuzz.sh): clang with libFuzzer's runtime
+  clang libclang-rt-14-dev)
 
 missing=()
 for p in "${DEB_PKGS[@]}"; do

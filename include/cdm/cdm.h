@@ -90,6 +90,26 @@ CDM_API const char *cdm_strerror(int code);
  */
 CDM_API const char *cdm_thread_error(void);
 
+/** since 1.1: levels of cdm_set_log_fn's messages. */
+typedef enum cdm_log_level {
+    CDM_LOG_DEBUG = 0,   /**< every failing call's detail text (as cdm_thread_error) */
+    CDM_LOG_INFO = 1,    /**< state changes: disconnections, reconnections, end of stream */
+    CDM_LOG_WARNING = 2, /**< data problems that were handled: malformed reports, a truncated replay */
+    CDM_LOG_ERROR = 3    /**< a device that cannot be reached, an internal error */
+} cdm_log_level;
+
+typedef void (*cdm_log_fn)(void *user, int level, const char *message);
+
+/**
+ * since 1.1. Routes libcdm's messages into the application's log: one
+ * process-wide function (NULL: none, the default), called from whichever
+ * thread the message arises on (reader threads, the caller's), never
+ * concurrently, never from cdm_get_pose. It may call cdm_* functions. A
+ * flood of malformed reports is logged at the 1st, 10th, 100th, ... only.
+ * The message is valid only during the call.
+ */
+CDM_API void cdm_set_log_fn(cdm_log_fn fn, void *user);
+
 /* ----------------------------------------------------------------- records */
 
 /** Pose flags (cdm_pose.flags). */
@@ -210,12 +230,38 @@ typedef struct cdm_sample {
  */
 typedef void (*cdm_sample_fn)(void *user, const cdm_sample *sample);
 
-/** Options for cdm_open_ex. Zero-initialise, set struct_size. */
+/** since 1.1: what happened to an open device (cdm_event.kind). */
+typedef enum cdm_event_kind {
+    CDM_EVENT_DISCONNECTED = 1, /**< the device went away; the handle retries by itself */
+    CDM_EVENT_RECONNECTED = 2,  /**< it is back (same serial) and streaming */
+    CDM_EVENT_STALE = 3,        /**< no report for longer than the stale timeout */
+    CDM_EVENT_FRESH = 4,        /**< reports again after STALE */
+    CDM_EVENT_END_OF_STREAM = 5 /**< a replay or a scripted simulation ended */
+} cdm_event_kind;
+
+/** since 1.1: one device event. Valid only during the callback. */
+typedef struct cdm_event {
+    uint32_t struct_size;
+    uint32_t kind;          /**< cdm_event_kind */
+    uint64_t host_time_ns;  /**< CLOCK_MONOTONIC when the reader noticed it */
+    const char *text;       /**< what happened, in words (never NULL) */
+} cdm_event;
+
+/**
+ * since 1.1. Called on the device's reader thread when the device's state
+ * changes (cdm_open_options.on_event). STALE is noticed within the stale
+ * timeout plus 50 ms (the reader's poll). Keep it short; it may call any
+ * cdm_* function except cdm_close on its own device.
+ */
+typedef void (*cdm_event_fn)(void *user, const cdm_event *event);
+
+/** Options for cdm_open_ex. Zero-initialise, set struct_size. Size 24 (1.0), 32 (1.1). */
 typedef struct cdm_open_options {
     uint32_t struct_size;
     uint32_t stale_timeout_us;  /**< 0: the default, 50000 */
     cdm_sample_fn on_sample;    /**< optional; installed before the first report */
-    void *user;                 /**< passed to on_sample */
+    void *user;                 /**< passed to on_sample and on_event */
+    cdm_event_fn on_event;      /**< since 1.1, optional: state changes (cdm_event_kind) */
 } cdm_open_options;
 
 /**

@@ -22,7 +22,8 @@ static_assert(sizeof(cdm_raw) == 80, "cdm_raw 1.0 is 80 bytes");
 static_assert(sizeof(cdm_device_info) == 456, "cdm_device_info 1.0 is 456 bytes");
 static_assert(offsetof(cdm_stats, sequence_jumps) == 48, "cdm_stats 1.0 is 48 bytes");
 static_assert(sizeof(cdm_stats) == 72, "cdm_stats 1.1 is 72 bytes");
-static_assert(sizeof(cdm_open_options) == 24, "cdm_open_options 1.0 is 24 bytes");
+static_assert(offsetof(cdm_open_options, on_event) == 24 && sizeof(cdm_open_options) == 32,
+              "cdm_open_options 1.0 is 24 bytes, 1.1 is 32");
 static_assert(sizeof(cdm_sample) == 32, "cdm_sample 1.0 is 32 bytes");
 
 struct cdm_device_list {
@@ -104,7 +105,8 @@ int cdm_open_ex(const char *uri, const cdm_open_options *options, cdm_device **o
         if (options) {
             if (options->struct_size < kOptionsSize10)
                 return bad_size("cdm_open_ex", "cdm_open_options", options->struct_size, kOptionsSize10);
-            std::memcpy(&opts, options, sizeof opts); // the 1.0 fields; newer ones are not known here
+            // The fields the caller's struct_size covers; the rest stay zero.
+            std::memcpy(&opts, options, std::min<size_t>(options->struct_size, sizeof opts));
             opts.struct_size = sizeof opts;
         }
         std::string err;

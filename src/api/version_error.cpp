@@ -2,6 +2,7 @@
 
 #include <string>
 #include "cdm/cdm.h"
+#include "io/log.h"
 
 namespace {
 thread_local std::string t_error;
@@ -10,6 +11,7 @@ thread_local std::string t_error;
 namespace cdm {
 int fail(int code, const std::string &detail) {
     t_error = detail;
+    log::message(code == CDM_ERR_INTERNAL ? log::kError : log::kDebug, detail);
     return code;
 }
 void clear_thread_error() { t_error.clear(); }
@@ -24,6 +26,8 @@ int fail_noexcept(int code, const char *fn, const char *what) noexcept {
 } // namespace cdm
 
 extern "C" {
+
+void cdm_set_log_fn(cdm_log_fn fn, void *user) { cdm::log::set_sink(fn, user); }
 
 const char *cdm_version(void) {
 #define CDM_STR2(x) #x

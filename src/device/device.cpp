@@ -10,6 +10,7 @@
 
 #include "device/replay_format.h"
 #include "device/transport_hidapi.h"
+#include "io/log.h"
 
 namespace cdm {
 
@@ -121,7 +122,7 @@ int open_device(const char *uri_c, const cdm_open_options *opts, cdm_device **ou
     const uint32_t stale = opts && opts->stale_timeout_us ? opts->stale_timeout_us : kDefaultStaleTimeoutUs;
     const std::string warning = t->open_warning();
     auto *dev = new cdm_device(std::move(t), info, stale, opts ? opts->on_sample : nullptr,
-                               opts ? opts->user : nullptr);
+                               opts ? opts->user : nullptr, opts ? opts->on_event : nullptr);
     if (!warning.empty()) dev->set_error("warning: " + warning);
     dev->start();
     *out = dev;
@@ -133,8 +134,9 @@ int open_device(const char *uri_c, const cdm_open_options *opts, cdm_device **ou
 using namespace cdm;
 
 cdm_device::cdm_device(TransportPtr t, const proto::DeviceInfoReport &info, uint32_t stale_timeout_us,
-                       cdm_sample_fn on_sample, void *user)
-    : transport_(std::move(t)), on_sample_(on_sample), user_(user), stale_timeout_us_(stale_timeout_us) {
+                       cdm_sample_fn on_sample, void *user, cdm_event_fn on_event)
+    : transport_(std::move(t)), on_sample_(on_sample), user_(user), on_event_(on_event),
+      stale_timeout_us_(stale_timeout_us) {
     truncated_bytes_ = transport_->truncated_bytes();
     device_info_from_report(info, transport_->name(), transport_->uri(), info_);
     conv_ = conversion_from(info);
@@ -164,9 +166,35 @@ cdm_device::Conversion cdm_device::conversion_from(const proto::DeviceInfoReport
     return c;
 }
 
-void cdm_device::set_error(const std::string &text) {
-    std::lock_guard<std::mutex> lock(err_mu_);
-    error_ = text;
+void cdm_device::set_error(const std::string &text, int level) {
+    {
+        std::lock_guard<std::mutex> lock(err_mu_);
+        error_ = text;
+    }
+    if (level >= 0) log::message(level, text);
+}
+
+void cdm_device::emit(uint32_t kind, const std::string &text, int level) {
+    log::message(level, std::string(transport_->name()) + " " + transport_->uri() + ": " + text);
+    if (!on_event_) return;
+    cdm_event e{};
+    e.struct_size = sizeof e;
+    e.kind = kind;
+    e.host_time_ns = monotonic_ns();
+    e.text = text.c_str();
+    on_event_(user_, &e);
+}
+
+// On a read timeout: a device that has published but sent nothing for
+// longer than the stale timeout goes STALE, once.
+void cdm_device::check_stale() {
+    if (stale_reported_ || last_report_ns_ == 0) return;
+    const uint64_t limit = uint64_t(stale_timeout_us_.load(std::memory_order_relaxed)) * 1000u;
+    if (monotonic_ns() - last_report_ns_ <= limit) return;
+    stale_reported_ = true;
+    emit(CDM_EVENT_STALE, "no report for " + std::to_string((monotonic_ns() - last_report_ns_) / 1000000u) +
+                              " ms (stale timeout " + std::to_string(limit / 1000000u) + " ms)",
+         log::kWarning);
 }
 
 void cdm_device::error_text(char *buf, size_t len) const {
@@ -219,13 +247,17 @@ void cdm_device::run() {
             } else if (n == kReadEnd) {
                 set_state_flag(CDM_POSE_END_OF_STREAM, true);
                 notify_waiters();
+                emit(CDM_EVENT_END_OF_STREAM, "end of stream", log::kInfo);
                 return;
-            } else if (n != kReadTimeout) {
-                set_error(std::string(transport_->name()) + " " + transport_->uri() + ": " +
-                          (err.empty() ? std::string("device disconnected") : err) +
-                          "; retrying every " + std::to_string(kReconnectIntervalMs) + " ms");
+            } else if (n == kReadTimeout) {
+                check_stale();
+            } else {
+                const std::string why = (err.empty() ? std::string("device disconnected") : err) + "; retrying every " +
+                                        std::to_string(kReconnectIntervalMs) + " ms";
+                set_error(std::string(transport_->name()) + " " + transport_->uri() + ": " + why, -1);
                 set_state_flag(CDM_POSE_DISCONNECTED, true);
                 notify_waiters();
+                emit(CDM_EVENT_DISCONNECTED, why, log::kError);
             }
         } catch (const std::exception &e) {
             // Never let one bad report or a model bug take the process down.
@@ -237,8 +269,10 @@ void cdm_device::run() {
 bool cdm_device::try_reconnect() {
     std::string err;
     if (transport_->reopen(err) != CDM_OK) {
+        // Every 250 ms while unplugged: the DISCONNECTED event said it once.
         set_error(std::string(transport_->name()) + " " + transport_->uri() + ": disconnected; reconnect failed: " +
-                  err);
+                      err,
+                  log::kDebug);
         return false;
     }
     proto::DeviceInfoReport info;
@@ -261,6 +295,7 @@ bool cdm_device::try_reconnect() {
     n_reconnects_.fetch_add(1, std::memory_order_relaxed);
     set_state_flag(CDM_POSE_DISCONNECTED, false);
     notify_waiters();
+    emit(CDM_EVENT_RECONNECTED, "reconnected", log::kInfo);
     return true;
 }
 
@@ -316,7 +351,11 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len) {
                       "input report rejected (reason %d: %s): %zu bytes, report ID 0x%02x; %llu rejected so far",
                       int(rej), proto::reject_text(rej), len, len ? buf[0] : 0u,
                       (unsigned long long)n_malformed_.load(std::memory_order_relaxed));
-        set_error(text);
+        // Logged at the 1st, 10th, 100th... rejection: a flood stays readable.
+        const uint64_t k = n_malformed_.load(std::memory_order_relaxed);
+        uint64_t p10 = 1;
+        while (p10 * 10 <= k) p10 *= 10;
+        set_error(text, k == p10 ? log::kWarning : -1);
         return;
     }
     const uint64_t host_ns = monotonic_ns();
@@ -381,6 +420,11 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len) {
 
     snap_.store(s);
     published_.store(pose.host_sequence); // seq-cst: pairs with the waiter count (notify_waiters)
+    last_report_ns_ = host_ns;
+    if (stale_reported_) {
+        stale_reported_ = false;
+        emit(CDM_EVENT_FRESH, "reports again", log::kInfo);
+    }
     n_reports_.fetch_add(1, std::memory_order_relaxed);
     notify_waiters();
 

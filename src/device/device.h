@@ -60,7 +60,8 @@ int open_device(const char *uri, const cdm_open_options *opts, cdm_device **out,
 struct cdm_device {
 public:
     cdm_device(cdm::TransportPtr t, const cdm::proto::DeviceInfoReport &info, uint32_t stale_timeout_us,
-               cdm_sample_fn on_sample, void *user);
+               cdm_sample_fn on_sample, void *user,
+               cdm_event_fn on_event = nullptr);
     ~cdm_device(); // stops and joins the reader thread
     cdm_device(const cdm_device &) = delete;
     cdm_device &operator=(const cdm_device &) = delete;
@@ -79,7 +80,9 @@ public:
         stale_timeout_us_.store(us ? us : cdm::kDefaultStaleTimeoutUs, std::memory_order_relaxed);
     }
     void error_text(char *buf, size_t len) const;
-    void set_error(const std::string &text);
+    // The text cdm_device_error returns; also logged (cdm_set_log_fn) at
+    // `level`, or not at all with level < 0.
+    void set_error(const std::string &text, int level = 2);
 
     // NULL model: back to the nominal one built from the device info.
     void set_model(const cdm::ModelPtr &model);
@@ -115,6 +118,13 @@ private:
     cdm::TransportPtr transport_;
     cdm_sample_fn on_sample_;
     void *user_;
+    cdm_event_fn on_event_;
+    // Reader thread only: the STALE/FRESH edge, and the newest report's time.
+    bool stale_reported_ = false;
+    uint64_t last_report_ns_ = 0;
+    // Tells on_event (if any) and the log.
+    void emit(uint32_t kind, const std::string &text, int level);
+    void check_stale();
 
     // Published state: read by any thread.
     cdm::SeqLock<Snapshot> snap_;

@@ -101,7 +101,9 @@ bool Model::add_effect(const std::string &name, const ParamValues &params, std::
     }
     EffectInst inst{d, {}};
     for (auto &p : d->params) inst.p.push_back(p.init);
-    for (const auto &[key, value] : params) {
+    for (const auto &kv : params) {
+        const std::string &key = kv.first;
+        const double value = kv.second;
         auto pit = std::find_if(d->params.begin(), d->params.end(), [&](const ParamDesc &p) { return p.name == key; });
         if (pit == d->params.end()) {
             err = "effect \"" + name + "\" has no parameter \"" + key + "\"";

@@ -44,6 +44,7 @@ static class CdmTests
                     Run("dispose_is_idempotent", DisposeIsIdempotent);
                     Run("bad_uri", BadUri);
                     Run("sample_callback", SampleCallback);
+                    Run("events_and_log", EventsAndLog);
                     break;
                 case "calibration":
                     Run("calibration_errors", CalibrationErrors);
@@ -54,6 +55,25 @@ static class CdmTests
         }
         Console.WriteLine("{0} checks, {1} failed", checks, failures);
         return Math.Min(failures, 99);
+    }
+
+    // since 1.1: a stall is reported once as Stale; libcdm's messages arrive
+    // through Cdm.Log.Message (a failing call's detail at level 0, debug).
+    static void EventsAndLog()
+    {
+        var seen = new List<DeviceEvent>();
+        using (var dev = Device.Open("sim:?stall_after=30", 0, null, (kind, text) => { lock (seen) seen.Add(kind); }))
+        {
+            var until = DateTime.UtcNow.AddSeconds(2);
+            while (DateTime.UtcNow < until) { lock (seen) if (seen.Contains(DeviceEvent.Stale)) break; Thread.Sleep(10); }
+        }
+        lock (seen) Expect(seen.Count(k => k == DeviceEvent.Stale) == 1, "events: one Stale on a stall");
+        var logs = new List<string>();
+        Action<int, string> h = (level, msg) => { lock (logs) logs.Add(level + ":" + msg); };
+        Log.Message += h;
+        try { Device.Open("nosuch:").Dispose(); } catch (CdmException) { }
+        Log.Message -= h;
+        lock (logs) Expect(logs.Any(l => l.StartsWith("0:") && l.Contains("nosuch")), "log: the failing open's detail at debug");
     }
 
     // A vector rotated in the device frame and carried into ROS's or Unity's

@@ -228,3 +228,37 @@ def test_velocity_on_the_circle():
             p = dev.wait_pose(1.0, after=p.host_sequence)
         assert abs(p.velocity[0]) < 8.0
         assert math.hypot(p.velocity[1], p.velocity[2]) == pytest.approx(2 * math.pi * 0.25 * 40, abs=8.0)
+
+
+def test_events_and_log():
+    """on_event (since 1.1) sees a stall as "stale"; cdm.log.to_python routes
+    libcdm's messages into logging (a failing call's detail at DEBUG)."""
+    import logging
+    seen = []
+    with cdm.open("sim:?stall_after=30", on_event=lambda kind, text: seen.append((kind, text))) as dev:
+        deadline = time.monotonic() + 2.0
+        while not any(k == "stale" for k, _ in seen) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert dev.stats().reports > 0
+    assert [k for k, _ in seen].count("stale") == 1, seen
+
+    records = []
+
+    class Grab(logging.Handler):
+        def emit(self, record):
+            records.append(record)
+
+    logger = logging.getLogger("cdm.test")
+    logger.setLevel(logging.DEBUG)
+    logger.addHandler(Grab())
+    cdm.log.to_python(logger)
+    try:
+        with pytest.raises(cdm.NoDeviceError):
+            cdm.open("nosuch:")
+    finally:
+        cdm.log.stop()
+    assert any(r.levelno == logging.DEBUG and "nosuch" in r.getMessage() for r in records)
+    n = len(records)
+    with pytest.raises(cdm.NoDeviceError):
+        cdm.open("nosuch:")
+    assert len(records) == n

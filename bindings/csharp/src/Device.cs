@@ -33,6 +33,14 @@ namespace Cdm
         /// callback run on the reader thread for every report (it must return quickly).</summary>
         public static Device Open(string uri, uint staleTimeoutUs, Action<Pose> onSample)
         {
+            return Open(uri, staleTimeoutUs, onSample, null);
+        }
+
+        /// <summary>since 1.1: as above, plus <paramref name="onEvent"/>(kind, text) on the reader
+        /// thread when the device's state changes (disconnected, reconnected, stale, fresh,
+        /// end of stream; cdm_event_kind).</summary>
+        public static Device Open(string uri, uint staleTimeoutUs, Action<Pose> onSample, Action<DeviceEvent, string> onEvent)
+        {
             var opts = new NativeOpenOptions();
             opts.struct_size = (uint)Marshal.SizeOf(typeof(NativeOpenOptions));
             opts.stale_timeout_us = staleTimeoutUs;
@@ -49,6 +57,17 @@ namespace Cdm
                 };
                 opts.on_sample = Marshal.GetFunctionPointerForDelegate(fn);
             }
+            EventFn efn = null;
+            if (onEvent != null)
+            {
+                efn = (user, ev) =>
+                {
+                    var e = (NativeEvent)Marshal.PtrToStructure(ev, typeof(NativeEvent));
+                    try { onEvent((DeviceEvent)e.kind, Marshal.PtrToStringAnsi(e.text) ?? ""); }
+                    catch (Exception x) { Console.Error.WriteLine("Cdm.Device event callback: " + x); }
+                };
+                opts.on_event = Marshal.GetFunctionPointerForDelegate(efn);
+            }
             DeviceHandle h;
             int rc = NativeMethods.cdm_open_ex(uri, ref opts, out h);
             if (rc < 0)
@@ -58,7 +77,9 @@ namespace Cdm
                 throw e;
             }
             h.SampleCallback = fn; // lives as long as the handle: cdm_close is the last point it can be called
+            h.EventCallback = efn;
             GC.KeepAlive(fn);
+            GC.KeepAlive(efn);
             return new Device(h, uri);
         }
 

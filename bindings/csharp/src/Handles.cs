@@ -11,6 +11,7 @@ namespace Cdm
         // the reader thread until cdm_close returns, so it lives exactly as long
         // as this handle.
         internal SampleFn SampleCallback;
+        internal EventFn EventCallback;
 
         public DeviceHandle() : base(IntPtr.Zero, true) { }
         public override bool IsInvalid { get { return handle == IntPtr.Zero; } }
@@ -19,6 +20,7 @@ namespace Cdm
         {
             NativeMethods.cdm_close(handle); // joins the reader thread: no callback after this
             SampleCallback = null;
+            EventCallback = null;
             return true;
         }
     }

@@ -113,6 +113,16 @@ namespace Cdm
         public uint stale_timeout_us;
         public IntPtr on_sample; // Marshal.GetFunctionPointerForDelegate(SampleFn), kept alive by DeviceHandle
         public IntPtr user;
+        public IntPtr on_event;  // since 1.1: EventFn, kept alive by DeviceHandle
+    }
+
+    [CStruct("cdm_event"), StructLayout(LayoutKind.Sequential)]
+    internal struct NativeEvent
+    {
+        public uint struct_size;
+        public uint kind;
+        public ulong host_time_ns;
+        public IntPtr text;
     }
 
     /// <summary>cdm_effect_def (CDM_EXPERIMENTAL). Mirrored for the layout test; this binding does not register effects.</summary>
@@ -134,6 +144,12 @@ namespace Cdm
     [UnmanagedFunctionPointer(CallingConvention.Cdecl)]
     internal delegate void SampleFn(IntPtr user, IntPtr sample);
 
+    [UnmanagedFunctionPointer(CallingConvention.Cdecl)]
+    internal delegate void EventFn(IntPtr user, IntPtr ev);
+
+    [UnmanagedFunctionPointer(CallingConvention.Cdecl)]
+    internal delegate void LogFn(IntPtr user, int level, IntPtr message);
+
     internal static class NativeMethods
     {
         private const string Lib = "cdm";
@@ -154,6 +170,9 @@ namespace Cdm
         internal static extern int cdm_open(string uri, out DeviceHandle dev);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl, CharSet = CharSet.Ansi, BestFitMapping = false)]
         internal static extern int cdm_open_ex(string uri, ref NativeOpenOptions options, out DeviceHandle dev);
+
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        internal static extern void cdm_set_log_fn(LogFn fn, IntPtr user);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern void cdm_close(IntPtr dev);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_get_pose(DeviceHandle dev, ref NativePose pose);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_wait_pose(DeviceHandle dev, int timeoutMs, ref NativePose pose);

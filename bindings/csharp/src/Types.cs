@@ -1,7 +1,59 @@
 using System;
+using System.Runtime.InteropServices;
 
 namespace Cdm
 {
+    /// <summary>since 1.1: cdm_event_kind.</summary>
+    public enum DeviceEvent : uint
+    {
+        Disconnected = 1,
+        Reconnected = 2,
+        Stale = 3,
+        Fresh = 4,
+        EndOfStream = 5
+    }
+
+    /// <summary>since 1.1: libcdm's messages (cdm_set_log_fn) as a .NET event.</summary>
+    public static class Log
+    {
+        static readonly object Gate = new object();
+        static LogFn hook; // kept alive while installed
+        static Action<int, string> handlers;
+
+        /// <summary>Raised with (level 0 debug .. 3 error, message) from libcdm's threads.</summary>
+        public static event Action<int, string> Message
+        {
+            add
+            {
+                lock (Gate)
+                {
+                    handlers += value;
+                    if (hook == null)
+                    {
+                        hook = (user, level, msg) =>
+                        {
+                            var h = handlers;
+                            if (h != null) h(level, Marshal.PtrToStringAnsi(msg) ?? "");
+                        };
+                        NativeMethods.cdm_set_log_fn(hook, IntPtr.Zero);
+                    }
+                }
+            }
+            remove
+            {
+                lock (Gate)
+                {
+                    handlers -= value;
+                    if (handlers == null && hook != null)
+                    {
+                        NativeMethods.cdm_set_log_fn(null, IntPtr.Zero);
+                        hook = null;
+                    }
+                }
+            }
+        }
+    }
+
     /// <summary>A position in mm (device frame: x out of the cable plane, y-z the plane).</summary>
     public struct Vector3d
     {

@@ -20,6 +20,7 @@ from .device import Device, DeviceInfo, Pose, Raw, Sample, Stats, enumerate_devi
 from .diagnosis import Diagnosis, diagnose, fit, load_diagnosis
 from .effects import effect_names, load_plugin, register_effect, unregister_effect
 from . import frames
+from . import log
 from .errors import (CdmError, CdmFileNotFoundError, CdmIOError, CdmMemoryError, CdmTimeoutError,
                      DisconnectedError, InvalidArgumentError, LibraryNotFoundError, NoDeviceError, ParseError)
 from . import constants as _constants
@@ -29,7 +30,7 @@ __all__ = ["open", "enumerate", "enumerate_devices", "Device", "DeviceInfo", "Po
            "effect_names", "load_plugin", "register_effect", "unregister_effect",
            "CdmError", "InvalidArgumentError", "ParseError", "NoDeviceError", "CdmIOError", "CdmFileNotFoundError",
            "CdmTimeoutError", "DisconnectedError", "CdmMemoryError", "LibraryNotFoundError",
-           "frames", "version", "version_number", "library_path"] + list(_constants.__all__)
+           "frames", "log", "version", "version_number", "library_path"] + list(_constants.__all__)
 
 
 

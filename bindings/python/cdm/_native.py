@@ -108,12 +108,26 @@ class cdm_sample(_Sized):
 cdm_sample_fn = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(cdm_sample))
 
 
+class cdm_event(_Sized):
+    _fields_ = [
+        ("struct_size", ctypes.c_uint32),
+        ("kind", ctypes.c_uint32),
+        ("host_time_ns", ctypes.c_uint64),
+        ("text", ctypes.c_char_p),
+    ]
+
+
+cdm_event_fn = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(cdm_event))
+cdm_log_fn = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_int, ctypes.c_char_p)
+
+
 class cdm_open_options(_Sized):
     _fields_ = [
         ("struct_size", ctypes.c_uint32),
         ("stale_timeout_us", ctypes.c_uint32),
         ("on_sample", cdm_sample_fn),
         ("user", ctypes.c_void_p),
+        ("on_event", cdm_event_fn),  # since 1.1
     ]
 
 
@@ -138,7 +152,7 @@ class cdm_effect_def(_Sized):
 cdm_progress_fn = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_char_p, ctypes.c_double)
 
 STRUCTS = {cls.__name__: cls for cls in
-           (cdm_pose, cdm_raw, cdm_device_info, cdm_stats, cdm_sample, cdm_open_options, cdm_effect_def)}
+           (cdm_pose, cdm_raw, cdm_device_info, cdm_stats, cdm_sample, cdm_open_options, cdm_effect_def, cdm_event)}
 
 # Opaque handles travel as void pointers.
 _handle = ctypes.c_void_p
@@ -161,6 +175,7 @@ PROTOTYPES = {
     "cdm_get_pose": (_int, [_handle, ctypes.POINTER(cdm_pose)]),
     "cdm_wait_pose": (_int, [_handle, _int, ctypes.POINTER(cdm_pose)]),
     "cdm_wait_pose_after": (_int, [_handle, ctypes.c_uint64, _int, ctypes.POINTER(cdm_pose)]),
+    "cdm_set_log_fn": (None, [cdm_log_fn, ctypes.c_void_p]),
     "cdm_get_raw": (_int, [_handle, ctypes.POINTER(cdm_raw)]),
     "cdm_get_info": (_int, [_handle, ctypes.POINTER(cdm_device_info)]),
     "cdm_set_stale_timeout": (_int, [_handle, ctypes.c_uint32]),

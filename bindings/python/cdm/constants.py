@@ -53,8 +53,27 @@ class Button(enum.IntFlag):
     CDM_BUTTON_MARK = 1 << 2
 
 
-# The header's names, flat, as module attributes (cdm.CDM_ERR_NO_DEVICE, ...).
-globals().update({str(m.name): int(m) for e in (Error, PoseFlag, Button) for m in e})
+class EventKind(enum.IntEnum):
+    """cdm_event_kind (since 1.1): what on_event reports."""
+    CDM_EVENT_DISCONNECTED = 1
+    CDM_EVENT_RECONNECTED = 2
+    CDM_EVENT_STALE = 3
+    CDM_EVENT_FRESH = 4
+    CDM_EVENT_END_OF_STREAM = 5
 
-__all__ = ["Error", "PoseFlag", "Button", "CDM_ERROR_COUNT", "CDM_VERSION_MAJOR", "CDM_VERSION_MINOR",
-           "CDM_VERSION_PATCH", "CDM_VERSION_NUMBER"] + [str(m.name) for e in (Error, PoseFlag, Button) for m in e]
+
+class LogLevel(enum.IntEnum):
+    """cdm_log_level (since 1.1): levels of cdm_set_log_fn's messages."""
+    CDM_LOG_DEBUG = 0
+    CDM_LOG_INFO = 1
+    CDM_LOG_WARNING = 2
+    CDM_LOG_ERROR = 3
+
+
+_ENUMS = (Error, PoseFlag, Button, EventKind, LogLevel)
+
+# The header's names, flat, as module attributes (cdm.CDM_ERR_NO_DEVICE, ...).
+globals().update({str(m.name): int(m) for e in _ENUMS for m in e})
+
+__all__ = ["Error", "PoseFlag", "Button", "EventKind", "LogLevel", "CDM_ERROR_COUNT", "CDM_VERSION_MAJOR",
+           "CDM_VERSION_MINOR", "CDM_VERSION_PATCH", "CDM_VERSION_NUMBER"] + [str(m.name) for e in _ENUMS for m in e]

@@ -333,12 +333,25 @@ class Device(_native.Closing):
             raise self._fail(rc, "cdm_device_calibration_write")
 
 
-def open(uri=None, stale_timeout_us=0, on_sample=None):  # noqa: A001 - cdm.open mirrors cdm_open
+EVENT_NAMES = {1: "disconnected", 2: "reconnected", 3: "stale", 4: "fresh", 5: "end_of_stream"}
+
+
+def _make_event_callback(fn):
+    def trampoline(_user, event_p):
+        e = event_p.contents
+        fn(EVENT_NAMES.get(e.kind, "event %d" % e.kind), (e.text or b"").decode("utf-8", "replace"))
+    return _native.cdm_event_fn(trampoline)
+
+
+def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None):  # noqa: A001 - cdm.open mirrors cdm_open
     """Opens a master (cdm_open_ex). uri: None or "" ($CDM_DEVICE, else the
     first device), "sim:?...", "replay:FILE", "hid:/dev/hidrawN", "serial:SN".
 
     on_sample, if given, is called as on_sample(cdm.Sample) on the device's
-    reader thread for every report; it must return quickly."""
+    reader thread for every report; it must return quickly.
+    on_event (since 1.1), if given, is called as on_event(kind, text) on the
+    reader thread when the device's state changes; kind is "disconnected",
+    "reconnected", "stale", "fresh" or "end_of_stream"."""
     L = _native.lib()
     opts = _native.cdm_open_options()
     if not 0 <= int(stale_timeout_us) < 2**32:
@@ -350,6 +363,12 @@ def open(uri=None, stale_timeout_us=0, on_sample=None):  # noqa: A001 - cdm.open
             raise TypeError("open: on_sample must be callable, got %r" % (on_sample,))
         callback = _make_sample_callback(on_sample)
         opts.on_sample = callback
+    if on_event is not None:
+        if not callable(on_event):
+            raise TypeError("open: on_event must be callable, got %r" % (on_event,))
+        event_callback = _make_event_callback(on_event)
+        opts.on_event = event_callback
+        callback = (callback, event_callback)  # both kept alive by the Device
     h = ctypes.c_void_p()
     raw_uri = None if uri is None else uri.encode("utf-8")
     rc = L.cdm_open_ex(raw_uri, ctypes.byref(opts), ctypes.byref(h))

@@ -9,7 +9,10 @@
 # target with its coverage (libFuzzer's "cov", edges reached).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# Usage: scripts/fuzz.sh [SECONDS [TARGET...]]  (no TARGET: every target)
 secs=${1:-20}
+shift || true
+only=("$@")
 dir=${CDM_FUZZ_BUILD_DIR:-build-fuzz}
 if [ ! -f "$dir/build.ninja" ]; then
   CC=clang CXX=clang++ cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCDM_FUZZ=ON \
@@ -17,7 +20,9 @@ if [ ! -f "$dir/build.ninja" ]; then
 fi
 cmake --build "$dir" -j"$(nproc)" --target fuzz_all
 status=0
-for target in $(sed -n 's/^fuzz_target://p' "$dir/tests/fuzz/fuzz_targets.txt"); do
+targets=$(sed -n 's/^fuzz_target://p' "$dir/tests/fuzz/fuzz_targets.txt")
+[ ${#only[@]} -gt 0 ] && targets="${only[*]}"
+for target in $targets; do
   work=$(mktemp -d)
   crashes="$dir/crashes/$target"
   mkdir -p "$crashes"

@@ -92,7 +92,7 @@ int main(int argc, char **argv) {
         return 1;
     }
     cdm_pose pose = {.struct_size = sizeof pose};
-    rc = cdm_wait_pose(dev, 2000, &pose);
+    rc = cdm_wait_pose_after(dev, 0, 2000, &pose); /* the first pose, even one already published */
     if (rc != CDM_OK) {
         fprintf(stderr, "teleop_loop: no pose from \"%s\" within 2 s: %s: %s\n", uri, cdm_strerror(rc),
                 cdm_thread_error());

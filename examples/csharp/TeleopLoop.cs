@@ -68,7 +68,7 @@ static class TeleopLoop
         catch (CdmException e) { Console.Error.WriteLine("TeleopLoop: " + e.Message); return 1; }
         using (dev)
         {
-            var first = dev.WaitPose(2000);
+            var first = dev.WaitPoseAfter(0, 2000); // the first pose, even one already published
             var info = dev.GetInfo();
             Console.WriteLine("opened {0} ({1}, serial {2}, firmware {3}, {4:F0} Hz reports), library {5}",
                               info.Uri, info.Transport, info.Serial, info.Firmware, info.ReportRateHz, Device.LibraryVersion);

@@ -203,7 +203,7 @@ def run(uri, seconds, scale, control_hz=500.0, feedforward=True, verbose=True):
     pos_err, rot_err, speeds = [], [], []
     clutch_presses, last_clutch, prev_target = 0, False, None
     with cdm.open(uri) as dev:
-        pose = dev.wait_pose(2.0)
+        pose = dev.wait_pose(2.0, after=0)  # the first pose, even one already published
         info = dev.info()
         if verbose:
             print("master: %s (%s); arm: 6 joints, tool at %s m; scale %.2f"

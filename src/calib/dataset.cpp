@@ -151,6 +151,7 @@ bool parse_dataset(const std::string &text, const std::string &src, Dataset &out
                 }
         }
         groups[g].push_back({v[4], v[5], v[6], v[7]});
+        d.pos[g].mean_row += double(d.rows); // summed here, divided by n below
         ++d.rows;
     }
     if (!header) {
@@ -171,6 +172,8 @@ bool parse_dataset(const std::string &text, const std::string &src, Dataset &out
             for (int c = 0; c < 4; ++c) jp.mean[c] += s[c];
         }
         for (int c = 0; c < 4; ++c) jp.mean[c] /= jp.n;
+        jp.mean_row /= jp.n;
+        jp.t_s = jp.mean_row * kDatasetNominalRowPeriodS;
         if (jp.n > 1) {
             for (auto &s : groups[g])
                 for (int a = 0; a < 4; ++a)

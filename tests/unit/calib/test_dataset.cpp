@@ -35,6 +35,24 @@ static void groups_and_ignores(void **) {
     assert_int_equal(d.heights.size(), 2);
 }
 
+// Rows are in acquisition order: a position's time is the mean index of its
+// rows (exact in binary for these small integers and halves).
+static void acquisition_order_per_position(void **) {
+    const char *t = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n"
+                    "1,0,0,0,100,100,100,100\n"
+                    "2,0,10,0,100,100,100,100\n"
+                    "1,0,0,0,100,100,100,100\n"
+                    "2,0,10,0,100,100,100,100\n"
+                    "2,0,10,0,100,100,100,100\n";
+    Dataset d;
+    std::string err;
+    assert_true(parse_dataset(t, "o.csv", d, err));
+    assert_int_equal(d.pos.size(), 2);
+    assert_true(d.pos[0].mean_row == 1.0);           // rows 0 and 2
+    assert_true(d.pos[1].mean_row == 8.0 / 3.0);     // rows 1, 3, 4
+    assert_true(d.pos[1].t_s == d.pos[1].mean_row * kDatasetNominalRowPeriodS);
+}
+
 static void expect_error(const char *text, const char *where) {
     Dataset d;
     std::string err;
@@ -130,6 +148,7 @@ static void write_is_atomic(void **) {
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(groups_and_ignores),
+        cmocka_unit_test(acquisition_order_per_position),
         cmocka_unit_test(errors_name_line_and_column),
         cmocka_unit_test(write_is_atomic),
         cmocka_unit_test(test_dataset_duplicate_column_refused),

@@ -51,6 +51,18 @@ static void acquisition_order_per_position(void **) {
     assert_true(d.pos[0].mean_row == 1.0);           // rows 0 and 2
     assert_true(d.pos[1].mean_row == 8.0 / 3.0);     // rows 1, 3, 4
     assert_true(d.pos[1].t_s == d.pos[1].mean_row * kDatasetNominalRowPeriodS);
+
+    // With a t_s column the time is its per-position mean, not the row index.
+    const char *tt = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4,t_s\n"
+                     "1,0,0,0,100,100,100,100,2\n"
+                     "1,0,0,0,100,100,100,100,4\n";
+    Dataset e;
+    assert_true(parse_dataset(tt, "t.csv", e, err));
+    assert_true(e.ignored_columns.empty());
+    assert_true(e.pos[0].t_s == 3.0);
+    Dataset b;
+    assert_false(parse_dataset("point,x_ref,y_ref,z_ref,l1,l2,l3,l4,t_s\n1,0,0,0,100,100,100,100,nan\n", "bad.csv", b, err));
+    assert_non_null(strstr(err.c_str(), "bad.csv:2:9: t_s"));
 }
 
 static void expect_error(const char *text, const char *where) {

@@ -55,6 +55,7 @@ bool parse_dataset(const std::string &text, const std::string &src, Dataset &out
     size_t line = 0;
     std::vector<std::pair<const char *, const char *>> f;
     int colidx[8];
+    int tcol = -1; // optional acquisition time column t_s (s)
     size_t ncols = 0;
     bool header = false;
     std::unordered_map<long, size_t> index;
@@ -93,7 +94,8 @@ bool parse_dataset(const std::string &text, const std::string &src, Dataset &out
                 colidx[k] = int(it - names.begin());
             }
             for (size_t k = 0; k < names.size(); ++k)
-                if (std::find(std::begin(required), std::end(required), names[k]) == std::end(required))
+                if (names[k] == "t_s") tcol = int(k);
+                else if (std::find(std::begin(required), std::end(required), names[k]) == std::end(required))
                     d.ignored_columns.push_back(names[k]);
             continue;
         }
@@ -150,7 +152,17 @@ bool parse_dataset(const std::string &text, const std::string &src, Dataset &out
                     return false;
                 }
         }
+        if (tcol >= 0) {
+            auto &x = f[size_t(tcol)];
+            double t;
+            if (!to_double(x.first, x.second, t) || !std::isfinite(t)) {
+                err = at(src, line, size_t(tcol) + 1) + "t_s is not a finite number: '" + shown(x.first, x.second) + "'";
+                return false;
+            }
+            d.pos[g].t_s += t; // summed here, divided by n below
+        }
         groups[g].push_back({v[4], v[5], v[6], v[7]});
+        d.pos[g].mean_row += double(d.rows); // summed here, divided by n below
         ++d.rows;
     }
     if (!header) {
@@ -171,6 +183,8 @@ bool parse_dataset(const std::string &text, const std::string &src, Dataset &out
             for (int c = 0; c < 4; ++c) jp.mean[c] += s[c];
         }
         for (int c = 0; c < 4; ++c) jp.mean[c] /= jp.n;
+        jp.mean_row /= jp.n;
+        jp.t_s = tcol >= 0 ? jp.t_s / jp.n : jp.mean_row * kDatasetNominalRowPeriodS;
         if (jp.n > 1) {
             for (auto &s : groups[g])
                 for (int a = 0; a < 4; ++a)

@@ -17,7 +17,16 @@ struct JigHole {
     double mean[4] = {0, 0, 0, 0};
     double cov[4][4] = {};   // sample covariance of the readings (n-1)
     size_t first = 0;        // index of its first sample in Dataset::samples
+    // Acquisition order, for drift over the session (issue 8 item 5). Rows
+    // of a jig CSV are in acquisition order; without a time column the time
+    // is the mean row index times kDatasetNominalRowPeriodS (a nominal
+    // figure, so a drift rate from it is per nominal second).
+    double mean_row = 0;     // mean 0-based data-row index of its samples
+    double t_s = 0;          // mean acquisition time (s)
 };
+
+// Nominal time between two jig CSV rows when the file has no time column.
+constexpr double kDatasetNominalRowPeriodS = 0.01;
 
 struct Dataset {
     std::string path;

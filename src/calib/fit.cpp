@@ -77,6 +77,7 @@ std::vector<PreparedPos> prepare(const Dataset &d) {
         }
         pp.n = p.n;
         pp.first = p.first;
+        pp.t_s = p.t_s; // lets time-dependent effects (drift) see acquisition order
         v.push_back(pp);
     }
     return v;

@@ -35,6 +35,36 @@ static void groups_and_ignores(void **) {
     assert_int_equal(d.heights.size(), 2);
 }
 
+// Rows are in acquisition order: a position's time is the mean index of its
+// rows (exact in binary for these small integers and halves).
+static void acquisition_order_per_position(void **) {
+    const char *t = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n"
+                    "1,0,0,0,100,100,100,100\n"
+                    "2,0,10,0,100,100,100,100\n"
+                    "1,0,0,0,100,100,100,100\n"
+                    "2,0,10,0,100,100,100,100\n"
+                    "2,0,10,0,100,100,100,100\n";
+    Dataset d;
+    std::string err;
+    assert_true(parse_dataset(t, "o.csv", d, err));
+    assert_int_equal(d.pos.size(), 2);
+    assert_true(d.pos[0].mean_row == 1.0);           // rows 0 and 2
+    assert_true(d.pos[1].mean_row == 8.0 / 3.0);     // rows 1, 3, 4
+    assert_true(d.pos[1].t_s == d.pos[1].mean_row * kDatasetNominalRowPeriodS);
+
+    // With a t_s column the time is its per-position mean, not the row index.
+    const char *tt = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4,t_s\n"
+                     "1,0,0,0,100,100,100,100,2\n"
+                     "1,0,0,0,100,100,100,100,4\n";
+    Dataset e;
+    assert_true(parse_dataset(tt, "t.csv", e, err));
+    assert_true(e.ignored_columns.empty());
+    assert_true(e.pos[0].t_s == 3.0);
+    Dataset b;
+    assert_false(parse_dataset("point,x_ref,y_ref,z_ref,l1,l2,l3,l4,t_s\n1,0,0,0,100,100,100,100,nan\n", "bad.csv", b, err));
+    assert_non_null(strstr(err.c_str(), "bad.csv:2:9: t_s"));
+}
+
 static void expect_error(const char *text, const char *where) {
     Dataset d;
     std::string err;
@@ -130,6 +160,7 @@ static void write_is_atomic(void **) {
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(groups_and_ignores),
+        cmocka_unit_test(acquisition_order_per_position),
         cmocka_unit_test(errors_name_line_and_column),
         cmocka_unit_test(write_is_atomic),
         cmocka_unit_test(test_dataset_duplicate_column_refused),

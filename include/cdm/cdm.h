@@ -445,6 +445,12 @@ typedef struct cdm_effect_def {
     const double *upper;
     cdm_effect_apply_fn apply;
     void *user;                    /**< passed to apply; must outlive the registration */
+    /** since 1.1: the value each parameter starts from when the effect is
+     *  added to a model (within [lower, upper]), or NULL for 0 clamped into
+     *  the bounds. A parameter that enters non-linearly (a period, a centre,
+     *  a time constant) is fitted from here; one named "period" is started
+     *  by the diagnosis from the cable-length periodogram instead. */
+    const double *initial;
 } cdm_effect_def;
 
 /**

@@ -37,6 +37,7 @@ int diagnose_body(const char *data_csv_path, const char *device_json_path, const
     opt.effects = a.effects;
     opt.jig_tolerance_mm = a.jig_tolerance_mm;
     opt.candidates = a.candidates;
+    opt.search = a.search;
     opt.validation = a.validation;
     opt.per_position = a.per_position;
     if (progress) opt.progress = [&](const std::string &s, double f) { return progress(user, s.c_str(), f) == 0; };

@@ -7,13 +7,13 @@ namespace cdm {
 namespace diag {
 
 namespace {
-Eigen::Matrix<double, 4, 3> reading_jacobian(const Model &m, const double p[3]) {
+Eigen::Matrix<double, 4, 3> reading_jacobian(const Model &m, const double p[3], double t_s) {
     // The model's own derivative (automatic differentiation through the
     // built-ins); NaN when a user effect fails, so nothing downstream
     // mistakes it for a number.
     Eigen::Matrix<double, 4, 3, Eigen::RowMajor> J;
     double y[4];
-    if (m.readings_jacobian(p, 0.0, y, J.data()) != 0) J.setConstant(std::numeric_limits<double>::quiet_NaN());
+    if (m.readings_jacobian(p, t_s, y, J.data()) != 0) J.setConstant(std::numeric_limits<double>::quiet_NaN());
     return J;
 }
 } // namespace
@@ -32,7 +32,9 @@ Eval evaluate(const Model &m, const Dataset &d, const std::vector<PreparedPos> &
     for (size_t j = 0; j < P; ++j) {
         double l[4] = {pos[j].mean(0), pos[j].mean(1), pos[j].mean(2), pos[j].mean(3)};
         double p[3];
-        if (m.position(l, p) != 0) {
+        // At the position's acquisition time: effects that drift in time
+        // (pot_drift) are undone as of when it was measured.
+        if (m.position(l, pos[j].t_s, p, nullptr) != 0) {
             E.bad_samples += size_t(pos[j].n);
             continue;
         }
@@ -40,7 +42,7 @@ Eval evaluate(const Model &m, const Dataset &d, const std::vector<PreparedPos> &
         m.jig_to_device(pos[j].ref.data(), t);
         E.est[j] = V3(p[0], p[1], p[2]);
         E.res[j] = E.est[j] - V3(t[0], t[1], t[2]);
-        auto J = reading_jacobian(m, p);
+        auto J = reading_jacobian(m, p, pos[j].t_s);
         Eigen::Matrix3d H = J.transpose() * J;
         E.Jp[j] = H.inverse() * J.transpose();
         // Covariance of the mean readings: the samples' (cross-cable terms

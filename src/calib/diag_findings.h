@@ -1,8 +1,11 @@
 // Findings beyond the catalogue in the residuals of the best explanation:
-// a period in cable length (pooled Lomb-Scargle over the four cables) and
-// polynomial trends of the position residual against physical variables.
-// Each finding carries structured fields beside its English text
-// (docs/calibration.md, "The JSON").
+// a period in cable length (pooled Lomb-Scargle over the four cables), a
+// drift over the session (the common reading residual against acquisition
+// time), and polynomial trends of the position residual against physical
+// variables. Each finding carries structured fields beside its English text
+// (docs/calibration.md, "The JSON") and a p-value already corrected for the
+// number of tests of its kind; a finding is listed only when that p-value is
+// below kFindingLevel.
 #pragma once
 
 #include <array>
@@ -15,12 +18,33 @@
 namespace cdm {
 namespace diag {
 
-// lmean, lres: per position, each cable's mean reading and its residual
-// against the model's prediction; angle: each cable's angle (deg) to the
-// plate; E: the evaluation whose residuals are analysed; jig: tolerance.
-nlohmann::json residual_findings(const std::vector<PreparedPos> &pos, const std::vector<std::array<double, 4>> &lmean,
-                                 const std::vector<std::array<double, 4>> &lres,
-                                 const std::vector<std::array<double, 4>> &angle, const Eval &bE, const V3 &jig);
+// The family-wise level of every test the verdict rests on (the
+// chi-square, the spatial structure, the candidates' likelihood ratios, the
+// findings): 1e-3, each family Bonferroni-corrected.
+constexpr double kFindingLevel = 1e-3;
+
+// Per position: each cable's mean reading, its residual against a model's
+// prediction at the jig position (at the position's acquisition time), and
+// the cable's angle (deg) to the plate.
+struct LengthView {
+    std::vector<std::array<double, 4>> lmean, lres, angle;
+};
+LengthView length_view(const Model &m, const std::vector<PreparedPos> &pos);
+
+// The strongest period of the cable-length residual, pooled over the four
+// cables (identical drums share a period) after a quadratic in length is
+// taken out of each; fap: the false-alarm probability over the frequencies
+// searched (periods 8 mm .. half the length span). valid = false when the
+// lengths span too little to search.
+struct PeriodPeak {
+    bool valid = false;
+    double period_mm = 0, fap = 1, amplitude_mm = 0;
+};
+PeriodPeak length_period(const LengthView &v);
+
+// lv: the length view of the evaluation bE's model; jig: tolerance.
+nlohmann::json residual_findings(const std::vector<PreparedPos> &pos, const LengthView &lv, const Eval &bE,
+                                 const V3 &jig);
 
 } // namespace diag
 } // namespace cdm

@@ -19,6 +19,7 @@ struct DiagnoseOptions {
     std::vector<std::string> effects;  // the model to fit (none: nominal)
     double jig_tolerance_mm = -1;      // < 0: estimated from the data
     bool candidates = true;
+    bool search = true;                // the model search (needs candidates)
     bool validation = true;
     bool per_position = true;
     std::function<bool(const std::string &stage, double fraction)> progress;

@@ -1,5 +1,6 @@
 #include "calib/simulate.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -25,22 +26,30 @@ template <class Sink> bool run(const Model &truth, const JigSimOptions &o, Sink 
     const auto where = jig_true_positions(plan, o.n, je);
     std::mt19937_64 rng(o.seed);
     std::normal_distribution<double> g(0.0, 1.0);
+    size_t row = 0; // data rows written so far: a row's time is row * kDatasetNominalRowPeriodS
     for (size_t k = 0; k < plan.size(); ++k) {
-        double p[3], L[4];
+        double p[3], L[4], L1[4];
         truth.jig_to_device(where[k].data(), p);
-        if (truth.readings(p, L) != 0) {
+        // Readings at the position's first and last sample time: an effect
+        // that drifts in time (pot_drift) moves them; between the two they
+        // are interpolated linearly (exact for a linear drift; the common
+        // curvature's error over one position's samples is below 1e-8 mm).
+        const double t0 = double(row) * kDatasetNominalRowPeriodS;
+        const double t1 = double(row + size_t(std::max(0, o.samples - 1))) * kDatasetNominalRowPeriodS;
+        if (truth.readings(p, t0, L) != 0 || truth.readings(p, t1, L1) != 0) {
             err = "a user effect of the true model failed at point " + std::to_string(plan[k].point);
             return false;
         }
         for (int c = 0; c < 4; ++c)
-            if (!std::isfinite(L[c])) {
+            if (!std::isfinite(L[c]) || !std::isfinite(L1[c])) {
                 err = "simulated readings are not finite at point " + std::to_string(plan[k].point);
                 return false;
             }
-        for (int s = 0; s < o.samples; ++s) {
+        for (int s = 0; s < o.samples; ++s, ++row) {
             double l[4];
+            const double f = o.samples > 1 ? double(s) / double(o.samples - 1) : 0.0;
             for (int c = 0; c < 4; ++c) {
-                l[c] = L[c] + o.noise_mm * g(rng);
+                l[c] = L[c] + f * (L1[c] - L[c]) + o.noise_mm * g(rng);
                 if (o.quant_mm > 0) l[c] = std::round(l[c] / o.quant_mm) * o.quant_mm;
             }
             sink(long(plan[k].point), plan[k].ref, l);

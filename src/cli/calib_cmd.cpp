@@ -66,6 +66,19 @@ void print_summary(const nlohmann::json &r) {
                 r["structure"]["p_value"].get<double>(), r["failing_positions"].get<int>(),
                 r["data"]["positions"].get<int>());
     std::printf("  explained: %s\n", r["explained"].get<bool>() ? "yes" : "no");
+    if (r.contains("recommended") && !r["recommended"].is_null()) {
+        const auto &rec = r["recommended"];
+        std::string names;
+        for (auto &e : rec["effects"]) names += (names.empty() ? "" : " + ") + e.get<std::string>();
+        std::printf("\nRecommended model: %s (x RMS %.4f mm; explained: %s)\n",
+                    names.empty() ? "the nominal model" : names.c_str(), rec["error_mm"]["x"]["rms"].get<double>(),
+                    rec["explained"].get<bool>() ? "yes" : rec["negligible_only"].get<bool>() ? "to within what matters" : "no");
+        for (auto &st : rec["path"])
+            std::printf("  step %d: %s %s (BIC %+.1f, x RMS %.4f mm)\n", st["step"].get<int>(),
+                        st.contains("added") ? "+" : "-",
+                        (st.contains("added") ? st["added"] : st["removed"]).get<std::string>().c_str(),
+                        st["bic_change"].get<double>(), st["x_rms_mm"].get<double>());
+    }
     if (!r["candidates"].empty()) {
         std::printf("\nMissing-effect candidates (best first):\n");
         std::printf("  %-18s %12s %12s %5s %10s  %s\n", "effect", "delta chi2", "BIC change", "k", "x rms after",
@@ -139,7 +152,7 @@ struct DiagArgs {
     std::string data, device, effects, json_out, report, calib_out, plugin;
     std::vector<std::string> before;
     double jig = -1;
-    bool quiet = false, no_candidates = false;
+    bool quiet = false, no_candidates = false, no_search = false;
 };
 
 int write_outputs(const DiagArgs &a, const nlohmann::json &r) {
@@ -178,6 +191,7 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     if (a.jig >= 0) o["jig_tolerance_mm"] = a.jig;
     if (!a.calib_out.empty()) o["calibration_out"] = a.calib_out;
     if (!fit_only && a.no_candidates) o["candidates"] = false;
+    if (!fit_only && a.no_search) o["search"] = false;
     char *res = nullptr;
     // fit: cdm_fit, the fit alone (no candidates, review or validation)
     const int rc = (fit_only ? cdm_fit : cdm_diagnose)(a.data.c_str(), device.c_str(), o.dump().c_str(),
@@ -314,7 +328,11 @@ void add_calib_commands(CLI::App &app) {
                      "defaults to python3)");
     diag->add_option("--before", d.before, "Earlier diagnosis JSON files to compare in the report");
     diag->add_option("--calibration", d.calib_out, "Also write the fitted calibration JSON");
-    diag->add_flag("--no-candidates", d.no_candidates, "Skip the ranking of missing effects");
+    diag->add_flag("--no-candidates", d.no_candidates,
+                   "Skip the ranking of missing effects (and the search): the verdict then says nothing about "
+                   "which effect could be missing");
+    diag->add_flag("--no-search", d.no_search,
+                   "Skip the model search (forward-backward stepwise by BIC from --effects; on by default)");
     diag->callback([] { select_command([] { return cmd_diagnose(d, false); }); });
 
     auto *fit = calib->add_subcommand("fit", "Fit the model with the given effects and write the calibration");

@@ -2,6 +2,7 @@
 // effects users register at run time.
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <mutex>
 
 #include "model/kernel.h"
@@ -61,7 +62,7 @@ std::vector<EffectDescPtr> candidate_effects() {
 }
 
 int register_user_effect(const cdm_effect_def *def, std::string &err) {
-    if (!def || def->struct_size < sizeof(cdm_effect_def)) {
+    if (!def || def->struct_size < offsetof(cdm_effect_def, initial)) {
         err = "cdm_effect_register: NULL definition or struct_size smaller than the 1.0 cdm_effect_def";
         return CDM_ERR_INVALID_ARG;
     }
@@ -109,6 +110,18 @@ int register_user_effect(const cdm_effect_def *def, std::string &err) {
             return CDM_ERR_INVALID_ARG;
         }
         p.init = std::min(std::max(0.0, p.lower), p.upper);
+        // since 1.1: a caller built against 1.0 has a smaller struct and no
+        // `initial` field at all.
+        const bool has_initial = def->struct_size >= offsetof(cdm_effect_def, initial) + sizeof(def->initial);
+        if (has_initial && def->initial) {
+            const double v = def->initial[k];
+            if (!std::isfinite(v) || v < p.lower || v > p.upper) {
+                err = "cdm_effect_register: effect \"" + d->name + "\" parameter \"" + p.name +
+                      "\": initial value outside [lower, upper] or not finite";
+                return CDM_ERR_INVALID_ARG;
+            }
+            p.init = v;
+        }
         p.rand_lo = 0.5 * p.scale;
         p.rand_hi = 2 * p.scale;
         d->params.push_back(p);

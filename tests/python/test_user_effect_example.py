@@ -9,4 +9,4 @@ def test_user_effect_example_runs():
     script = os.path.join(src, "docs", "examples", "user_effect.py")
     r = subprocess.run([sys.executable, script, "--check"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "with drum_ripple: explained = True" in r.stdout
+    assert "with worn_spot: explained = True" in r.stdout

@@ -139,6 +139,7 @@ namespace Cdm
         public IntPtr upper;
         public IntPtr apply;
         public IntPtr user;
+        public IntPtr initial; // since 1.1
     }
 
     [UnmanagedFunctionPointer(CallingConvention.Cdecl)]

@@ -146,6 +146,7 @@ class cdm_effect_def(_Sized):
         ("upper", c_double_p),
         ("apply", cdm_effect_apply_fn),
         ("user", ctypes.c_void_p),
+        ("initial", c_double_p),  # since 1.1
     ]
 
 

@@ -14,8 +14,14 @@ except ImportError:  # numpy is optional
     _np = None  # type: ignore[assignment]
 
 # name -> _Registration. Holds every object native code may still reach
-# (the apply trampoline, the parameter arrays) until unregister_effect.
+# (the apply trampoline, the parameter arrays).
 _registry: dict = {}
+# Registrations removed by unregister_effect. A model or calibration built
+# while the effect was registered keeps its description, and with it the
+# trampoline's address, for as long as it lives; freeing the trampoline
+# would leave it a dangling pointer. They are kept for the process's life
+# (a few hundred bytes each).
+_retired: list = []
 _registry_lock = threading.Lock()
 
 
@@ -62,7 +68,7 @@ def _doubles(values, n, what, name):
     return (ctypes.c_double * n)(*vals)
 
 
-def register_effect(name, param_names, param_scale, apply, doc="", lower=None, upper=None):
+def register_effect(name, param_names, param_scale, apply, doc="", lower=None, upper=None, initial=None):
     """Registers apply(params, position, readings) as the effect `name`.
 
     The model calls apply with the readings (4 values, mm) predicted by the
@@ -70,7 +76,12 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
     place (a numpy view when numpy is installed, a ctypes array otherwise).
     params and position (mm, device frame) are read-only copies. apply must be
     smooth in params and position: derivatives are central differences. An
-    exception in apply fails the fit or diagnosis that called it."""
+    exception in apply fails the fit or diagnosis that called it.
+
+    lower, upper: bounds per parameter; initial: where each parameter starts
+    when the effect is added to a model (since 1.1; default 0 clamped into the
+    bounds), so that a parameter entering non-linearly (a period, a centre)
+    is fitted from a sensible value."""
     if not isinstance(name, str) or not re.fullmatch(r"[a-z0-9_]+", name):
         raise ValueError("register_effect: name must match [a-z0-9_]+, got %r" % (name,))
     if not callable(apply):
@@ -83,6 +94,7 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
         raise ValueError("register_effect(%r): param_scale must be > 0, got %r" % (name, list(scale)))
     lo = _doubles(lower, n, "lower", name)
     hi = _doubles(upper, n, "upper", name)
+    init = _doubles(initial, n, "initial", name)
     names_c = (ctypes.c_char_p * max(n, 1))(*[p.encode("utf-8") for p in param_names])
     fn = _native.cdm_effect_apply_fn(reg.trampoline)
     d = _native.cdm_effect_def()
@@ -95,7 +107,8 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
     d.upper = hi
     d.apply = fn
     d.user = None
-    reg.keep = [fn, names_c, d.param_scale, lo, hi, d]
+    d.initial = init
+    reg.keep = [fn, names_c, d.param_scale, lo, hi, init, d]
     with _registry_lock:
         if name in _registry:
             raise ValueError("register_effect: %r is already registered from Python; unregister it first" % name)
@@ -111,7 +124,9 @@ def unregister_effect(name):
         rc = _native.lib().cdm_effect_unregister(_native.c_path(name, "effect name"))
         if rc < 0:
             raise _native.fail(rc, "cdm_effect_unregister")
-        _registry.pop(name, None)
+        reg = _registry.pop(name, None)
+        if reg is not None:
+            _retired.append(reg)
 
 
 def load_plugin(path):

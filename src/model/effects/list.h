@@ -14,10 +14,12 @@
 #include "model/effects/cable_gain.h"
 #include "model/effects/cable_offset.h"
 #include "model/effects/cable_stretch.h"
+#include "model/effects/drum_eccentricity.h"
 #include "model/effects/ellipsoid.h"
 #include "model/effects/exit_pulley.h"
 #include "model/effects/holder_geometry.h"
 #include "model/effects/jig_misalignment.h"
+#include "model/effects/pot_drift.h"
 #include "model/effects/pot_nonlinearity.h"
 
 // clang-format off
@@ -30,5 +32,7 @@
     _(CableGain)               \
     _(CableOffset)             \
     _(PotNonlinearity)         \
+    _(DrumEccentricity)        \
+    _(PotDrift)                \
     _(EllipsoidCorrection)
 // clang-format on

@@ -1,0 +1,245 @@
+// See diag_candidates.h.
+#include "calib/diag_candidates.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "calib/diag_findings.h"
+#include "calib/diag_stats.h"
+#include "model/effect.h"
+
+namespace cdm {
+namespace diag {
+
+using nlohmann::json;
+
+namespace {
+std::string fmt(double v, int prec = 3) {
+    char b[64];
+    std::snprintf(b, sizeof b, "%.*f", prec, v);
+    return b;
+}
+} // namespace
+
+std::vector<std::string> reading_effects(const Model &m) {
+    std::vector<std::string> v;
+    for (size_t k = 0; k < m.effect_count(); ++k)
+        if (m.effect_desc(k).stage != Stage::Position) v.push_back(m.effect_name(k));
+    return v;
+}
+
+Model model_with(const Model &from, const std::vector<std::string> &keep, const std::string &add,
+                 const ParamValues &add_init) {
+    Model m2{from.geometry()};
+    std::string e2;
+    for (size_t k = 0; k < from.effect_count(); ++k) {
+        const EffectDesc &d = from.effect_desc(k);
+        if (d.stage == Stage::Position) continue;
+        if (std::find(keep.begin(), keep.end(), d.name) == keep.end()) continue;
+        ParamValues pv;
+        for (size_t q = 0; q < d.params.size(); ++q) pv.push_back({d.params[q].name, from.effect_params(k)[q]});
+        m2.add_effect(d.name, pv, e2);
+    }
+    if (!add.empty()) m2.add_effect(add, add_init, e2);
+    return m2;
+}
+
+std::vector<ParamValues> effect_starts(const Model &base, const std::string &effect,
+                                       const std::vector<PreparedPos> &pos) {
+    auto d = find_effect(effect);
+    if (!d) return {{}};
+    for (auto &p : d->params) {
+        if (p.name != "period" || (p.unit != "mm" && !p.unit.empty())) continue;
+        const PeriodPeak pk = length_period(length_view(base, pos));
+        if (!pk.valid) return {{}};
+        std::vector<ParamValues> v;
+        for (double f : {1.0, 0.9, 1.1}) {
+            const double per = std::min(std::max(pk.period_mm * f, p.lower), p.upper);
+            v.push_back({{"period", per}});
+        }
+        return v;
+    }
+    return {{}};
+}
+
+bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
+                      const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,
+                      std::string &err) {
+    out.clear();
+    const size_t P = ctx.pos.size();
+    auto list = candidate_effects();
+    const size_t n_base = reading_effects(base).size();
+    size_t done = 0;
+    for (auto &d : list) {
+        ++done;
+        if (base.has_effect(d->name)) continue;
+        Candidate c(base.geometry());
+        c.name = d->name;
+        // An effect entering non-linearly is fitted from each data-seeded
+        // start; the best fit counts.
+        bool have = false;
+        for (const ParamValues &start : effect_starts(base, d->name, ctx.pos)) {
+            Model m = model_with(base, reading_effects(base), d->name, start);
+            if (!m.has_effect(d->name)) break;
+            FitReport r;
+            if (!ctx.fit(m, stage + " " + d->name, r)) {
+                err = r.message.empty() ? "fit cancelled" : r.message;
+                return false;
+            }
+            if (!have || r.chi2 < c.rep.chi2) {
+                c.m = m;
+                c.rep = r;
+                have = true;
+            }
+        }
+        if (!have) continue;
+        c.k = c.rep.n_free - base_free;
+        // What the model already does that this effect would: an effect
+        // the model's own effects reproduce cannot be told from them.
+        if (n_base > 0) {
+            Overlap ov = effect_overlap(c.m, ctx.pos, ctx.fo, d->name);
+            for (auto &pe : ov.per_effect)
+                if (pe.second > 0.99) c.in_model.push_back(pe.first);
+            if (c.in_model.empty() && ov.all > 0.99)
+                for (auto &pe : ov.per_effect) c.in_model.push_back(pe.first);
+        }
+        if (c.k <= 0) continue; // nothing left to fit after the gauge: indistinguishable from the model
+        c.dchi2 = base_chi2 - c.rep.chi2;
+        c.bic = -c.dchi2 + c.k * std::log(ctx.n_obs);
+        c.p = chi2_sf(std::max(0.0, c.dchi2), c.k);
+        c.E = evaluate(c.m, ctx.data, ctx.pos);
+        c.v = judge(c.E, ctx.G, ctx.own_jig(c.E), c.rep.n_free);
+        c.fp.resize(P);
+        double sxy = 0, sxx = 0, syy = 0, ss = 0;
+        size_t nn = 0;
+        for (size_t j = 0; j < P; ++j) {
+            c.fp[j] = base_eval.res[j] - c.E.res[j];
+            if (!base_eval.ok[j] || !c.E.ok[j]) {
+                c.fp[j].setZero();
+                continue;
+            }
+            ss += c.fp[j].squaredNorm();
+            ++nn;
+            for (int a = 0; a < 3; ++a) {
+                const double s2 = base_eval.var_mean[j](a) + ctx.jig(a) * ctx.jig(a);
+                sxy += c.fp[j](a) * base_eval.res[j](a) / s2;
+                sxx += c.fp[j](a) * c.fp[j](a) / s2;
+                syy += base_eval.res[j](a) * base_eval.res[j](a) / s2;
+            }
+        }
+        c.shift_rms_mm = nn ? std::sqrt(ss / double(nn)) : 0;
+        c.corr = (sxx > 0 && syy > 0) ? sxy / std::sqrt(sxx * syy) : 0;
+        out.push_back(std::move(c));
+        if (!ctx.report(stage, double(done) / double(list.size()))) {
+            err = "fit cancelled";
+            return false;
+        }
+    }
+    for (auto &c : out) c.p_adj = std::min(1.0, c.p * double(out.size()));
+    std::sort(out.begin(), out.end(), [](const Candidate &a, const Candidate &b) { return a.bic < b.bic; });
+    return true;
+}
+
+void mark_confusions(const Eval &base_eval, const V3 &jig, std::vector<Candidate> &cands) {
+    const size_t P = base_eval.res.size();
+    auto fp_corr = [&](const Candidate &a, const Candidate &b) {
+        double sab = 0, saa = 0, sbb = 0;
+        for (size_t j = 0; j < P; ++j)
+            for (int k = 0; k < 3; ++k) {
+                const double s2 = base_eval.var_mean[j](k) + jig(k) * jig(k);
+                sab += a.fp[j](k) * b.fp[j](k) / s2;
+                saa += a.fp[j](k) * a.fp[j](k) / s2;
+                sbb += b.fp[j](k) * b.fp[j](k) / s2;
+            }
+        return (saa > 0 && sbb > 0) ? sab / std::sqrt(saa * sbb) : 0.0;
+    };
+    for (auto &c : cands) c.confused = c.in_model;
+    for (size_t a = 0; a < cands.size(); ++a)
+        for (size_t b = 0; b < cands.size(); ++b) {
+            if (a == b || cands[a].bic >= 0 || cands[b].bic >= 0) continue;
+            // Equally good (BIC within 10: "very strong" evidence on
+            // Kass-Raftery's scale is needed to prefer one) and explaining
+            // the same pattern.
+            if (std::fabs(cands[a].bic - cands[b].bic) < 10 && fp_corr(cands[a], cands[b]) > 0.9)
+                cands[a].confused.push_back(cands[b].name);
+        }
+}
+
+json candidates_json(const std::vector<Candidate> &cands) {
+    json cj = json::array();
+    for (auto &c : cands)
+        cj.push_back({{"effect", c.name},
+                      {"score", -c.bic},
+                      {"delta_chi2", c.dchi2},
+                      {"bic_change", c.bic},
+                      {"n_params", c.k},
+                      {"lr_p_value", c.p},
+                      {"lr_p_adjusted", c.p_adj},
+                      {"significant", c.significant()},
+                      {"position_change_rms_mm", c.shift_rms_mm},
+                      {"error_mm_after", stats3(c.E.err)},
+                      {"explained_after", c.v.explained},
+                      {"chi2_per_dof_after", c.v.chi2 / c.v.dof},
+                      {"structure_after", c.v.moran_z},
+                      {"confused_with", c.confused},
+                      {"residual_correlation", c.corr}});
+    return cj;
+}
+
+json inseparable_json(const std::vector<Candidate> &cands) {
+    json insep = json::array();
+    std::vector<char> seen(cands.size(), 0);
+    for (size_t a = 0; a < cands.size(); ++a) {
+        if (seen[a] || cands[a].confused.empty()) continue;
+        json grp = json::array({cands[a].name});
+        seen[a] = 1;
+        std::string sep;
+        for (auto &nm : cands[a].confused) {
+            grp.push_back(nm);
+            bool is_cand = false;
+            for (size_t b = 0; b < cands.size(); ++b) {
+                if (cands[b].name != nm) continue;
+                is_cand = true;
+                seen[b] = 1;
+                // probe heights and radii beyond the measured ones
+                double best = -1, bh = 0, by = 0, bz = 0;
+                for (double hx = 10; hx <= 110; hx += 10)
+                    for (double yy = -90; yy <= 90; yy += 15)
+                        for (double zz = -90; zz <= 90; zz += 15) {
+                            double pa[3] = {hx, yy, zz}, ra[4], rb[4], ta[3], tb[3];
+                            cands[a].m.jig_to_device(pa, ta);
+                            cands[b].m.jig_to_device(pa, tb);
+                            cands[a].m.readings(ta, ra);
+                            cands[b].m.readings(tb, rb);
+                            double dmax = 0;
+                            for (int c = 0; c < 4; ++c) dmax = std::max(dmax, std::fabs(ra[c] - rb[c]));
+                            if (dmax > best) {
+                                best = dmax;
+                                bh = hx;
+                                by = yy;
+                                bz = zz;
+                            }
+                        }
+                sep += (sep.empty() ? "" : "; ") + cands[a].name + " vs " + nm;
+                // 0.01 mm: a position mean of 100 samples at 0.05 mm noise.
+                if (best < 0.01)
+                    sep += ": they predict the same readings everywhere (at most " + fmt(best, 4) +
+                           " mm apart out to x = 10..110, y, z = +-90 mm): no jig measurement separates them; "
+                           "they are one effect as far as the cable lengths can tell, keep either";
+                else
+                    sep += ": their readings differ most (" + fmt(best) + " mm) at x = " + fmt(bh, 0) + ", y = " +
+                           fmt(by, 0) + ", z = " + fmt(bz, 0) +
+                           " mm; measure positions toward there (other heights, further out) to separate them";
+            }
+            if (!is_cand)
+                sep += (sep.empty() ? "" : "; ") + nm + " (already in the model) reproduces what " + cands[a].name +
+                       " would do: adding it changes nothing the data can see";
+        }
+        insep.push_back({{"effects", grp}, {"separate_by", sep}});
+    }
+    return insep;
+}
+
+} // namespace diag
+} // namespace cdm

@@ -1,0 +1,54 @@
+// The candidate table: every catalogued effect (and registered user effect)
+// not in a model, added to it and fitted, with its likelihood-ratio test,
+// its BIC change, what it would change in the positions (its fingerprint),
+// and the candidates or model effects the data cannot tell it from.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "calib/diag_context.h"
+#include "calib/diag_findings.h"
+
+namespace cdm {
+namespace diag {
+
+struct Candidate {
+    explicit Candidate(const DeviceGeometry &g) : m(g) {}
+    std::string name;
+    double dchi2 = 0;   // reading-space chi-square decrease when added
+    int k = 0;          // parameters it adds (after the gauge)
+    double bic = 0;     // BIC change: -dchi2 + k ln(n_obs)
+    double p = 1;       // likelihood ratio: P(chi2(k) > dchi2)
+    double p_adj = 1;   // Bonferroni over the candidates tried
+    double corr = 0;    // correlation of its fingerprint with the model's residual
+    double shift_rms_mm = 0; // RMS over positions of what it changes in the position (mm)
+    Eval E;
+    Verdict v;
+    Model m;
+    FitReport rep;
+    std::vector<V3> fp;                  // per position: model residual - residual with it
+    std::vector<std::string> in_model;   // model effects that reproduce it
+    std::vector<std::string> confused;   // candidates (or model effects) it cannot be told from
+    bool significant() const { return p_adj < kFindingLevel; }
+};
+
+// Scores every candidate on top of `base` (fitted; `base_free` its reading-
+// space free parameters, `base_chi2` its chi-square, `base_eval` its
+// evaluation). Sorted by BIC change. False + err when cancelled.
+bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
+                      const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,
+                      std::string &err);
+
+// Fills each candidate's `confused` list (in_model, plus candidates equally
+// good by BIC, within 10, explaining the same pattern, correlation > 0.9).
+void mark_confusions(const Eval &base_eval, const V3 &jig, std::vector<Candidate> &cands);
+
+nlohmann::json candidates_json(const std::vector<Candidate> &cands);
+// Groups that cannot be told apart, with where their predictions part.
+nlohmann::json inseparable_json(const std::vector<Candidate> &cands);
+
+} // namespace diag
+} // namespace cdm

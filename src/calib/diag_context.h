@@ -1,0 +1,68 @@
+// What every stage of the diagnosis shares: the data prepared once, the
+// noise model the fit weighs readings with, and how to fit a model with
+// progress and cancellation. Private to src/calib (the diag_*.cpp stages).
+#pragma once
+
+#include <cmath>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "calib/dataset.h"
+#include "calib/diag_eval.h"
+#include "calib/diag_spatial.h"
+#include "calib/fit.h"
+#include "model/model.h"
+
+namespace cdm {
+namespace diag {
+
+struct DiagContext {
+    const Dataset &data;
+    const DeviceGeometry &g;
+    const std::vector<PreparedPos> &pos;
+    const Grid &G;
+    V3 jig;              // jig tolerance per axis (mm) the fit weighs with
+    bool user_jig;       // given by the user (else estimated)
+    double jig_cap;      // cap on a model's own white-scatter estimate
+    FitOptions fo;       // the fit's noise model; every comparison uses it
+    double n_obs;        // readings: 4 per position
+    std::function<bool(const std::string &, double)> progress;
+
+    bool report(const std::string &stage, double f) const { return !progress || progress(stage, f); }
+    // Fits m's reading-space effects from their current values.
+    bool fit(Model &m, const std::string &stage, FitReport &r) const {
+        FitOptions f = fo;
+        f.progress = [&](double fr) { return report(stage, fr); };
+        return fit_model(m, pos, f, r);
+    }
+    double bic(double chi2, int k) const { return chi2 + k * std::log(n_obs); }
+    // The white scatter a model's own residual shows (a large smooth
+    // residual biases the nugget): how each explanation is judged.
+    V3 own_jig(const Eval &E) const {
+        if (user_jig) return jig;
+        V3 est = estimate_nugget(E, G), j;
+        for (int a = 0; a < 3; ++a) j(a) = std::min(est(a), jig_cap);
+        return j;
+    }
+};
+
+// A copy of `from` keeping only its reading-space effects named in `keep`
+// (with their fitted values), plus `add` (if not empty) at `add_init`.
+Model model_with(const Model &from, const std::vector<std::string> &keep, const std::string &add,
+                 const ParamValues &add_init = {});
+
+// The reading-space effects of a model, in its order (Position-stage
+// effects, the ellipsoid, left out: they are not fitted on the readings).
+std::vector<std::string> reading_effects(const Model &m);
+
+// Starting values for an effect whose parameters enter non-linearly and
+// that the data can seed: a parameter named "period" in mm (drum
+// eccentricity, or a user effect) starts at the peak of the cable-length
+// periodogram of `base`'s residual and at 0.9 and 1.1 times it. One
+// ParamValues per start; a single empty one when nothing is seeded.
+std::vector<ParamValues> effect_starts(const Model &base, const std::string &effect,
+                                       const std::vector<PreparedPos> &pos);
+
+} // namespace diag
+} // namespace cdm

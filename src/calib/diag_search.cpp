@@ -1,0 +1,165 @@
+// See diag_search.h.
+#include "calib/diag_search.h"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include "model/effect.h"
+
+namespace cdm {
+namespace diag {
+
+namespace {
+
+std::vector<std::string> sorted(std::vector<std::string> v) {
+    std::sort(v.begin(), v.end());
+    return v;
+}
+
+double x_rms(const Eval &E) {
+    return E.err[0].n > 0 ? std::sqrt(E.err[0].ss / E.err[0].n) : 0.0;
+}
+
+} // namespace
+
+bool model_search(const DiagContext &ctx, const Model &start, const FitReport &start_rep, double start_chi2,
+                  SearchResult &out, std::string &err) {
+    Model cur = model_with(start, reading_effects(start), "");
+    int cur_free = start_rep.n_free;
+    // The ellipsoid's three parameters are fitted in position space, not
+    // in this chi-square.
+    for (size_t k = 0; k < start.effect_count(); ++k)
+        if (start.effect_desc(k).stage == Stage::Position) cur_free -= int(start.effect_desc(k).params.size());
+    double cur_chi2 = start_chi2;
+    FitReport cur_rep = start_rep;
+    cur_rep.n_free = cur_free;
+    Eval cur_E = evaluate(cur, ctx.data, ctx.pos);
+    std::set<std::vector<std::string>> seen{sorted(reading_effects(cur))};
+    out.visited.push_back({reading_effects(cur), ctx.bic(cur_chi2, cur_free)});
+    std::vector<Candidate> cands;
+    for (int step = 1; step <= 12; ++step) {
+        if (!score_candidates(ctx, cur, cur_free, cur_chi2, cur_E, "search step " + std::to_string(step), cands, err))
+            return false;
+        for (auto &c : cands) {
+            auto s = reading_effects(c.m);
+            if (std::none_of(out.visited.begin(), out.visited.end(), [&](auto &v) { return sorted(v.first) == sorted(s); }))
+                out.visited.push_back({s, ctx.bic(c.rep.chi2, c.rep.n_free)});
+        }
+        // Best addition: lowers the BIC and passes the likelihood-ratio test.
+        const Candidate *add = nullptr;
+        for (auto &c : cands)
+            if (c.bic < 0 && c.significant() && !seen.count(sorted(reading_effects(c.m)))) {
+                add = &c;
+                break; // sorted by BIC
+            }
+        // Best removal.
+        double best_rm = 0;
+        std::string rm_name;
+        Model rm_model{ctx.g};
+        FitReport rm_rep;
+        const auto names = reading_effects(cur);
+        for (size_t k = 0; k < names.size(); ++k) {
+            std::vector<std::string> keep = names;
+            keep.erase(keep.begin() + long(k));
+            if (seen.count(sorted(keep))) continue;
+            Model m = model_with(cur, keep, "");
+            FitReport r;
+            if (!ctx.fit(m, "search step " + std::to_string(step) + " without " + names[k], r)) {
+                err = r.message.empty() ? "fit cancelled" : r.message;
+                return false;
+            }
+            const double d = ctx.bic(r.chi2, r.n_free) - ctx.bic(cur_chi2, cur_free);
+            out.visited.push_back({keep, ctx.bic(r.chi2, r.n_free)});
+            if (d < best_rm) {
+                best_rm = d;
+                rm_name = names[k];
+                rm_model = m;
+                rm_rep = r;
+            }
+        }
+        SearchStep st;
+        st.step = step;
+        if (add && add->bic <= best_rm) {
+            st.added = add->name;
+            st.bic_change = add->bic;
+            cur = add->m;
+            cur_rep = add->rep;
+            cur_free = add->rep.n_free;
+            cur_chi2 = add->rep.chi2;
+            cur_E = add->E;
+        } else if (!rm_name.empty()) {
+            st.removed = rm_name;
+            st.bic_change = best_rm;
+            cur = rm_model;
+            cur_rep = rm_rep;
+            cur_free = rm_rep.n_free;
+            cur_chi2 = rm_rep.chi2;
+            cur_E = evaluate(cur, ctx.data, ctx.pos);
+        } else {
+            break; // no move lowers the criterion: cands are the candidates on top of cur
+        }
+        st.x_rms_mm = x_rms(cur_E);
+        seen.insert(sorted(reading_effects(cur)));
+        out.path.push_back(st);
+        cands.clear();
+    }
+    out.effects = reading_effects(cur);
+    out.model = cur;
+    out.rep = cur_rep;
+    out.rep.n_free = cur_free;
+    out.chi2 = cur_chi2;
+    out.bic = ctx.bic(cur_chi2, cur_free);
+    out.E = std::move(cur_E);
+    out.cands = std::move(cands);
+    return true;
+}
+
+bool search_alternatives(const DiagContext &ctx, const SearchResult &r,
+                         std::vector<std::pair<std::vector<std::string>, double>> &alts, std::string &err) {
+    alts.clear();
+    const auto rec = sorted(r.effects);
+    std::set<std::vector<std::string>> listed{rec};
+    auto superset = [&](const std::vector<std::string> &s) {
+        return std::includes(s.begin(), s.end(), rec.begin(), rec.end());
+    };
+    for (auto &v : r.visited) {
+        auto s = sorted(v.first);
+        if (listed.count(s) || superset(s) || v.second - r.bic >= 10) continue;
+        listed.insert(s);
+        alts.push_back({v.first, v.second - r.bic});
+    }
+    // One-effect swaps.
+    for (const auto &out_name : r.effects)
+        for (auto &d : candidate_effects()) {
+            if (r.model.has_effect(d->name)) continue;
+            std::vector<std::string> keep;
+            for (auto &e : r.effects)
+                if (e != out_name) keep.push_back(e);
+            auto s = keep;
+            s.push_back(d->name);
+            s = sorted(s);
+            if (listed.count(s)) continue;
+            double best = INFINITY;
+            for (const ParamValues &st : effect_starts(r.model, d->name, ctx.pos)) {
+                Model m = model_with(r.model, keep, d->name, st);
+                FitReport fr;
+                if (!ctx.fit(m, "alternatives", fr)) {
+                    err = fr.message.empty() ? "fit cancelled" : fr.message;
+                    return false;
+                }
+                best = std::min(best, ctx.bic(fr.chi2, fr.n_free) - r.bic);
+            }
+            if (best < 10) {
+                listed.insert(s);
+                std::vector<std::string> v = keep;
+                v.push_back(d->name);
+                alts.push_back({v, best});
+            }
+        }
+    std::sort(alts.begin(), alts.end(), [](auto &a, auto &b) { return a.second < b.second; });
+    return true;
+}
+
+} // namespace diag
+} // namespace cdm

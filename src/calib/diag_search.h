@@ -1,0 +1,53 @@
+// The model search: forward-backward stepwise selection over the catalogue
+// (and registered user effects) from the user's model, by BIC on the
+// reading-space chi-square. An addition must also pass the likelihood-ratio
+// test at the verdict's level (kFindingLevel, Bonferroni over the
+// candidates tried), so that the search never adds what the verdict would
+// call insignificant; a removal is taken whenever it lowers the BIC, so no
+// effect stays whose removal lowers the criterion. Each step takes the move
+// (add or remove) that lowers the BIC most; a set once visited is not
+// visited again.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "calib/diag_candidates.h"
+
+namespace cdm {
+namespace diag {
+
+struct SearchStep {
+    int step = 0;
+    std::string added, removed;
+    double bic_change = 0, x_rms_mm = 0;
+};
+
+struct SearchResult {
+    explicit SearchResult(const DeviceGeometry &g) : model(g) {}
+    std::vector<std::string> effects; // the recommended reading-space effects
+    Model model;                      // fitted
+    FitReport rep;
+    double chi2 = 0, bic = 0;
+    Eval E;
+    std::vector<SearchStep> path;
+    // Candidates on top of the recommended model (the last forward step).
+    std::vector<Candidate> cands;
+    // Every set fitted on the way: its effects and BIC (for the alternatives).
+    std::vector<std::pair<std::vector<std::string>, double>> visited;
+};
+
+// start: the user's model, fitted (its Position-stage effects are ignored).
+bool model_search(const DiagContext &ctx, const Model &start, const FitReport &start_rep, double start_chi2,
+                  SearchResult &out, std::string &err);
+
+// The models the data cannot tell from the recommended one: every set
+// visited within 10 of its BIC (not a superset of it: those add what the data
+// do not need) and every one-effect swap of it within 10 (fitted here).
+bool search_alternatives(const DiagContext &ctx, const SearchResult &r,
+                         std::vector<std::pair<std::vector<std::string>, double>> &alts, std::string &err);
+
+} // namespace diag
+} // namespace cdm

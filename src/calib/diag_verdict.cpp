@@ -1,0 +1,89 @@
+// See diag_verdict.h.
+#include "calib/diag_verdict.h"
+
+#include <cmath>
+#include <cstdio>
+
+#include "calib/diag_findings.h"
+
+namespace cdm {
+namespace diag {
+
+using nlohmann::json;
+
+std::string fmt_num(double v, int prec) {
+    char b[64];
+    std::snprintf(b, sizeof b, "%.*f", prec, v);
+    return b;
+}
+
+std::string fmt_p(double p) {
+    char b[64];
+    if (p >= 0.001)
+        std::snprintf(b, sizeof b, "p = %.3f", p);
+    else if (p > 0)
+        std::snprintf(b, sizeof b, "p = %.1e", p);
+    else
+        std::snprintf(b, sizeof b, "p < 1e-300");
+    return b;
+}
+
+Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candidate> *cands, const json *findings,
+                      const V3 &noise) {
+    Judgement J;
+    const double floor3 = noise.norm();
+    const double small = 0.1 * floor3; // a tenth of the noise floor (3-D)
+    std::vector<std::string> material, negligible;
+    if (cands)
+        for (auto &c : *cands) {
+            if (!c.significant()) continue;
+            const std::string what = c.name + " (Delta chi2 " + fmt_num(c.dchi2, 0) + " for " + std::to_string(c.k) +
+                                     " parameters, " + fmt_p(c.p_adj) + " after Bonferroni over " +
+                                     std::to_string(cands->size()) + "; BIC change " + fmt_num(c.bic, 0) +
+                                     "; it moves positions by " + fmt_num(c.shift_rms_mm, 4) + " mm RMS)";
+            J.significant.push_back({{"kind", "candidate"},
+                                     {"effect", c.name},
+                                     {"delta_chi2", c.dchi2},
+                                     {"n_params", c.k},
+                                     {"p_adjusted", c.p_adj},
+                                     {"bic_change", c.bic},
+                                     {"position_change_rms_mm", c.shift_rms_mm},
+                                     {"negligible", c.shift_rms_mm < small}});
+            (c.shift_rms_mm < small ? negligible : material).push_back(what);
+        }
+    if (findings)
+        for (auto &f : *findings) {
+            const double amp = f.value("amplitude_mm", 0.0);
+            const std::string what = f["text"].get<std::string>() + " (" + fmt_p(f["p_value"].get<double>()) + ")";
+            J.significant.push_back({{"kind", "finding"}, {"text", f["text"]}, {"p_value", f["p_value"]},
+                                     {"amplitude_mm", amp}, {"negligible", amp < small}});
+            (amp < small ? negligible : material).push_back(what);
+        }
+    const double xr = E.err[0].n > 0 ? std::sqrt(E.err[0].ss / E.err[0].n) : 0.0;
+    const std::string rms = "x RMS " + fmt_num(xr, 3) + " mm at the noise floor " + fmt_num(noise(0), 3) + " mm";
+    const std::string tests = "chi2/dof " + fmt_num(v.chi2 / v.dof, 2) + " (" + fmt_p(v.chi2_p) +
+                              "), spatial structure z = " + fmt_num(v.moran_z, 1) + " (" + fmt_p(v.moran_p) + ")";
+    J.explained = v.explained && material.empty() && negligible.empty();
+    J.negligible_only = v.explained && material.empty() && !negligible.empty();
+    if (J.explained) {
+        J.words = "explains the data; " + rms + " (" + tests + (cands ? "; no candidate significant" : "") +
+                  (findings ? "; no residual finding" : "") + ")";
+    } else if (J.negligible_only) {
+        J.words = "explains the data to within what matters; " + rms + " (" + tests +
+                  "). Statistically significant but under a tenth of the noise floor (" + fmt_num(small, 4) +
+                  " mm): ";
+        for (size_t k = 0; k < negligible.size(); ++k) J.words += (k ? "; " : "") + negligible[k];
+    } else {
+        J.words = "does not explain the data; " + rms + " (" + tests + ")";
+        if (!material.empty()) {
+            J.words += ". Still significant: ";
+            for (size_t k = 0; k < material.size(); ++k) J.words += (k ? "; " : "") + material[k];
+        } else if (!v.explained) {
+            J.words += ": the residual is larger or more structured than the noise and the jig's tolerance allow";
+        }
+    }
+    return J;
+}
+
+} // namespace diag
+} // namespace cdm

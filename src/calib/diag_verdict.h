@@ -1,0 +1,40 @@
+// The verdict's rule, in one place. A model explains the data only when
+// every test shown beside it agrees: the chi-square of its residual against
+// the noise and the jig's tolerance, the spatial-structure test, no
+// candidate significant by its likelihood ratio (Delta chi2 against
+// chi2(k), Bonferroni over the candidates tried), and no residual finding
+// significant (each family at kFindingLevel). What is significant but moves
+// positions by less than a tenth of the noise floor is named as negligible,
+// with its number, and does not count against the model in the words
+// ("explains the data to within what matters") while `explained` stays false.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "calib/diag_candidates.h"
+
+namespace cdm {
+namespace diag {
+
+struct Judgement {
+    bool explained = false;     // every test passes
+    bool negligible_only = false; // fails only on things below a tenth of the noise floor
+    std::string words;          // "explains the data; x RMS ..." or "does not explain the data: ..."
+    nlohmann::json significant = nlohmann::json::array(); // what is left: candidates and findings
+};
+
+// v: the model's chi-square and structure tests; E: its evaluation;
+// cands: the candidates on top of it (nullptr: not tried); findings: its
+// residual findings (nullptr: not analysed); noise: the noise floor per
+// axis (mm).
+Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candidate> *cands,
+                      const nlohmann::json *findings, const V3 &noise);
+
+std::string fmt_num(double v, int prec);
+std::string fmt_p(double p); // "p = 3.2e-05", exact tails down to the smallest double
+
+} // namespace diag
+} // namespace cdm

@@ -1,0 +1,45 @@
+// A drum (or its shaft, or the pot's wiper track) that is not perfectly
+// round: the pot counts the cable through a radius that varies once per
+// turn, so the reading error is periodic in the cable's own length, with the
+// period of one turn (2*pi*r, about 60-130 mm for these drums). The four pots
+// are one make: one period, fitted; amplitude and phase per cable, as a sine
+// and a cosine coefficient. Typical amplitude 0.05-0.2 mm.
+//
+// The period enters non-linearly: the diagnosis starts it from the peak of
+// the cable-length periodogram of the residual (any parameter named
+// "period" in mm is started that way, user effects included) and refines it
+// jointly with the amplitudes; its standard error comes with the fit.
+#pragma once
+#include "model/effects/base.h"
+
+namespace cdm {
+struct DrumEccentricity : EffectBase {
+    static constexpr Stage kStage = Stage::Transfer;
+    static EffectDesc describe() {
+        EffectDesc d{"drum_eccentricity",
+                     "Eccentric drum (or shaft, or a ripple of the pot's track): reading += a_i*sin(2*pi*L/period) + "
+                     "b_i*cos(2*pi*L/period), L the counted cable length; one period (one turn of the drum, mm) for "
+                     "the four pots, amplitude and phase per cable, mm. Typical: period 60-130 mm, amplitude "
+                     "0.05-0.2 mm.",
+                     kStage, -1, {}};
+        d.params.push_back(param("period", "mm", 10.0, 5.0, 2000.0, 100.0, 60.0, 130.0, false));
+        for (int i = 1; i <= 4; ++i) {
+            d.params.push_back(param("a" + std::to_string(i), "mm", 0.1, -5, 5, 0.0, 0.05, 0.2));
+            d.params.push_back(param("b" + std::to_string(i), "mm", 0.1, -5, 5, 0.0, 0.05, 0.2));
+        }
+        return d;
+    }
+    static constexpr int kCableParams = 3;
+    static void cable_params(int cable, int *idx) {
+        idx[0] = 0;
+        idx[1] = 1 + 2 * cable;
+        idx[2] = 2 + 2 * cable;
+    }
+    template <class T> static void transfer(const T *q, int, const Sample<T> &, TransferState<T> &st) {
+        using std::cos;
+        using std::sin;
+        const T ph = T(2 * M_PI) * st.length / q[0];
+        st.reading = st.reading + q[1] * sin(ph) + q[2] * cos(ph);
+    }
+};
+} // namespace cdm

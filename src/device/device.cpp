@@ -250,7 +250,10 @@ void cdm_device::run() {
             std::string err;
             const int n = transport_->read(buf, sizeof buf, kReaderPollMs, err);
             if (n > 0) {
-                handle_report(buf, size_t(n));
+                // host_time_ns: the moment the transport handed the report
+                // over, before parsing and the model (what the latency
+                // benchmark measures from).
+                handle_report(buf, size_t(n), monotonic_ns());
             } else if (n == kReadEnd) {
                 set_state_flag(CDM_POSE_END_OF_STREAM, true);
                 notify_waiters();
@@ -347,7 +350,7 @@ bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t hos
     return true;
 }
 
-void cdm_device::handle_report(const uint8_t *buf, size_t len) {
+void cdm_device::handle_report(const uint8_t *buf, size_t len, uint64_t host_ns) {
     proto::InputReport r;
     const proto::Reject rej = proto::parse_input(buf, len, r);
     if (rej != proto::Reject::None) {
@@ -365,8 +368,6 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len) {
         set_error(text, k == p10 ? log::kWarning : -1);
         return;
     }
-    const uint64_t host_ns = monotonic_ns();
-
     if (!account_sequence(r.sequence, r.device_time_us, host_ns)) return;
 
     if (model_changed_.load(std::memory_order_acquire)) {

@@ -107,7 +107,8 @@ private:
 
     void run();
     bool try_reconnect();
-    void handle_report(const uint8_t *buf, size_t len);
+    // host_ns: CLOCK_MONOTONIC when the transport's read returned it.
+    void handle_report(const uint8_t *buf, size_t len, uint64_t host_ns);
     // false: discard (duplicate or late)
     bool account_sequence(uint32_t seq, uint64_t device_us, uint64_t host_ns);
     bool wait_until(const std::function<bool()> &ready, int timeout_ms);

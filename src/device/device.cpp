@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -142,6 +143,12 @@ cdm_device::cdm_device(TransportPtr t, const proto::DeviceInfoReport &info, uint
     conv_ = conversion_from(info);
     nominal_ = nominal_model(info);
     model_ = nominal_;
+#ifdef CLOCK_MONOTONIC_COARSE
+    // 0 (no coarse clock): every stale check reads CLOCK_MONOTONIC.
+    timespec res;
+    if (clock_getres(CLOCK_MONOTONIC_COARSE, &res) == 0)
+        coarse_tick_ns_ = uint64_t(res.tv_sec) * 1000000000ull + uint64_t(res.tv_nsec);
+#endif
 }
 
 cdm_device::~cdm_device() {
@@ -243,7 +250,10 @@ void cdm_device::run() {
             std::string err;
             const int n = transport_->read(buf, sizeof buf, kReaderPollMs, err);
             if (n > 0) {
-                handle_report(buf, size_t(n));
+                // host_time_ns: the moment the transport handed the report
+                // over, before parsing and the model (what the latency
+                // benchmark measures from).
+                handle_report(buf, size_t(n), monotonic_ns());
             } else if (n == kReadEnd) {
                 set_state_flag(CDM_POSE_END_OF_STREAM, true);
                 notify_waiters();
@@ -340,7 +350,7 @@ bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t hos
     return true;
 }
 
-void cdm_device::handle_report(const uint8_t *buf, size_t len) {
+void cdm_device::handle_report(const uint8_t *buf, size_t len, uint64_t host_ns) {
     proto::InputReport r;
     const proto::Reject rej = proto::parse_input(buf, len, r);
     if (rej != proto::Reject::None) {
@@ -358,8 +368,6 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len) {
         set_error(text, k == p10 ? log::kWarning : -1);
         return;
     }
-    const uint64_t host_ns = monotonic_ns();
-
     if (!account_sequence(r.sequence, r.device_time_us, host_ns)) return;
 
     if (model_changed_.load(std::memory_order_acquire)) {
@@ -456,9 +464,8 @@ int cdm_device::finish(cdm_pose &pose, bool have, uint32_t st) const {
         return CDM_ERR_NO_DATA;
     }
     pose.flags |= st;
-    const uint64_t now = monotonic_ns();
     const uint64_t limit = uint64_t(stale_timeout_us_.load(std::memory_order_relaxed)) * 1000u;
-    if (now > pose.host_time_ns && now - pose.host_time_ns > limit) pose.flags |= CDM_POSE_STALE;
+    if (older_than(pose.host_time_ns, limit)) pose.flags |= CDM_POSE_STALE;
     if (st & CDM_POSE_DISCONNECTED) return CDM_ERR_DISCONNECTED;
     if (st & CDM_POSE_END_OF_STREAM) return CDM_ERR_END_OF_STREAM;
     if (pose.flags & CDM_POSE_NO_POSITION) return CDM_ERR_NO_DATA;
@@ -466,11 +473,36 @@ int cdm_device::finish(cdm_pose &pose, bool have, uint32_t st) const {
     return CDM_OK;
 }
 
+// Half of cdm_get_pose's time was the CLOCK_MONOTONIC read (a TSC read and
+// its scaling in the vDSO, 23 ns here, docs/performance.md). The coarse
+// clock is the time of the kernel's last timekeeping tick, a plain load
+// from the vDSO page (5 ns): never ahead of CLOCK_MONOTONIC, behind it by at
+// most one tick (its resolution, coarse_tick_ns_) while that tick runs on
+// time. A pose that is young enough by the coarse clock plus one tick is
+// fresh whatever the fine clock says; only within a tick of the deadline
+// does the fine clock decide, so the flag is set exactly when it was. The
+// one exception: if the timekeeping tick itself stalls (a virtual machine
+// whose timekeeping vCPU is descheduled; Linux forces an update after 5
+// stalled ticks), STALE can come late by as much as the stall beyond one
+// tick. It never comes early.
+bool cdm_device::older_than(uint64_t host_ns, uint64_t limit_ns) const {
+#ifdef CLOCK_MONOTONIC_COARSE
+    if (coarse_tick_ns_ != 0) {
+        timespec ts;
+        clock_gettime(CLOCK_MONOTONIC_COARSE, &ts);
+        const uint64_t coarse = uint64_t(ts.tv_sec) * 1000000000ull + uint64_t(ts.tv_nsec);
+        if (coarse + coarse_tick_ns_ <= host_ns + limit_ns) return false;
+    }
+#endif
+    const uint64_t now = monotonic_ns();
+    return now > host_ns && now - host_ns > limit_ns;
+}
+
 int cdm_device::get_pose(cdm_pose &out) const {
     const uint32_t st = state_flags_.load(std::memory_order_acquire);
-    Snapshot s;
-    const bool have = snap_.load(s);
-    if (have) out = s.pose;
+    // The pose's words only, straight into out: the raw report beside it
+    // would be 80 more bytes copied for nothing.
+    const bool have = snap_.load_part<offsetof(Snapshot, pose)>(out);
     return finish(out, have, st);
 }
 

@@ -40,22 +40,36 @@ public:
     }
 
     // Any thread. Returns false (out untouched) if nothing was ever stored.
-    bool load(T &out) const {
-        uint64_t tmp[kWords];
+    bool load(T &out) const { return load_part<0>(out); }
+
+    // Any thread. Like load, but copies only the member of type M at byte
+    // `Offset` of T (a multiple of 8): the words around it are not read. The
+    // member is still consistent with the rest of the value it was stored
+    // with; a reader that needs only part of a large value copies only it.
+    // The words go straight into `out` (through no buffer: 8-byte stores
+    // read back by wider loads stall store forwarding, which cost more than
+    // the copy): a retry overwrites a torn copy, and `out` holds one only
+    // while load_part runs.
+    template <size_t Offset, class M>
+    bool load_part(M &out) const {
+        static_assert(std::is_trivially_copyable<M>::value, "SeqLock copies bytes");
+        static_assert(Offset % 8 == 0 && Offset + sizeof(M) <= sizeof(T), "a whole-word part of T");
+        constexpr size_t first = Offset / 8, n = (sizeof(M) + 7) / 8;
+        unsigned char *dst = reinterpret_cast<unsigned char *>(&out);
         for (;;) {
             const uint64_t s1 = seq_.load(std::memory_order_acquire);
+            if (s1 == 0) return false;
             if (s1 & 1) {
                 spin_pause();
                 continue;
             }
             // Acquire on each word (the pair of the writer's release): the
             // second count read cannot be older than any word's writer.
-            for (size_t i = 0; i < kWords; ++i) tmp[i] = words_[i].load(std::memory_order_acquire);
-            if (seq_.load(std::memory_order_relaxed) == s1) {
-                if (s1 == 0) return false;
-                std::memcpy(&out, tmp, sizeof(T));
-                return true;
+            for (size_t i = 0; i < n; ++i) {
+                const uint64_t w = words_[first + i].load(std::memory_order_acquire);
+                std::memcpy(dst + 8 * i, &w, i + 1 < n ? 8 : sizeof(M) - 8 * i);
             }
+            if (seq_.load(std::memory_order_relaxed) == s1) return true;
         }
     }
 

@@ -63,6 +63,26 @@ std::vector<ParamValues> effect_starts(const Model &base, const std::string &eff
     return {{}};
 }
 
+bool period_shown(const Model &m, const std::string &effect, const std::vector<PreparedPos> &pos) {
+    for (size_t k = 0; k < m.effect_count(); ++k) {
+        if (m.effect_name(k) != effect) continue;
+        const EffectDesc &d = m.effect_desc(k);
+        for (size_t q = 0; q < d.params.size(); ++q) {
+            if (d.params[q].name != "period") continue;
+            double lo = INFINITY, hi = -INFINITY;
+            for (auto &pp : pos)
+                for (int c = 0; c < 4; ++c) {
+                    lo = std::min(lo, pp.mean(c));
+                    hi = std::max(hi, pp.mean(c));
+                }
+            // One full period at least within the measured lengths, as the
+            // periodogram searches (periods up to the span).
+            return m.effect_params(k)[q] <= hi - lo;
+        }
+    }
+    return true;
+}
+
 bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
                       const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,
                       std::string &err) {
@@ -87,6 +107,7 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
                 err = r.message.empty() ? "fit cancelled" : r.message;
                 return false;
             }
+            if (!period_shown(m, d->name, ctx.pos)) continue;
             if (!have || r.chi2 < c.rep.chi2) {
                 c.m = m;
                 c.rep = r;

@@ -61,6 +61,12 @@ std::vector<std::string> reading_effects(const Model &m);
 // eccentricity, or a user effect) starts at the peak of the cable-length
 // periodogram of `base`'s residual and at 0.9 and 1.1 times it. One
 // ParamValues per start; a single empty one when nothing is seeded.
+// False when `effect` in m has a parameter named "period" longer than the
+// span of the measured cable lengths: such a "period" does not repeat in
+// the data and is a smooth trend in disguise (a flexible stand-in for gain or
+// non-linearity), so that fit is not taken.
+bool period_shown(const Model &m, const std::string &effect, const std::vector<PreparedPos> &pos);
+
 std::vector<ParamValues> effect_starts(const Model &base, const std::string &effect,
                                        const std::vector<PreparedPos> &pos);
 

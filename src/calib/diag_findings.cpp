@@ -55,7 +55,9 @@ PeriodPeak length_period(const LengthView &v) {
                 hi = std::max(hi, v.lmean[j][size_t(c)]);
             }
     const double span = hi - lo;
-    const double fmin = 2.0 / span, fmax = 1.0 / 8.0; // periods from 8 mm to span/2
+    // Periods from 8 mm to the span: one full turn seen at least (a longer
+    // one is a smooth trend to this test, as to the fit).
+    const double fmin = 1.0 / span, fmax = 1.0 / 8.0;
     if (!(span > 0) || !(fmax > fmin)) return pk;
     // Oversampled 5x against the natural resolution 1/span, so that the
     // grid's own step is no part of the period's error.

@@ -34,7 +34,7 @@ LengthView length_view(const Model &m, const std::vector<PreparedPos> &pos);
 // The strongest period of the cable-length residual, pooled over the four
 // cables (identical drums share a period) after a quadratic in length is
 // taken out of each; fap: the false-alarm probability over the frequencies
-// searched (periods 8 mm .. half the length span). valid = false when the
+// searched (periods 8 mm .. the length span). valid = false when the
 // lengths span too little to search.
 struct PeriodPeak {
     bool valid = false;

@@ -40,7 +40,7 @@ bool review_model(const DiagContext &ctx, const Model &model, int n_free, double
                     return false;
                 }
                 const double d = ctx.bic(rs.chi2, rs.n_free) - bic_cur;
-                if (d < best) {
+                if (period_shown(swapped, cd->name, ctx.pos) && d < best) {
                     best = d;
                     best_name = cd->name;
                 }

@@ -97,7 +97,49 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
             cur_chi2 = rm_rep.chi2;
             cur_E = evaluate(cur, ctx.data, ctx.pos);
         } else {
-            break; // no move lowers the criterion: cands are the candidates on top of cur
+            // Stuck on additions and removals: a one-effect swap can still
+            // lower the criterion (greedy forward steps can take a flexible
+            // effect that stands in for a specific one).
+            double best_sw = 0;
+            std::string sw_out, sw_in;
+            Model sw_model{ctx.g};
+            FitReport sw_rep;
+            for (size_t k = 0; k < names.size(); ++k)
+                for (auto &d : candidate_effects()) {
+                    if (cur.has_effect(d->name)) continue;
+                    std::vector<std::string> keep = names;
+                    keep.erase(keep.begin() + long(k));
+                    auto s2 = keep;
+                    s2.push_back(d->name);
+                    if (seen.count(sorted(s2))) continue;
+                    for (const ParamValues &start : effect_starts(cur, d->name, ctx.pos)) {
+                        Model m = model_with(cur, keep, d->name, start);
+                        FitReport r;
+                        if (!ctx.fit(m, "search step " + std::to_string(step) + " swaps", r)) {
+                            err = r.message.empty() ? "fit cancelled" : r.message;
+                            return false;
+                        }
+                        if (!period_shown(m, d->name, ctx.pos)) continue;
+                        const double dd = ctx.bic(r.chi2, r.n_free) - ctx.bic(cur_chi2, cur_free);
+                        out.visited.push_back({s2, ctx.bic(r.chi2, r.n_free)});
+                        if (dd < best_sw) {
+                            best_sw = dd;
+                            sw_out = names[k];
+                            sw_in = d->name;
+                            sw_model = m;
+                            sw_rep = r;
+                        }
+                    }
+                }
+            if (sw_in.empty()) break; // no move lowers the criterion: cands are the candidates on top of cur
+            st.added = sw_in;
+            st.removed = sw_out;
+            st.bic_change = best_sw;
+            cur = sw_model;
+            cur_rep = sw_rep;
+            cur_free = sw_rep.n_free;
+            cur_chi2 = sw_rep.chi2;
+            cur_E = evaluate(cur, ctx.data, ctx.pos);
         }
         st.x_rms_mm = x_rms(cur_E);
         seen.insert(sorted(reading_effects(cur)));
@@ -140,6 +182,8 @@ bool search_alternatives(const DiagContext &ctx, const SearchResult &r,
             s.push_back(d->name);
             s = sorted(s);
             if (listed.count(s)) continue;
+            if (std::any_of(r.visited.begin(), r.visited.end(), [&](auto &v) { return sorted(v.first) == s; }))
+                continue; // fitted by the search: judged above
             double best = INFINITY;
             for (const ParamValues &st : effect_starts(r.model, d->name, ctx.pos)) {
                 Model m = model_with(r.model, keep, d->name, st);
@@ -148,7 +192,7 @@ bool search_alternatives(const DiagContext &ctx, const SearchResult &r,
                     err = fr.message.empty() ? "fit cancelled" : fr.message;
                     return false;
                 }
-                best = std::min(best, ctx.bic(fr.chi2, fr.n_free) - r.bic);
+                if (period_shown(m, d->name, ctx.pos)) best = std::min(best, ctx.bic(fr.chi2, fr.n_free) - r.bic);
             }
             if (best < 10) {
                 listed.insert(s);

@@ -5,8 +5,8 @@
 // candidates tried), so that the search never adds what the verdict would
 // call insignificant; a removal is taken whenever it lowers the BIC, so no
 // effect stays whose removal lowers the criterion. Each step takes the move
-// (add or remove) that lowers the BIC most; a set once visited is not
-// visited again.
+// (add or remove) that lowers the BIC most; when neither does, the best
+// one-effect swap that does; a set once visited is not visited again.
 #pragma once
 
 #include <string>

@@ -245,8 +245,10 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
         if (!sr.path.empty()) {
             verdict += " Search from " + join(reading_effects(model), " + ", "the nominal model") + ":";
             for (auto &st : sr.path)
-                verdict += (st.added.empty() ? " - " + st.removed : " + " + st.added) + " (BIC " +
-                           fmt_num(st.bic_change, 0) + ")";
+                verdict += (st.added.empty()     ? " - " + st.removed
+                            : st.removed.empty() ? " + " + st.added
+                                                 : " " + st.removed + " -> " + st.added) +
+                           " (BIC " + fmt_num(st.bic_change, 0) + ")";
             verdict += ".";
         }
         if (!alts.empty()) {

@@ -74,9 +74,12 @@ void print_summary(const nlohmann::json &r) {
                     names.empty() ? "the nominal model" : names.c_str(), rec["error_mm"]["x"]["rms"].get<double>(),
                     rec["explained"].get<bool>() ? "yes" : rec["negligible_only"].get<bool>() ? "to within what matters" : "no");
         for (auto &st : rec["path"])
-            std::printf("  step %d: %s %s (BIC %+.1f, x RMS %.4f mm)\n", st["step"].get<int>(),
-                        st.contains("added") ? "+" : "-",
-                        (st.contains("added") ? st["added"] : st["removed"]).get<std::string>().c_str(),
+            std::printf("  step %d: %s (BIC %+.1f, x RMS %.4f mm)\n", st["step"].get<int>(),
+                        (st.contains("added") && st.contains("removed")
+                             ? st["removed"].get<std::string>() + " -> " + st["added"].get<std::string>()
+                         : st.contains("added") ? "+ " + st["added"].get<std::string>()
+                                                : "- " + st["removed"].get<std::string>())
+                            .c_str(),
                         st["bic_change"].get<double>(), st["x_rms_mm"].get<double>());
     }
     if (!r["candidates"].empty()) {

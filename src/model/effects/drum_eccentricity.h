@@ -22,7 +22,7 @@ struct DrumEccentricity : EffectBase {
                      "the four pots, amplitude and phase per cable, mm. Typical: period 60-130 mm, amplitude "
                      "0.05-0.2 mm.",
                      kStage, -1, {}};
-        d.params.push_back(param("period", "mm", 10.0, 5.0, 2000.0, 100.0, 60.0, 130.0, false));
+        d.params.push_back(param("period", "mm", 10.0, 5.0, 400.0, 100.0, 60.0, 130.0, false));
         for (int i = 1; i <= 4; ++i) {
             d.params.push_back(param("a" + std::to_string(i), "mm", 0.1, -5, 5, 0.0, 0.05, 0.2));
             d.params.push_back(param("b" + std::to_string(i), "mm", 0.1, -5, 5, 0.0, 0.05, 0.2));

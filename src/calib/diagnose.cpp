@@ -44,6 +44,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     fopt.effects = opt.effects;
     fopt.jig_tolerance_mm = opt.jig_tolerance_mm;
     fopt.progress = opt.progress;
+    fopt.fitted_maxima = false; // one pass over the rows at the end serves every evaluation
     CalibrationFit cf(g);
     if (!fit_calibration(data, g, fopt, cf, err)) return false;
     const auto &pos = cf.pos;
@@ -55,7 +56,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     V3 jig = cf.jig;
     const Eval &nom = cf.nominal;
     Ellipsoid ell = ellipsoid_on(nom, pos);
-    Eval ellE = evaluate_seed(g, data, pos, &ell);
+    Eval ellE; // the seed's procedure with its ellipsoid: in the pass over the rows below
     Eval cur = cf.fitted;
     const bool user_jig = opt.jig_tolerance_mm >= 0;
     // Candidates' own jig tolerance is capped as in fit_calibration().
@@ -113,7 +114,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
             c.dchi2 = chi2_cur - r2.chi2;
             c.bic = -c.dchi2 + c.k * std::log(n_obs);
             c.score = -c.bic;
-            c.E = evaluate(c.m, data, pos);
+            c.E = evaluate(c.m, pos);
             // Each explanation is judged with the white scatter its own
             // residual shows: a large smooth residual biases the nugget.
             V3 jc = jig;
@@ -228,7 +229,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                 err = "fit cancelled";
                 return false;
             }
-            Eval ev = evaluate(mv, data, pos);
+            Eval ev = evaluate(mv, pos);
             Acc f[3];
             for (size_t j = 0; j < P; ++j)
                 if (!fv.use[j] && ev.ok[j])
@@ -335,6 +336,15 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
         unexplained_summary += "; found: ";
         for (size_t k = 0; k < std::min<size_t>(3, findings.size()); ++k)
             unexplained_summary += (k ? "; " : "") + findings[k]["text"].get<std::string>();
+    }
+
+    // --- what needs every sample: the maxima of the reported evaluations and
+    // the seed's ellipsoid applied to each sample, in one pass over the rows
+    {
+        std::vector<Eval *> linear{&cur};
+        for (auto &c : cands) linear.push_back(&c.E);
+        progress("per-sample statistics", 0.0);
+        if (!sample_pass(data, pos, linear, {{&g, &ell, &ellE}}, err)) return false;
     }
 
     // --- JSON

@@ -16,7 +16,8 @@ namespace cdm::io {
 // 64 MiB is far beyond any real one yet bounds a hostile or mistaken input.
 constexpr size_t kJsonMaxBytes = size_t(64) << 20;
 // A dataset row is ~60 bytes: 1 GiB is ~17 million samples (days of
-// recording at 200 Hz), still well inside the machine's memory after parsing.
+// recording at 200 Hz). Datasets are streamed (calib/dataset.h), so the cap
+// bounds the work, not the memory.
 constexpr size_t kDatasetMaxBytes = size_t(1) << 30;
 
 // Reads a whole regular file. Opens with O_NONBLOCK and checks fstat before

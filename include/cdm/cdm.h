@@ -482,6 +482,10 @@ typedef int (*cdm_progress_fn)(void *user, const char *stage, double fraction);
  * {"effects": ["exit_pulley"], "jig_tolerance_mm": 0.03, "candidates": true,
  *  "per_position": true, "calibration_out": "calib.json"}.
  * Errors name the file, line and column (cdm_thread_error). Any thread.
+ * The dataset is streamed into per-position statistics (memory does not grow
+ * with the samples per position) and read again during the call through the
+ * descriptor opened first: replacing the file by rename meanwhile is
+ * harmless; rewriting it in place makes the call fail (since 1.1).
  */
 CDM_API int cdm_diagnose(const char *data_csv_path, const char *device_json_path,
                          const char *options_json, cdm_progress_fn progress, void *user,

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstring>
 #include <unordered_map>
+#include <utility>
 
 #include "io/json.h"
 
@@ -47,169 +48,350 @@ bool to_double(const char *b, const char *e, double &v) {
 }
 } // namespace
 
-bool parse_dataset(const std::string &text, const std::string &src, Dataset &out, std::string &err) {
-    static const char *required[] = {"point", "x_ref", "y_ref", "z_ref", "l1", "l2", "l3", "l4"};
-    Dataset d;
-    d.path = src;
-    const char *p = text.data(), *end = p + text.size();
-    size_t line = 0;
-    std::vector<std::pair<const char *, const char *>> f;
-    int colidx[8];
-    int tcol = -1; // optional acquisition time column t_s (s)
-    size_t ncols = 0;
-    bool header = false;
-    std::unordered_map<long, size_t> index;
-    std::vector<std::vector<std::array<double, 4>>> groups;
-    std::vector<size_t> first_line;
-    while (p < end) {
-        const char *nl = static_cast<const char *>(memchr(p, '\n', size_t(end - p)));
-        const char *le = nl ? nl : end;
-        ++line;
-        const char *b = p;
-        p = nl ? nl + 1 : end;
-        if (le > b && le[-1] == '\r') --le;
-        if (le == b || *b == '#') continue; // blank lines and comments
-        split(b, le, f);
-        if (!header) {
-            header = true;
-            ncols = f.size();
-            std::vector<std::string> names;
-            for (auto &x : f) {
-                std::string n = trim(x.first, x.second);
-                auto dup = std::find(names.begin(), names.end(), n);
-                if (dup != names.end()) {
-                    err = at(src, line, names.size() + 1) + "duplicate column \"" + io::quote_field(n) +
-                          "\" (also column " + std::to_string(dup - names.begin() + 1) + ")";
-                    return false;
-                }
-                names.push_back(std::move(n));
-            }
-            for (int k = 0; k < 8; ++k) {
-                auto it = std::find(names.begin(), names.end(), required[k]);
-                if (it == names.end()) {
-                    err = at(src, line, 1) + "header lacks column \"" + required[k] +
-                          "\" (expected point,x_ref,y_ref,z_ref,l1,l2,l3,l4)";
-                    return false;
-                }
-                colidx[k] = int(it - names.begin());
-            }
-            for (size_t k = 0; k < names.size(); ++k)
-                if (names[k] == "t_s") tcol = int(k);
-                else if (std::find(std::begin(required), std::end(required), names[k]) == std::end(required))
-                    d.ignored_columns.push_back(names[k]);
-            continue;
-        }
-        if (f.size() != ncols) {
-            err = at(src, line, std::min(f.size(), ncols) + 1) + "expected " + std::to_string(ncols) +
-                  " fields as in the header, found " + std::to_string(f.size());
-            return false;
-        }
-        double v[8];
-        for (int k = 0; k < 8; ++k) {
-            auto &x = f[size_t(colidx[k])];
-            if (!to_double(x.first, x.second, v[k]) || !std::isfinite(v[k])) {
-                err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " is not a finite number: '" +
-                      shown(x.first, x.second) + "'";
-                return false;
-            }
-        }
-        if (v[0] != std::floor(v[0]) || std::fabs(v[0]) > 9e15) {
-            err = at(src, line, size_t(colidx[0]) + 1) + "point must be an integer id, got " +
-                  shown(f[size_t(colidx[0])].first, f[size_t(colidx[0])].second);
-            return false;
-        }
-        for (int k = 1; k < 4; ++k)
-            if (std::fabs(v[k]) > kDatasetMaxRefMm) {
-                err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " = " + shown(f[size_t(colidx[k])].first, f[size_t(colidx[k])].second) +
-                      " mm is beyond the sane range of +-5000 mm (wrong unit?)";
-                return false;
-            }
-        for (int k = 4; k < 8; ++k)
-            if (!(v[k] > 0) || v[k] > kDatasetMaxLengthMm) {
-                err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " must be a positive length in mm, at most 10000 (got " +
-                      shown(f[size_t(colidx[k])].first, f[size_t(colidx[k])].second) + ")";
-                return false;
-            }
-        long id = long(v[0]);
-        auto it = index.find(id);
-        size_t g;
-        if (it == index.end()) {
-            g = groups.size();
-            index.emplace(id, g);
-            groups.emplace_back();
-            first_line.push_back(line);
-            JigHole jp;
-            jp.point = id;
-            for (int k = 0; k < 3; ++k) jp.ref[k] = v[1 + k];
-            d.pos.push_back(jp);
-        } else {
-            g = it->second;
-            for (int k = 0; k < 3; ++k)
-                if (d.pos[g].ref[k] != v[1 + k]) {
-                    err = at(src, line, size_t(colidx[1 + k]) + 1) + "point " + std::to_string(id) + " has " +
-                          required[1 + k] + " " + shown(f[size_t(colidx[1 + k])].first, f[size_t(colidx[1 + k])].second) +
-                          " but line " + std::to_string(first_line[g]) + " gave " + std::to_string(d.pos[g].ref[k]);
-                    return false;
-                }
-        }
-        if (tcol >= 0) {
-            auto &x = f[size_t(tcol)];
-            double t;
-            if (!to_double(x.first, x.second, t) || !std::isfinite(t)) {
-                err = at(src, line, size_t(tcol) + 1) + "t_s is not a finite number: '" + shown(x.first, x.second) + "'";
-                return false;
-            }
-            d.pos[g].t_s += t; // summed here, divided by n below
-        }
-        groups[g].push_back({v[4], v[5], v[6], v[7]});
-        d.pos[g].mean_row += double(d.rows); // summed here, divided by n below
-        ++d.rows;
+struct DatasetSource {
+    bool is_file = false;
+    io::FileReader file; // the descriptor load_dataset() opened
+    std::string text;    // what parse_dataset() was given
+};
+
+namespace {
+
+// The distinct values of one cable's readings, as a sorted vector (8 bytes
+// a value) fed through a small unsorted buffer; at most `cap` are kept.
+class DistinctValues {
+public:
+    void add(double v) {
+        if (v == last_ || full_) return; // quantised data repeats itself
+        last_ = v;
+        pending_.push_back(v);
+        if (pending_.size() >= 4096) flush();
     }
-    if (!header) {
+    // Smallest step between distinct values (> 1e-9), 0 when there is none.
+    double min_step() {
+        flush();
+        double q = INFINITY;
+        for (size_t k = 1; k < sorted_.size(); ++k)
+            if (sorted_[k] - sorted_[k - 1] > 1e-9) q = std::min(q, sorted_[k] - sorted_[k - 1]);
+        return std::isfinite(q) ? q : 0.0;
+    }
+
+private:
+    void flush() {
+        if (pending_.empty()) return;
+        std::sort(pending_.begin(), pending_.end());
+        pending_.erase(std::unique(pending_.begin(), pending_.end()), pending_.end());
+        const size_t mid = sorted_.size();
+        sorted_.insert(sorted_.end(), pending_.begin(), pending_.end());
+        std::inplace_merge(sorted_.begin(), sorted_.begin() + std::ptrdiff_t(mid), sorted_.end());
+        sorted_.erase(std::unique(sorted_.begin(), sorted_.end()), sorted_.end());
+        pending_.clear();
+        full_ = sorted_.size() >= kDatasetResolutionValues;
+    }
+    std::vector<double> sorted_, pending_;
+    double last_ = NAN;
+    bool full_ = false;
+};
+
+using Visit = std::function<void(size_t, const double *)>;
+
+// One CSV line at a time, in order: the header, then rows accumulated into
+// per-position statistics (Welford's update of the mean and the co-moment
+// matrix). With `expect` it reads a dataset again and checks it is the one
+// `expect` describes, handing each row's readings to `visit`.
+class Parser {
+public:
+    Parser(const std::string &src, Dataset &d, const Dataset *expect, const Visit *visit)
+        : src_(src), d_(d), expect_(expect), visit_(visit) {
+        d_.path = src;
+    }
+    bool line(const char *b, const char *le, std::string &err);
+    bool finish(std::string &err);
+
+private:
+    bool header(std::string &err);
+    const std::string &src_;
+    Dataset &d_;
+    const Dataset *expect_;
+    const Visit *visit_;
+    size_t line_ = 0;
+    std::vector<std::pair<const char *, const char *>> f_;
+    int colidx_[8] = {};
+    int tcol_ = -1; // optional acquisition time column t_s (s)
+    size_t ncols_ = 0;
+    bool header_ = false;
+    std::unordered_map<long, size_t> index_;
+    std::vector<size_t> first_line_;
+    DistinctValues distinct_[4];
+};
+
+const char *const kRequired[] = {"point", "x_ref", "y_ref", "z_ref", "l1", "l2", "l3", "l4"};
+
+bool Parser::header(std::string &err) {
+    const std::string &src = src_;
+    header_ = true;
+    ncols_ = f_.size();
+    std::vector<std::string> names;
+    for (auto &x : f_) {
+        std::string n = trim(x.first, x.second);
+        auto dup = std::find(names.begin(), names.end(), n);
+        if (dup != names.end()) {
+            err = at(src, line_, names.size() + 1) + "duplicate column \"" + io::quote_field(n) + "\" (also column " +
+                  std::to_string(dup - names.begin() + 1) + ")";
+            return false;
+        }
+        names.push_back(std::move(n));
+    }
+    for (int k = 0; k < 8; ++k) {
+        auto it = std::find(names.begin(), names.end(), kRequired[k]);
+        if (it == names.end()) {
+            err = at(src, line_, 1) + "header lacks column \"" + kRequired[k] +
+                  "\" (expected point,x_ref,y_ref,z_ref,l1,l2,l3,l4)";
+            return false;
+        }
+        colidx_[k] = int(it - names.begin());
+    }
+    for (size_t k = 0; k < names.size(); ++k)
+        if (names[k] == "t_s") tcol_ = int(k);
+        else if (std::find(std::begin(kRequired), std::end(kRequired), names[k]) == std::end(kRequired))
+            d_.ignored_columns.push_back(names[k]);
+    return true;
+}
+
+bool Parser::line(const char *b, const char *le, std::string &err) {
+    const std::string &src = src_;
+    const char *const *required = kRequired;
+    auto &f = f_;
+    const auto &colidx = colidx_;
+    const size_t line = ++line_;
+    if (le > b && le[-1] == '\r') --le;
+    if (le == b || *b == '#') return true; // blank lines and comments
+    split(b, le, f);
+    if (!header_) return header(err);
+    if (f.size() != ncols_) {
+        err = at(src, line, std::min(f.size(), ncols_) + 1) + "expected " + std::to_string(ncols_) +
+              " fields as in the header, found " + std::to_string(f.size());
+        return false;
+    }
+    double v[8];
+    for (int k = 0; k < 8; ++k) {
+        auto &x = f[size_t(colidx[k])];
+        if (!to_double(x.first, x.second, v[k]) || !std::isfinite(v[k])) {
+            err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " is not a finite number: '" +
+                  shown(x.first, x.second) + "'";
+            return false;
+        }
+    }
+    if (v[0] != std::floor(v[0]) || std::fabs(v[0]) > 9e15) {
+        err = at(src, line, size_t(colidx[0]) + 1) + "point must be an integer id, got " +
+              shown(f[size_t(colidx[0])].first, f[size_t(colidx[0])].second);
+        return false;
+    }
+    for (int k = 1; k < 4; ++k)
+        if (std::fabs(v[k]) > kDatasetMaxRefMm) {
+            err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " = " +
+                  shown(f[size_t(colidx[k])].first, f[size_t(colidx[k])].second) +
+                  " mm is beyond the sane range of +-5000 mm (wrong unit?)";
+            return false;
+        }
+    for (int k = 4; k < 8; ++k)
+        if (!(v[k] > 0) || v[k] > kDatasetMaxLengthMm) {
+            err = at(src, line, size_t(colidx[k]) + 1) + required[k] +
+                  " must be a positive length in mm, at most 10000 (got " +
+                  shown(f[size_t(colidx[k])].first, f[size_t(colidx[k])].second) + ")";
+            return false;
+        }
+    long id = long(v[0]);
+    auto it = index_.find(id);
+    size_t g;
+    if (it == index_.end()) {
+        g = d_.pos.size();
+        if (expect_ && (g >= expect_->pos.size() || expect_->pos[g].point != id ||
+                        !std::equal(v + 1, v + 4, expect_->pos[g].ref))) {
+            err = at(src, line, size_t(colidx[0]) + 1) + "the dataset changed since it was loaded (point " +
+                  std::to_string(id) + " is new here or moved)";
+            return false;
+        }
+        index_.emplace(id, g);
+        first_line_.push_back(line);
+        JigHole jp;
+        jp.point = id;
+        for (int k = 0; k < 3; ++k) jp.ref[k] = v[1 + k];
+        d_.pos.push_back(jp);
+    } else {
+        g = it->second;
+        for (int k = 0; k < 3; ++k)
+            if (d_.pos[g].ref[k] != v[1 + k]) {
+                err = at(src, line, size_t(colidx[1 + k]) + 1) + "point " + std::to_string(id) + " has " +
+                      required[1 + k] + " " + shown(f[size_t(colidx[1 + k])].first, f[size_t(colidx[1 + k])].second) +
+                      " but line " + std::to_string(first_line_[g]) + " gave " + std::to_string(d_.pos[g].ref[k]);
+                return false;
+            }
+    }
+    JigHole &h = d_.pos[g];
+    if (tcol_ >= 0) {
+        auto &x = f[size_t(tcol_)];
+        double t;
+        if (!to_double(x.first, x.second, t) || !std::isfinite(t)) {
+            err = at(src, line, size_t(tcol_) + 1) + "t_s is not a finite number: '" + shown(x.first, x.second) + "'";
+            return false;
+        }
+        h.t_s += t; // summed here, divided by n in finish()
+    }
+    // Welford: the mean and the co-moment sum (l - mean_old)(l - mean_new)',
+    // upper triangle; finish() mirrors it and divides by n - 1.
+    const double *l = v + 4;
+    const double n = double(++h.n);
+    double dx[4];
+    for (int c = 0; c < 4; ++c) {
+        dx[c] = l[c] - h.mean[c];
+        h.mean[c] += dx[c] / n;
+    }
+    for (int a = 0; a < 4; ++a)
+        for (int c = a; c < 4; ++c) h.cov[a][c] += dx[a] * (l[c] - h.mean[c]);
+    h.mean_row += double(d_.rows); // summed here (exact: integers), divided by n in finish()
+    ++d_.rows;
+    if (visit_) (*visit_)(g, l);
+    else
+        for (int c = 0; c < 4; ++c) distinct_[c].add(l[c]);
+    return true;
+}
+
+bool Parser::finish(std::string &err) {
+    const std::string &src = src_;
+    if (!header_) {
         err = src + ":1:1: empty file (expected the header point,x_ref,y_ref,z_ref,l1,l2,l3,l4)";
         return false;
     }
-    if (d.rows == 0) {
-        err = src + ":" + std::to_string(line) + ":1: no data rows after the header";
+    if (d_.rows == 0) {
+        err = src + ":" + std::to_string(line_) + ":1: no data rows after the header";
         return false;
     }
-    d.samples.reserve(d.rows);
-    for (size_t g = 0; g < groups.size(); ++g) {
-        auto &jp = d.pos[g];
-        jp.first = d.samples.size();
-        jp.n = int(groups[g].size());
-        for (auto &s : groups[g]) {
-            d.samples.push_back(s);
-            for (int c = 0; c < 4; ++c) jp.mean[c] += s[c];
-        }
-        for (int c = 0; c < 4; ++c) jp.mean[c] /= jp.n;
+    for (auto &jp : d_.pos) {
         jp.mean_row /= jp.n;
-        jp.t_s = tcol >= 0 ? jp.t_s / jp.n : jp.mean_row * kDatasetNominalRowPeriodS;
-        if (jp.n > 1) {
-            for (auto &s : groups[g])
-                for (int a = 0; a < 4; ++a)
-                    for (int b = 0; b < 4; ++b) jp.cov[a][b] += (s[a] - jp.mean[a]) * (s[b] - jp.mean[b]);
-            for (int a = 0; a < 4; ++a)
-                for (int b = 0; b < 4; ++b) jp.cov[a][b] /= (jp.n - 1);
-        }
-        d.heights.push_back(jp.ref[0]);
+        jp.t_s = tcol_ >= 0 ? jp.t_s / jp.n : jp.mean_row * kDatasetNominalRowPeriodS;
+        for (int a = 0; a < 4; ++a)
+            for (int b = a; b < 4; ++b) {
+                const double c = jp.n > 1 ? jp.cov[a][b] / (jp.n - 1) : 0.0;
+                jp.cov[a][b] = jp.cov[b][a] = c;
+            }
+        d_.heights.push_back(jp.ref[0]);
     }
-    std::sort(d.heights.begin(), d.heights.end());
-    d.heights.erase(std::unique(d.heights.begin(), d.heights.end(),
-                                [](double a, double b) { return std::fabs(a - b) < 1e-6; }),
-                    d.heights.end());
+    std::sort(d_.heights.begin(), d_.heights.end());
+    d_.heights.erase(std::unique(d_.heights.begin(), d_.heights.end(),
+                                 [](double a, double b) { return std::fabs(a - b) < 1e-6; }),
+                     d_.heights.end());
+    if (!visit_)
+        for (int c = 0; c < 4; ++c) d_.resolution[c] = distinct_[c].min_step();
+    if (expect_) {
+        bool same = d_.rows == expect_->rows && d_.pos.size() == expect_->pos.size();
+        for (size_t g = 0; same && g < d_.pos.size(); ++g) {
+            same = d_.pos[g].n == expect_->pos[g].n;
+            for (int c = 0; c < 4; ++c) same = same && d_.pos[g].mean[c] == expect_->pos[g].mean[c];
+        }
+        if (!same) {
+            err = src + ": the dataset changed since it was loaded (" + std::to_string(d_.rows) + " rows now, " +
+                  std::to_string(expect_->rows) + " then, or other readings)";
+            return false;
+        }
+    }
+    return true;
+}
+
+// Feeds `read(buf, n)` (bytes read, 0 at the end, < 0 on error) to the
+// parser line by line through a bounded buffer: `chunk` bytes, or one line
+// when a line is longer.
+template <class Read> bool stream_lines(Read read, Parser &p, std::string &err, size_t chunk = size_t(1) << 20) {
+    std::vector<char> buf(chunk);
+    size_t have = 0, scanned = 0; // bytes in buf (from a line's start); of them, known to hold no '\n'
+    for (;;) {
+        if (have == buf.size()) buf.resize(buf.size() * 2); // one line longer than the buffer
+        const long n = read(buf.data() + have, buf.size() - have);
+        if (n < 0) return false;
+        if (n == 0) break;
+        have += size_t(n);
+        const char *b = buf.data(), *end = b + have, *s = b + scanned;
+        while (const char *nl = static_cast<const char *>(memchr(s, '\n', size_t(end - s)))) {
+            if (!p.line(b, nl, err)) return false;
+            b = s = nl + 1;
+        }
+        have = size_t(end - b);
+        scanned = have;
+        if (b != buf.data() && have) std::memmove(buf.data(), b, have);
+        if (have < chunk && buf.size() > chunk) buf.resize(chunk), buf.shrink_to_fit();
+    }
+    if (have && !p.line(buf.data(), buf.data() + have, err)) return false;
+    return p.finish(err);
+}
+
+// Reads the source's bytes in order.
+struct SourceReader {
+    const DatasetSource &s;
+    std::string &err;
+    size_t off = 0;
+    long operator()(char *buf, size_t n) {
+        long r;
+        if (s.is_file) {
+            r = s.file.pread(buf, n, off, err);
+        } else {
+            r = long(std::min(n, s.text.size() - off));
+            std::memcpy(buf, s.text.data() + off, size_t(r));
+        }
+        if (r > 0) off += size_t(r);
+        return r;
+    }
+};
+
+bool parse_source(const std::shared_ptr<const DatasetSource> &s, const std::string &src, Dataset &out,
+                  std::string &err) {
+    Dataset d;
+    Parser p(src, d, nullptr, nullptr);
+    if (!stream_lines(SourceReader{*s, err}, p, err)) return false;
+    d.source = s;
+    out = std::move(d);
+    return true;
+}
+} // namespace
+
+bool parse_dataset(const std::string &text, const std::string &src, Dataset &out, std::string &err) {
+    auto s = std::make_shared<DatasetSource>();
+    s->text = text;
+    return parse_source(s, src, out, err);
+}
+
+bool load_dataset(const std::string &path, Dataset &out, std::string &err, bool *io_failure) {
+    if (io_failure) *io_failure = false;
+    auto s = std::make_shared<DatasetSource>();
+    s->is_file = true;
+    if (!s->file.open(path, io::kDatasetMaxBytes, err, "dataset")) {
+        if (io_failure) *io_failure = true;
+        return false;
+    }
+    // A read error part-way is an I/O failure too, not a malformed file.
+    bool read_failed = false;
+    auto reader = [&, r = SourceReader{*s, err}](char *buf, size_t n) mutable {
+        const long k = r(buf, n);
+        read_failed = k < 0;
+        return k;
+    };
+    Dataset d;
+    Parser p(path, d, nullptr, nullptr);
+    if (!stream_lines(reader, p, err)) {
+        if (io_failure) *io_failure = read_failed;
+        return false;
+    }
+    d.source = std::move(s);
     out = std::move(d);
     return true;
 }
 
-bool load_dataset(const std::string &path, Dataset &out, std::string &err, bool *io_failure) {
-    std::string text;
-    if (io_failure) *io_failure = false;
-    if (!io::read_file(path, io::kDatasetMaxBytes, text, err, "dataset")) {
-        if (io_failure) *io_failure = true;
+bool for_each_sample(const Dataset &d, const Visit &visit, std::string &err) {
+    if (!d.source) {
+        err = d.path + ": the dataset's rows cannot be read again (it was not read by load_dataset or parse_dataset)";
         return false;
     }
-    return parse_dataset(text, path, out, err);
+    Dataset again;
+    Parser p(d.path, again, &d, &visit);
+    return stream_lines(SourceReader{*d.source, err}, p, err);
 }
 
 bool DatasetWriter::open(const std::string &path, const std::vector<std::string> &protect, std::string &err) {

@@ -1,8 +1,14 @@
 // Jig datasets: CSV `point,x_ref,y_ref,z_ref,l1,l2,l3,l4` (extra columns
-// ignored and reported), grouped into per-position statistics.
+// ignored and reported), grouped into per-position statistics as the rows
+// stream in: memory grows with the positions, not with the samples at each.
+// The samples themselves are not kept; the few statistics that need every
+// sample (the per-sample maxima, the seed's per-sample triangulation) read
+// them again with for_each_sample() (docs/calibration.md, "Per-position
+// statistics").
 #pragma once
 
-#include <array>
+#include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -15,8 +21,7 @@ struct JigHole {
     double ref[3] = {0, 0, 0};
     int n = 0;               // samples
     double mean[4] = {0, 0, 0, 0};
-    double cov[4][4] = {};   // sample covariance of the readings (n-1)
-    size_t first = 0;        // index of its first sample in Dataset::samples
+    double cov[4][4] = {};   // sample covariance of the readings (n-1; 0 when n = 1)
     // Acquisition order, for drift over the session (issue 8 item 5). Rows
     // of a jig CSV are in acquisition order; without a time column the time
     // is the mean row index times kDatasetNominalRowPeriodS (a nominal
@@ -28,14 +33,34 @@ struct JigHole {
 // Nominal time between two jig CSV rows when the file has no time column.
 constexpr double kDatasetNominalRowPeriodS = 0.01;
 
+// Distinct readings kept per cable to find the readings' resolution; beyond
+// it the resolution is an upper bound (see Dataset::resolution).
+constexpr size_t kDatasetResolutionValues = size_t(1) << 16;
+
+struct DatasetSource; // where the rows can be read again (dataset.cpp)
+
 struct Dataset {
     std::string path;
     size_t rows = 0;
     std::vector<std::string> ignored_columns;
     std::vector<JigHole> pos;                 // in order of first appearance
-    std::vector<std::array<double, 4>> samples;   // grouped by position
-    std::vector<double> heights;                  // distinct x_ref, sorted
+    std::vector<double> heights;              // distinct x_ref, sorted
+    // Per cable, the smallest step between distinct readings (> 1e-9 mm;
+    // 0 when there is none): the ADC count through the nominal scale, or the
+    // CSV's last digit for unquantised data. Exact while a cable shows at
+    // most kDatasetResolutionValues distinct readings; beyond that, the
+    // smallest step among the first that many (an upper bound on it).
+    double resolution[4] = {0, 0, 0, 0};
+    std::shared_ptr<const DatasetSource> source;
 };
+
+// Reads the rows of `d` again, in file order, and calls visit(position
+// index into d.pos, the four readings) for each; the same parser and checks
+// as the first read. A file is read through the descriptor load_dataset()
+// opened (a file replaced by rename since is still the one loaded); if its
+// content changed in place the pass stops with an error naming the line.
+// False + err also when `d` has no source (not made by the functions below).
+bool for_each_sample(const Dataset &d, const std::function<void(size_t, const double *)> &visit, std::string &err);
 
 // Sane magnitudes (mm). A jig reference beyond 5 m from the origin, or a
 // cable length outside (0, 10 m], is a unit error or corrupt data, not a
@@ -43,7 +68,8 @@ struct Dataset {
 constexpr double kDatasetMaxRefMm = 5000.0;
 constexpr double kDatasetMaxLengthMm = 10000.0;
 
-// Parses and groups. On error returns false with `err` naming the file,
+// Parses and groups, streaming (load_dataset reads the file in 1 MiB
+// pieces; a line longer than that is held whole). On error returns false with `err` naming the file,
 // line and column (1-based), e.g. "jig.csv:17:6: l2 is not a number: 'abc'".
 // Refuses duplicate columns, non-finite values and magnitudes outside the
 // ranges above; a field echoed in a message is cut to ~40 characters.

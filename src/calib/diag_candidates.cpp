@@ -129,7 +129,7 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         c.dchi2 = base_chi2 - c.rep.chi2;
         c.bic = -c.dchi2 + c.k * std::log(ctx.n_obs);
         c.p = chi2_sf(std::max(0.0, c.dchi2), c.k);
-        c.E = evaluate(c.m, ctx.data, ctx.pos);
+        c.E = evaluate(c.m, ctx.pos);
         c.v = judge(c.E, ctx.G, ctx.own_jig(c.E), c.rep.n_free);
         c.fp.resize(P);
         double sxy = 0, sxx = 0, syy = 0, ss = 0;

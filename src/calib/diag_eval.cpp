@@ -16,19 +16,26 @@ Eigen::Matrix<double, 4, 3> reading_jacobian(const Model &m, const double p[3], 
     if (m.readings_jacobian(p, t_s, y, J.data()) != 0) J.setConstant(std::numeric_limits<double>::quiet_NaN());
     return J;
 }
-} // namespace
 
-// Per-position residuals by FK of the mean readings; per-sample statistics
-// through the local linearisation e_s = res + Jp (l_s - mean), exact to
-// second order in the noise (1e-4 mm at 0.05 mm noise).
-Eval evaluate(const Model &m, const Dataset &d, const std::vector<PreparedPos> &pos) {
+Eval init_eval(size_t P) {
     Eval E;
-    const size_t P = pos.size();
     E.res.assign(P, V3::Zero());
     E.Jp.assign(P, Eigen::Matrix<double, 3, 4>::Zero());
     E.var_mean.assign(P, V3::Constant(1e-6));
     E.ok.assign(P, 0);
     E.est.assign(P, V3::Zero());
+    return E;
+}
+} // namespace
+
+// Per-position residuals by FK of the mean readings; per-sample statistics
+// through the local linearisation e_s = res + Jp (l_s - mean), exact to
+// second order in the noise (1e-4 mm at 0.05 mm noise). Over a position's
+// samples sum(l_s - mean) = 0 and sum (Jp_a (l_s - mean))^2 = Jp_a M Jp_a'
+// with M the co-moment matrix (n - 1) cov: the moments need no sample.
+Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos) {
+    const size_t P = pos.size();
+    Eval E = init_eval(P);
     for (size_t j = 0; j < P; ++j) {
         double l[4] = {pos[j].mean(0), pos[j].mean(1), pos[j].mean(2), pos[j].mean(3)};
         double p[3];
@@ -53,51 +60,70 @@ Eval evaluate(const Model &m, const Dataset &d, const std::vector<PreparedPos> &
         Eigen::Matrix3d C = E.Jp[j] * Cl * E.Jp[j].transpose();
         for (int a = 0; a < 3; ++a) E.var_mean[j](a) = std::max(C(a, a), 1e-10);
         E.ok[j] = 1;
-        for (int s = 0; s < pos[j].n; ++s) {
-            const auto &ls = d.samples[pos[j].first + size_t(s)];
-            Eigen::Vector4d dl(ls[0] - l[0], ls[1] - l[1], ls[2] - l[2], ls[3] - l[3]);
-            V3 dev = E.Jp[j] * dl;
-            for (int a = 0; a < 3; ++a) {
-                E.err[a].add(E.res[j](a) + dev(a));
-                E.within[a].add(dev(a));
-            }
+        const double n = pos[j].n;
+        const Eigen::Matrix3d S = E.Jp[j] * (pos[j].cov * (n - 1)) * E.Jp[j].transpose();
+        for (int a = 0; a < 3; ++a) {
+            const double r = E.res[j](a);
+            E.err[a].add_moments(n, n * r, n * r * r + S(a, a));
+            E.within[a].add_moments(n, 0.0, S(a, a));
         }
     }
+    for (int a = 0; a < 3; ++a) E.err[a].mx = E.within[a].mx = std::numeric_limits<double>::quiet_NaN();
     return E;
 }
 
-// The seed's procedure, per sample: triangulation (eq. 1-3), optionally the
-// ellipsoid (eq. 4) subtracted from x.
-Eval evaluate_seed(const DeviceGeometry &g, const Dataset &d, const std::vector<PreparedPos> &pos,
-                   const Ellipsoid *ell) {
-    Eval E;
+// The seed's procedure is per sample (eq. 1-3 on each sample's readings,
+// optionally the ellipsoid of eq. 4 subtracted from x), and so is a maximum:
+// both read the rows again.
+bool sample_pass(const Dataset &d, const std::vector<PreparedPos> &pos, const std::vector<Eval *> &linear,
+                 const std::vector<SeedRequest> &seeds, std::string &err) {
     const size_t P = pos.size();
-    E.res.assign(P, V3::Zero());
-    E.ok.assign(P, 0);
-    E.est.assign(P, V3::Zero());
-    E.var_mean.assign(P, V3::Constant(1e-6));
-    E.Jp.assign(P, Eigen::Matrix<double, 3, 4>::Zero());
-    for (size_t j = 0; j < P; ++j) {
-        V3 sum = V3::Zero();
-        int n = 0;
-        for (int s = 0; s < pos[j].n; ++s) {
-            const auto &ls = d.samples[pos[j].first + size_t(s)];
+    for (Eval *E : linear)
+        for (int a = 0; a < 3; ++a) E->err[a].mx = E->within[a].mx = 0;
+    std::vector<Eval> sv(seeds.size(), init_eval(P));
+    std::vector<std::vector<V3>> sum(seeds.size(), std::vector<V3>(P, V3::Zero()));
+    std::vector<std::vector<int>> cnt(seeds.size(), std::vector<int>(P, 0));
+    auto visit = [&](size_t j, const double *ls) {
+        if (j >= P) return; // for_each_sample checked the positions; pos comes from the same dataset
+        const Eigen::Vector4d dl(ls[0] - pos[j].mean(0), ls[1] - pos[j].mean(1), ls[2] - pos[j].mean(2),
+                                 ls[3] - pos[j].mean(3));
+        for (Eval *E : linear) {
+            if (!E->ok[j]) continue;
+            const V3 dev = E->Jp[j] * dl;
+            for (int a = 0; a < 3; ++a) {
+                E->err[a].add_extreme(E->res[j](a) + dev(a));
+                E->within[a].add_extreme(dev(a));
+            }
+        }
+        for (size_t k = 0; k < seeds.size(); ++k) {
             double p[3];
-            if (!triangulate(g, ls.data(), p)) {
-                ++E.bad_samples;
+            if (!triangulate(*seeds[k].geometry, ls, p)) {
+                ++sv[k].bad_samples;
                 continue;
             }
-            if (ell) p[0] -= ell->xc(p[1], p[2]);
-            for (int a = 0; a < 3; ++a) E.err[a].add(p[a] - pos[j].ref(a));
-            sum += V3(p[0], p[1], p[2]);
-            ++n;
+            if (seeds[k].ellipsoid) p[0] -= seeds[k].ellipsoid->xc(p[1], p[2]);
+            for (int a = 0; a < 3; ++a) sv[k].err[a].add(p[a] - pos[j].ref(a));
+            sum[k][j] += V3(p[0], p[1], p[2]);
+            ++cnt[k][j];
         }
-        if (n == 0) continue;
-        E.est[j] = sum / n;
-        E.res[j] = E.est[j] - pos[j].ref;
-        E.ok[j] = 1;
+    };
+    if (!for_each_sample(d, visit, err)) return false;
+    for (size_t k = 0; k < seeds.size(); ++k) {
+        Eval &E = sv[k];
+        for (size_t j = 0; j < P; ++j) {
+            if (cnt[k][j] == 0) continue;
+            E.est[j] = sum[k][j] / cnt[k][j];
+            E.res[j] = E.est[j] - pos[j].ref;
+            E.ok[j] = 1;
+        }
+        *seeds[k].out = std::move(E);
     }
-    return E;
+    return true;
+}
+
+bool evaluate_seed(const DeviceGeometry &g, const Dataset &d, const std::vector<PreparedPos> &pos,
+                   const Ellipsoid *ell, Eval &out, std::string &err) {
+    return sample_pass(d, pos, {}, {{&g, ell, &out}}, err);
 }
 
 // The seed's eq. 5: the ellipsoid fitted to the x error of an evaluation

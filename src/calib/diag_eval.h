@@ -3,6 +3,7 @@
 // procedure (triangulation, optionally the ellipsoid).
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include <Eigen/Dense>
@@ -27,9 +28,29 @@ struct Eval {
     size_t bad_samples = 0;
 };
 
-Eval evaluate(const Model &m, const Dataset &d, const std::vector<PreparedPos> &pos);
-Eval evaluate_seed(const DeviceGeometry &g, const Dataset &d, const std::vector<PreparedPos> &pos,
-                   const Ellipsoid *ell);
+// The model on per-position statistics: residuals by FK of the mean
+// readings, and the per-sample error's mean, std and RMS through the local
+// linearisation (exact from each position's mean and covariance). The
+// per-sample maxima (err[].mx, within[].mx) need every sample: NaN (null in
+// JSON) until sample_pass() fills them.
+Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos);
+
+// The seed's procedure (triangulation, optionally the ellipsoid) applied to
+// every sample, into `out`.
+struct SeedRequest {
+    const DeviceGeometry *geometry;
+    const Ellipsoid *ellipsoid; // null: triangulation alone
+    Eval *out;
+};
+
+// One pass over the dataset's rows (for_each_sample) for what needs every
+// sample: the maxima of `linear` (evaluations from evaluate() on `pos`) and
+// the seed evaluations asked for. False + err when the rows cannot be read
+// again (the file changed since it was loaded).
+bool sample_pass(const Dataset &d, const std::vector<PreparedPos> &pos, const std::vector<Eval *> &linear,
+                 const std::vector<SeedRequest> &seeds, std::string &err);
+bool evaluate_seed(const DeviceGeometry &g, const Dataset &d, const std::vector<PreparedPos> &pos,
+                   const Ellipsoid *ell, Eval &out, std::string &err);
 Ellipsoid ellipsoid_on(const Eval &E, const std::vector<PreparedPos> &pos);
 
 } // namespace diag

@@ -34,7 +34,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
     double cur_chi2 = start_chi2;
     FitReport cur_rep = start_rep;
     cur_rep.n_free = cur_free;
-    Eval cur_E = evaluate(cur, ctx.data, ctx.pos);
+    Eval cur_E = evaluate(cur, ctx.pos);
     std::set<std::vector<std::string>> seen{sorted(reading_effects(cur))};
     out.visited.push_back({reading_effects(cur), ctx.bic(cur_chi2, cur_free)});
     std::vector<Candidate> cands;
@@ -95,7 +95,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
             cur_rep = rm_rep;
             cur_free = rm_rep.n_free;
             cur_chi2 = rm_rep.chi2;
-            cur_E = evaluate(cur, ctx.data, ctx.pos);
+            cur_E = evaluate(cur, ctx.pos);
         } else {
             // Stuck on additions and removals: a one-effect swap can still
             // lower the criterion (greedy forward steps can take a flexible
@@ -139,7 +139,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
             cur_rep = sw_rep;
             cur_free = sw_rep.n_free;
             cur_chi2 = sw_rep.chi2;
-            cur_E = evaluate(cur, ctx.data, ctx.pos);
+            cur_E = evaluate(cur, ctx.pos);
         }
         st.x_rms_mm = x_rms(cur_E);
         seen.insert(sorted(reading_effects(cur)));

@@ -25,6 +25,14 @@ struct Acc {
         ss += w * v * v;
         mx = std::max(mx, std::fabs(v));
     }
+    // Moments of a group of values added at once (their count, sum and sum
+    // of squares); the maximum is left to add_extreme().
+    void add_moments(double cnt, double sum, double sumsq) {
+        n += cnt;
+        s += sum;
+        ss += sumsq;
+    }
+    void add_extreme(double v) { mx = std::max(mx, std::fabs(v)); }
     nlohmann::json to_json() const {
         const double mean = n > 0 ? s / n : 0;
         const double var = n > 1 ? std::max(0.0, (ss - n * mean * mean) / (n - 1)) : 0;

@@ -29,7 +29,7 @@ bool validate_heights(const DiagContext &ctx, const Model &model, const Eval &in
             err = rv.message.empty() ? "fit cancelled" : rv.message;
             return false;
         }
-        Eval ev = evaluate(mv, ctx.data, ctx.pos);
+        Eval ev = evaluate(mv, ctx.pos);
         Acc f[3];
         for (size_t j = 0; j < P; ++j)
             if (!c2.fo.use[j] && ev.ok[j])

@@ -105,6 +105,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     fopt.effects = opt.effects;
     fopt.jig_tolerance_mm = opt.jig_tolerance_mm;
     fopt.progress = opt.progress;
+    fopt.fitted_maxima = false; // one pass over the rows below serves every evaluation
     CalibrationFit cf(g);
     if (!fit_calibration(data, g, fopt, cf, err)) return false;
     const auto &pos = cf.pos;
@@ -114,8 +115,8 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     const V3 jig = cf.jig;
     const Eval &nom = cf.nominal;
     Ellipsoid ell = ellipsoid_on(nom, pos);
-    Eval ellE = evaluate_seed(g, data, pos, &ell);
-    const Eval &cur = cf.fitted;
+    Eval ellE; // the seed's procedure with its ellipsoid: in the pass over the rows below
+    Eval &cur = cf.fitted;
     const bool user_jig = opt.jig_tolerance_mm >= 0;
     // Candidates' own jig tolerance is capped as in fit_calibration().
     const bool repeats = std::any_of(pos.begin(), pos.end(), [](const PreparedPos &p) { return p.n > 1; });
@@ -192,6 +193,19 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     const Eval &bE = search ? sr.E : use_top ? cands[0].E : cur;
     const LengthView lv = length_view(basis, pos);
     const json findings = residual_findings(pos, lv, bE, search ? sctx.jig : jig);
+
+    // --- what needs every sample: the maxima of the reported evaluations and
+    // the seed's ellipsoid applied to each sample, in one pass over the rows
+    {
+        std::vector<Eval *> linear{&cur};
+        for (auto &c : cands) linear.push_back(&c.E);
+        if (search) {
+            linear.push_back(&sr.E);
+            for (auto &c : sr.cands) linear.push_back(&c.E);
+        }
+        ctx.report("per-sample statistics", 0.0);
+        if (!sample_pass(data, pos, linear, {{&g, &ell, &ellE}}, err)) return false;
+    }
 
     // --- verdict
     std::string modelname = "the nominal model";

@@ -39,18 +39,8 @@ namespace cdm {
 std::vector<PreparedPos> prepare(const Dataset &d) {
     // The readings' resolution per cable: the smallest step between distinct
     // values (the ADC count through the nominal scale; the CSV's last digit
-    // for unquantised data).
-    double q[4];
-    for (int c = 0; c < 4; ++c) {
-        std::vector<double> v;
-        v.reserve(d.samples.size());
-        for (auto &s : d.samples) v.push_back(s[size_t(c)]);
-        std::sort(v.begin(), v.end());
-        q[c] = INFINITY;
-        for (size_t k = 1; k < v.size(); ++k)
-            if (v[k] - v[k - 1] > 1e-9) q[c] = std::min(q[c], v[k] - v[k - 1]);
-        if (!std::isfinite(q[c])) q[c] = 0;
-    }
+    // for unquantised data), found as the dataset was read.
+    const double *q = d.resolution;
     // Pooled within-position variance, for positions measured once.
     double pooled[4] = {0, 0, 0, 0}, dof = 0;
     for (auto &p : d.pos)
@@ -76,7 +66,6 @@ std::vector<PreparedPos> prepare(const Dataset &d) {
             pp.var_mean(c) = std::max(pp.var_mean(c), 1e-10);
         }
         pp.n = p.n;
-        pp.first = p.first;
         pp.t_s = p.t_s; // lets time-dependent effects (drift) see acquisition order
         v.push_back(pp);
     }

@@ -25,7 +25,6 @@ struct PreparedPos {
     Eigen::Vector4d var_mean; // variance of the mean reading from the repeatability alone
     Eigen::Matrix4d cov;      // sample covariance of the readings
     int n = 0;
-    size_t first = 0;
     double t_s = 0; // acquisition time of the position (s), for effects that drift in time
 };
 

@@ -24,7 +24,7 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
     const bool repeats = std::any_of(pos.begin(), pos.end(), [](const PreparedPos &p) { return p.n > 1; });
     const double jig_cap = repeats ? 0.05 : INFINITY;
     progress("nominal model", 0.0);
-    out.nominal = diag::evaluate_seed(g, data, pos, nullptr);
+    if (!diag::evaluate_seed(g, data, pos, nullptr, out.nominal, err)) return false;
 
     Model &model = out.model;
     model = Model(g);
@@ -44,7 +44,7 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
         err = out.report.message.empty() ? "fit cancelled" : out.report.message;
         return false;
     }
-    out.fitted = diag::evaluate(model, data, pos);
+    out.fitted = diag::evaluate(model, pos);
     // Jig tolerance from the white part of the residual, then refit with it.
     if (!user_jig) {
         V3 est = diag::estimate_nugget(out.fitted, out.grid);
@@ -55,7 +55,7 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
                 err = out.report.message.empty() ? "fit cancelled" : out.report.message;
                 return false;
             }
-            out.fitted = diag::evaluate(model, data, pos);
+            out.fitted = diag::evaluate(model, pos);
         }
     }
     // The ellipsoid on top of the physical model, when asked for.
@@ -63,9 +63,10 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
         Ellipsoid e2 = diag::ellipsoid_on(out.fitted, pos);
         if (!model.add_effect("ellipsoid", ParamValues{{"L", e2.L}, {"M", e2.M}, {"N", e2.N}}, err))
             return false;
-        out.fitted = diag::evaluate(model, data, pos);
+        out.fitted = diag::evaluate(model, pos);
         out.report.n_free += 3;
     }
+    if (opt.fitted_maxima && !diag::sample_pass(data, pos, {&out.fitted}, {}, err)) return false;
     return true;
 }
 

@@ -17,6 +17,9 @@ struct FitCalibrationOptions {
     std::vector<std::string> effects; // "ellipsoid" is fitted in position space on top
     double jig_tolerance_mm = -1;     // < 0: estimated from the data
     std::function<bool(const std::string &stage, double fraction)> progress;
+    // Fill fitted's per-sample maxima (a pass over the rows). A caller that
+    // makes its own pass at the end (diagnose) turns it off.
+    bool fitted_maxima = true;
 };
 
 struct CalibrationFit {
@@ -31,7 +34,7 @@ struct CalibrationFit {
 };
 
 // False + err (naming what is wrong) on too few positions, an unknown
-// effect, or cancellation through progress.
+// effect, cancellation through progress, or rows that cannot be read again.
 bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCalibrationOptions &opt,
                      CalibrationFit &out, std::string &err);
 

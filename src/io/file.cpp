@@ -51,7 +51,13 @@ const char *file_kind(mode_t m) {
     return "a file of unknown kind";
 }
 
-bool read_file(const std::string &path, size_t max_bytes, std::string &out, std::string &err, const char *what) {
+FileReader::~FileReader() {
+    if (fd_ >= 0) ::close(fd_);
+}
+
+bool FileReader::open(const std::string &path, size_t max_bytes, std::string &err, const char *what) {
+    if (fd_ >= 0) ::close(fd_);
+    fd_ = -1;
     // O_NONBLOCK: opening a FIFO without a writer must not hang; fstat then
     // refuses it (and every other special file) before any read.
     int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY);
@@ -76,30 +82,47 @@ bool read_file(const std::string &path, size_t max_bytes, std::string &out, std:
         ::close(fd);
         return false;
     }
-    std::string text;
-    text.resize(size_t(st.st_size));
-    size_t got = 0;
-    // The file may grow while read: read to EOF but never past the cap.
+    fd_ = fd;
+    max_ = max_bytes;
+    path_ = path;
+    what_ = what;
+    return true;
+}
+
+long FileReader::pread(char *buf, size_t n, size_t offset, std::string &err) const {
+    // The file may grow while read: read to EOF but never past the cap
+    // (one byte beyond it tells a file that grew past it).
+    if (offset > max_) {
+        err = path_ + ": the " + what_ + " grew past the " + std::to_string(max_) + "-byte limit while being read";
+        return -1;
+    }
+    n = std::min(n, max_ + 1 - offset);
     for (;;) {
-        if (got == text.size()) {
-            if (text.size() >= max_bytes + 1) break;
-            text.resize(std::min(max_bytes + 1, text.size() + 65536));
-        }
-        ssize_t n = ::read(fd, &text[got], text.size() - got);
-        if (n < 0) {
+        ssize_t r = ::pread(fd_, buf, n, off_t(offset));
+        if (r < 0) {
             if (errno == EINTR) continue;
-            err = path + ": cannot read the " + what + ": " + why();
-            ::close(fd);
-            return false;
+            err = path_ + ": cannot read the " + what_ + ": " + why();
+            return -1;
         }
+        if (offset + size_t(r) > max_) {
+            err = path_ + ": the " + what_ + " grew past the " + std::to_string(max_) + "-byte limit while being read";
+            return -1;
+        }
+        return long(r);
+    }
+}
+
+bool read_file(const std::string &path, size_t max_bytes, std::string &out, std::string &err, const char *what) {
+    FileReader f;
+    if (!f.open(path, max_bytes, err, what)) return false;
+    std::string text;
+    size_t got = 0;
+    for (;;) {
+        if (got == text.size()) text.resize(std::min(max_bytes + 1, std::max<size_t>(text.size() * 2, 65536)));
+        const long n = f.pread(&text[got], text.size() - got, got, err);
+        if (n < 0) return false;
         if (n == 0) break;
         got += size_t(n);
-    }
-    ::close(fd);
-    if (got > max_bytes) {
-        err = path + ": the " + std::string(what) + " grew past the " + std::to_string(max_bytes) +
-              "-byte limit while being read";
-        return false;
     }
     text.resize(got);
     out = std::move(text);

@@ -16,7 +16,8 @@ namespace cdm::io {
 // 64 MiB is far beyond any real one yet bounds a hostile or mistaken input.
 constexpr size_t kJsonMaxBytes = size_t(64) << 20;
 // A dataset row is ~60 bytes: 1 GiB is ~17 million samples (days of
-// recording at 200 Hz), still well inside the machine's memory after parsing.
+// recording at 200 Hz). Datasets are streamed (calib/dataset.h), so the cap
+// bounds the work, not the memory.
 constexpr size_t kDatasetMaxBytes = size_t(1) << 30;
 
 // Reads a whole regular file. Opens with O_NONBLOCK and checks fstat before
@@ -26,6 +27,30 @@ constexpr size_t kDatasetMaxBytes = size_t(1) << 30;
 // messages ("calibration", "device description", "dataset").
 bool read_file(const std::string &path, size_t max_bytes, std::string &out, std::string &err,
                const char *what = "file");
+
+// The same checks, for a reader that streams: open() refuses what
+// read_file() refuses, with the same messages; pread() reads from any
+// offset (several passes, concurrent readers), never past `max_bytes` (a
+// file that grows beyond it while read is refused as read_file() refuses
+// it). The descriptor stays open until destruction, so a file replaced by
+// rename is still the one opened.
+class FileReader {
+public:
+    FileReader() = default;
+    ~FileReader();
+    FileReader(const FileReader &) = delete;
+    FileReader &operator=(const FileReader &) = delete;
+
+    bool open(const std::string &path, size_t max_bytes, std::string &err, const char *what = "file");
+    // Bytes read (0 at the end of the file), or -1 with err set.
+    long pread(char *buf, size_t n, size_t offset, std::string &err) const;
+    const std::string &path() const { return path_; }
+
+private:
+    int fd_ = -1;
+    size_t max_ = 0;
+    std::string path_, what_;
+};
 
 // "a directory", "a FIFO (named pipe)", ...: what a stat mode is, for
 // messages that say why a path was refused.

@@ -4,10 +4,15 @@
 // stay a small multiple of it (docs/performance.md).
 #include <benchmark/benchmark.h>
 
+#include <cstdio>
+#include <cstdlib>
+#include <unistd.h>
+
 #include "calib/dataset.h"
 #include "calib/diagnose.h"
 #include "calib/fit.h"
 #include "calib/simulate.h"
+#include "io/file.h"
 
 namespace {
 
@@ -19,17 +24,16 @@ struct Fixture {
         std::string err;
         truth.add_effect_random("exit_pulley", 7, err);
         cdm::JigSimOptions o;
-        cdm::simulate_jig(truth, o, data, err);
-        // the same rows as text, for the parse baseline
-        char buf[160];
-        text = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n";
-        for (auto &p : data.pos)
-            for (int s = 0; s < p.n; ++s) {
-                auto &l = data.samples[p.first + size_t(s)];
-                std::snprintf(buf, sizeof buf, "%ld,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f\n", p.point, p.ref[0], p.ref[1],
-                              p.ref[2], l[0], l[1], l[2], l[3]);
-                text += buf;
-            }
+        // The CSV text `cdm calib simulate` writes, for the parse baseline.
+        char path[] = "/tmp/cdm_bench_calib_XXXXXX";
+        const int fd = mkstemp(path);
+        if (fd < 0 || close(fd) != 0 || !cdm::simulate_jig_csv(truth, o, path, {}, err) ||
+            !cdm::io::read_file(path, cdm::io::kDatasetMaxBytes, text, err, "dataset") ||
+            !cdm::parse_dataset(text, "bench", data, err)) {
+            std::fprintf(stderr, "bench_calib: %s\n", err.c_str());
+            std::exit(1);
+        }
+        unlink(path);
     }
 };
 Fixture &fx() {

@@ -7,6 +7,9 @@
 #include <cstdint>
 #include <unistd.h>
 #include <cstdlib>
+#include <fcntl.h>
+#include <string>
+#include <vector>
 
 #include "calib/dataset.h"
 
@@ -157,6 +160,153 @@ static void write_is_atomic(void **) {
     unlink(path);
 }
 
+
+// A temporary file holding `text`, removed by the destructor.
+struct TempCsv {
+    std::string path;
+    explicit TempCsv(const std::string &text) {
+        char p[] = "/tmp/cdm_ds_XXXXXX";
+        const int fd = mkstemp(p);
+        assert_true(fd >= 0);
+        assert_int_equal(write(fd, text.data(), text.size()), ssize_t(text.size()));
+        close(fd);
+        path = p;
+    }
+    ~TempCsv() { unlink(path.c_str()); }
+};
+
+static void assert_same_dataset(const Dataset &a, const Dataset &b) {
+    assert_int_equal(a.rows, b.rows);
+    assert_int_equal(a.pos.size(), b.pos.size());
+    for (size_t g = 0; g < a.pos.size(); ++g) {
+        const JigHole &x = a.pos[g], &y = b.pos[g];
+        assert_int_equal(x.point, y.point);
+        assert_int_equal(x.n, y.n);
+        assert_memory_equal(x.ref, y.ref, sizeof x.ref);
+        assert_memory_equal(x.mean, y.mean, sizeof x.mean);
+        assert_memory_equal(x.cov, y.cov, sizeof x.cov);
+        assert_true(x.mean_row == y.mean_row && x.t_s == y.t_s);
+    }
+    assert_memory_equal(a.resolution, b.resolution, sizeof a.resolution);
+    assert_true(a.heights == b.heights);
+    assert_true(a.ignored_columns == b.ignored_columns);
+}
+
+// The file is read in 1 MiB pieces: lines cut by a piece's end, CRLF, a
+// comment, and one line longer than a piece must give exactly what parsing
+// the whole text gives, and an error after them must still name its line.
+static void file_in_pieces_equals_whole_text(void **) {
+    std::string t = "# a jig session\r\npoint,x_ref,y_ref,z_ref,l1,l2,l3,l4,t_s,note\r\n";
+    char row[160];
+    size_t lines = 2;
+    for (int r = 0; r < 60000; ++r) {
+        const int pt = r % 37; // positions interleaved: each is revisited
+        std::snprintf(row, sizeof row, "%d,%d,%d,0,%.2f,%.2f,%.2f,%.2f,%.3f,x\r\n", pt, 30 + 10 * (pt % 5), pt,
+                      300 + pt + 0.01 * (r % 7), 301 + 0.01 * (r % 11), 302 - 0.02 * (r % 5), 303 + 0.03 * (r % 3),
+                      0.005 * r);
+        t += row;
+        ++lines;
+        if (r == 30000) { // a 1.5 MiB field in an ignored column
+            t += "5,30,5,0,305,301,302,303,150.0," + std::string(3 << 19, 'n') + "\r\n";
+            ++lines;
+        }
+    }
+    assert_true(t.size() > (size_t(3) << 20));
+    Dataset whole, file;
+    std::string err;
+    assert_true(parse_dataset(t, "s.csv", whole, err));
+    TempCsv f(t);
+    assert_true(load_dataset(f.path, file, err));
+    assert_same_dataset(whole, file);
+    assert_int_equal(file.rows, 60001);
+    assert_true(file.resolution[1] > 0.0099 && file.resolution[1] < 0.0101);
+
+    TempCsv bad(t + "1,30,1,0,300,301,302,oops,1,x\r\n");
+    assert_false(load_dataset(bad.path, file, err));
+    const std::string where = bad.path + ":" + std::to_string(lines + 1) + ":8: l4 is not a finite number";
+    if (!strstr(err.c_str(), where.c_str())) fail_msg("error \"%s\" does not name \"%s\"", err.c_str(), where.c_str());
+}
+
+// The resolution is the smallest step between distinct readings of a cable,
+// whatever their order and repetitions; a cable with one value has none.
+static void resolution_is_the_smallest_step(void **) {
+    const char *t = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n"
+                    "1,30,0,0,100.03,200,300,400\n"
+                    "1,30,0,0,100.00,200,300,400.5\n"
+                    "2,30,5,0,100.03,200,300,401\n"
+                    "2,30,5,0,100.01,200,300,400\n";
+    Dataset d;
+    std::string err;
+    assert_true(parse_dataset(t, "r.csv", d, err));
+    assert_true(d.resolution[0] == 100.01 - 100.00);
+    assert_true(d.resolution[1] == 0.0 && d.resolution[2] == 0.0);
+    assert_true(d.resolution[3] == 0.5);
+}
+
+// for_each_sample hands back every row's readings in file order with its
+// position's index, from a file or from text.
+static void samples_read_again_in_order(void **) {
+    const std::string t = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n"
+                          "8,30,0,0,100,101,102,103\n"
+                          "9,30,5,0,110,111,112,113\n"
+                          "8,30,0,0,100.5,101,102,103\n";
+    TempCsv f(t);
+    Dataset a, b;
+    std::string err;
+    assert_true(parse_dataset(t, "t.csv", a, err));
+    assert_true(load_dataset(f.path, b, err));
+    for (const Dataset *d : {&a, &b}) {
+        std::vector<std::pair<size_t, double>> seen;
+        assert_true(for_each_sample(*d, [&](size_t g, const double *l) { seen.emplace_back(g, l[0]); }, err));
+        assert_int_equal(seen.size(), 3);
+        assert_true(seen[0] == std::make_pair(size_t(0), 100.0));
+        assert_true(seen[1] == std::make_pair(size_t(1), 110.0));
+        assert_true(seen[2] == std::make_pair(size_t(0), 100.5));
+    }
+    Dataset none;
+    assert_false(for_each_sample(none, [](size_t, const double *) {}, err));
+}
+
+// A file replaced by rename after loading is still read through the
+// descriptor opened; one rewritten in place is refused, naming where.
+static void changed_file_is_refused(void **) {
+    const std::string t = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n"
+                          "1,30,0,0,100,101,102,103\n"
+                          "2,30,5,0,110,111,112,113\n";
+    TempCsv f(t);
+    Dataset d;
+    std::string err;
+    assert_true(load_dataset(f.path, d, err));
+    {
+        TempCsv other("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n7,30,0,0,1,1,1,1\n");
+        assert_int_equal(rename(other.path.c_str(), f.path.c_str()), 0);
+        other.path = "/nonexistent-dir/x"; // renamed away: nothing to unlink
+    }
+    size_t rows = 0;
+    assert_true(for_each_sample(d, [&](size_t, const double *) { ++rows; }, err));
+    assert_int_equal(rows, 2);
+
+    TempCsv g(t);
+    Dataset e;
+    assert_true(load_dataset(g.path, e, err));
+    const int fd = open(g.path.c_str(), O_WRONLY | O_TRUNC);
+    assert_true(fd >= 0);
+    const std::string moved = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,30,0,0,100,101,102,103\n3,30,5,0,110,111,112,113\n";
+    assert_int_equal(write(fd, moved.data(), moved.size()), ssize_t(moved.size()));
+    close(fd);
+    assert_false(for_each_sample(e, [](size_t, const double *) {}, err));
+    const std::string where = g.path + ":3:1: the dataset changed since it was loaded";
+    if (!strstr(err.c_str(), where.c_str())) fail_msg("error \"%s\" does not name \"%s\"", err.c_str(), where.c_str());
+
+    const int fd2 = open(g.path.c_str(), O_WRONLY | O_TRUNC);
+    assert_true(fd2 >= 0);
+    const std::string other_value = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,30,0,0,100,101,102,103\n2,30,5,0,110,111,112,114\n";
+    assert_int_equal(write(fd2, other_value.data(), other_value.size()), ssize_t(other_value.size()));
+    close(fd2);
+    assert_false(for_each_sample(e, [](size_t, const double *) {}, err));
+    assert_non_null(strstr(err.c_str(), "the dataset changed since it was loaded"));
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(groups_and_ignores),
@@ -167,6 +317,10 @@ int main(void) {
         cmocka_unit_test(test_dataset_huge_field_not_echoed_whole),
         cmocka_unit_test(test_dataset_insane_magnitudes_refused),
         cmocka_unit_test(test_dataset_missing_file_is_io_failure),
+        cmocka_unit_test(file_in_pieces_equals_whole_text),
+        cmocka_unit_test(resolution_is_the_smallest_step),
+        cmocka_unit_test(samples_read_again_in_order),
+        cmocka_unit_test(changed_file_is_refused),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

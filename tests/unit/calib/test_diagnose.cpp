@@ -16,7 +16,11 @@
 #include <cstddef>
 #include <cstdint>
 
+#include <cfloat>
+
+#include "calib/diag_eval.h"
 #include "calib/diagnose.h"
+#include "calib/fit.h"
 #include "calib/simulate.h"
 #include "model/effect.h"
 
@@ -314,8 +318,71 @@ static void review_suggests_the_leaner_model(void **) {
     }
 }
 
+
+// The dataset keeps per-position statistics, not samples. The per-sample
+// error's mean, std and RMS through the linearisation follow from each
+// position's mean and co-moment matrix; the maxima and the seed's per-sample
+// triangulation come from a pass over the rows. Checked here against the
+// per-sample computation on the rows read back one by one.
+static void per_sample_statistics_without_samples(void **) {
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    assert_true(truth.add_effect_random("exit_pulley", 3, err));
+    JigSimOptions so = small_jig(9);
+    so.n = 5;
+    so.samples = 25;
+    Dataset d;
+    assert_true(simulate_jig(truth, so, d, err));
+    const auto pos = prepare(d);
+    diag::Eval E = diag::evaluate(truth, pos), S;
+    for (int a = 0; a < 3; ++a) assert_true(std::isnan(E.err[a].mx)); // no maximum before the pass
+    assert_true(diag::sample_pass(d, pos, {&E}, {{&truth.geometry(), nullptr, &S}}, err));
+
+    diag::Acc err_ref[3], within_ref[3], seed_ref[3];
+    std::vector<diag::V3> seed_sum(pos.size(), diag::V3::Zero());
+    std::vector<int> seed_n(pos.size(), 0);
+    double lmax = 0, smin = INFINITY;
+    assert_true(for_each_sample(d, [&](size_t j, const double *l) {
+        Eigen::Vector4d dl;
+        for (int c = 0; c < 4; ++c) dl(c) = l[c] - pos[j].mean(c), lmax = std::max(lmax, l[c]);
+        const diag::V3 dev = E.Jp[j] * dl;
+        for (int a = 0; a < 3; ++a) {
+            err_ref[a].add(E.res[j](a) + dev(a));
+            within_ref[a].add(dev(a));
+        }
+        double p[3];
+        assert_true(triangulate(truth.geometry(), l, p));
+        for (int a = 0; a < 3; ++a) seed_ref[a].add(p[a] - pos[j].ref(a));
+        seed_sum[j] += diag::V3(p[0], p[1], p[2]);
+        ++seed_n[j];
+    }, err));
+    for (const auto &p : pos)
+        for (int c = 0; c < 4; ++c) smin = std::min(smin, std::sqrt(p.cov(c, c)));
+    // Rounding bound of the two ways of summing: N terms, each deviation
+    // l - mean carrying the rounding of readings of size lmax against a
+    // spread of at least smin.
+    const double N = double(d.rows), tol = N * DBL_EPSILON * lmax / smin;
+    for (int a = 0; a < 3; ++a) {
+        assert_true(E.err[a].n == err_ref[a].n && E.within[a].n == within_ref[a].n);
+        const double ss_scale = err_ref[a].ss, s_scale = std::sqrt(N * ss_scale);
+        if (std::fabs(E.err[a].s - err_ref[a].s) > tol * s_scale ||
+            std::fabs(E.err[a].ss - err_ref[a].ss) > tol * ss_scale ||
+            std::fabs(E.within[a].ss - within_ref[a].ss) > tol * ss_scale)
+            fail_msg("axis %d: moments %.17g %.17g %.17g, per sample %.17g %.17g %.17g (tol %g)", a, E.err[a].s,
+                     E.err[a].ss, E.within[a].ss, err_ref[a].s, err_ref[a].ss, within_ref[a].ss, tol);
+        // the maxima and the seed's pass are the same operations in the same order
+        assert_true(E.err[a].mx == err_ref[a].mx && E.within[a].mx == within_ref[a].mx);
+        assert_true(S.err[a].s == seed_ref[a].s && S.err[a].ss == seed_ref[a].ss && S.err[a].mx == seed_ref[a].mx);
+    }
+    for (size_t j = 0; j < pos.size(); ++j) {
+        assert_int_equal(seed_n[j], pos[j].n);
+        assert_true(S.est[j] == seed_sum[j] / seed_n[j]);
+    }
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
+        cmocka_unit_test(per_sample_statistics_without_samples),
         cmocka_unit_test(clean_data_is_explained),
         cmocka_unit_test(each_hidden_effect_is_found),
         cmocka_unit_test(effect_outside_catalogue),

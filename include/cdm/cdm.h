@@ -521,6 +521,12 @@ CDM_API int cdm_dataset_writer_open(const char *path, const char *const *protect
                                     cdm_dataset_writer **out);
 CDM_API int cdm_dataset_writer_add(cdm_dataset_writer *w, int point, const double ref_mm[3],
                                    const double lengths_mm[4]);
+/* A row with its acquisition time (s since the session's start, finite):
+ * the file then has a t_s column, which drift over the session is measured
+ * against (docs/calibration.md). A file's rows are all timed or all not:
+ * mixing the two calls is CDM_ERR_INVALID_ARG. */
+CDM_API int cdm_dataset_writer_add_at(cdm_dataset_writer *w, int point, const double ref_mm[3],
+                                      const double lengths_mm[4], double t_s);
 CDM_API int cdm_dataset_writer_commit(cdm_dataset_writer *w);
 CDM_API void cdm_dataset_writer_free(cdm_dataset_writer *w);
 

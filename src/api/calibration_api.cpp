@@ -230,7 +230,24 @@ int cdm_dataset_writer_add(cdm_dataset_writer *w, int point, const double ref_mm
     return cdm::guarded("cdm_dataset_writer_add", [&]() -> int {
         if (!w || !ref_mm || !lengths_mm) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_dataset_writer_add: NULL argument");
         std::string err;
-        if (!w->w.add_row(long(point), ref_mm, lengths_mm, err)) return cdm::fail(CDM_ERR_IO, err);
+        bool usage = false;
+        if (!w->w.add_row(long(point), ref_mm, lengths_mm, err, NAN, &usage))
+            return cdm::fail(usage ? CDM_ERR_INVALID_ARG : CDM_ERR_IO, err);
+        return CDM_OK;
+    });
+}
+
+int cdm_dataset_writer_add_at(cdm_dataset_writer *w, int point, const double ref_mm[3], const double lengths_mm[4],
+                              double t_s) {
+    return cdm::guarded("cdm_dataset_writer_add_at", [&]() -> int {
+        if (!w || !ref_mm || !lengths_mm)
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_dataset_writer_add_at: NULL argument");
+        if (!std::isfinite(t_s))
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_dataset_writer_add_at: t_s must be finite");
+        std::string err;
+        bool usage = false;
+        if (!w->w.add_row(long(point), ref_mm, lengths_mm, err, t_s, &usage))
+            return cdm::fail(usage ? CDM_ERR_INVALID_ARG : CDM_ERR_IO, err);
         return CDM_OK;
     });
 }

@@ -7,6 +7,7 @@
 // statistics").
 #pragma once
 
+#include <cmath>
 #include <functional>
 #include <memory>
 #include <string>
@@ -84,12 +85,17 @@ bool parse_dataset(const std::string &text, const std::string &source, Dataset &
 class DatasetWriter {
 public:
     bool open(const std::string &path, const std::vector<std::string> &protect_paths, std::string &err);
-    bool add_row(long point, const double ref[3], const double lengths[4], std::string &err);
+    // t_s finite: the row's acquisition time, written in a t_s column. The
+    // first row decides whether the file has the column; a later row of the
+    // other kind is refused (*usage set: the caller's mistake, not I/O).
+    bool add_row(long point, const double ref[3], const double lengths[4], std::string &err, double t_s = NAN,
+                 bool *usage = nullptr);
     bool commit(std::string &err);
 
 private:
     io::AtomicFile f_;
     std::string buf_;
+    int timed_ = -1; // -1: no row yet; 0: no t_s column; 1: t_s column
 };
 
 

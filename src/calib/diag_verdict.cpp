@@ -77,7 +77,9 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
         J.words = "does not explain the data; " + rms + " (" + tests + ")";
         if (!material.empty()) {
             J.words += ". Still significant: ";
-            for (size_t k = 0; k < material.size(); ++k) J.words += (k ? "; " : "") + material[k];
+            // The strongest three in words; the JSON lists every one.
+            for (size_t k = 0; k < material.size() && k < 3; ++k) J.words += (k ? "; " : "") + material[k];
+            if (material.size() > 3) J.words += "; and " + std::to_string(material.size() - 3) + " more (significant_left)";
         } else if (!v.explained) {
             J.words += ": the residual is larger or more structured than the noise and the jig's tolerance allow";
         }

@@ -59,6 +59,9 @@ struct RecordCtx {
     size_t next_point = 0;
     bool in_dwell = false;
     std::vector<std::array<double, 4>> dwell;
+    std::vector<double> dwell_t;     // each sample's device time since the first sample (s): the t_s column
+    bool have_t0 = false;
+    uint64_t t0_us = 0;
     uint64_t short_dwells = 0;
     std::atomic<bool> done{false};
     // both
@@ -72,18 +75,20 @@ void close_dwell(RecordCtx &c) {
         // Released too early: the same position is asked for again.
         ++c.short_dwells;
         c.dwell.clear();
+        c.dwell_t.clear();
         return;
     }
     int point = 0;
     double ref[3] = {0, 0, 0};
     cdm_jig_plan_get(c.plan, c.next_point, &point, ref);
-    for (const auto &l : c.dwell)
-        if (!c.write_failed && cdm_dataset_writer_add(c.csv, point, ref, l.data()) != CDM_OK) {
+    for (size_t k = 0; k < c.dwell.size(); ++k)
+        if (!c.write_failed && cdm_dataset_writer_add_at(c.csv, point, ref, c.dwell[k].data(), c.dwell_t[k]) != CDM_OK) {
             c.write_failed = true;
             c.write_err = cdm_thread_error();
             c.done = true;
         }
     c.dwell.clear();
+    c.dwell_t.clear();
     if (++c.next_point == c.plan_n) c.done = true;
 }
 
@@ -109,10 +114,19 @@ void record_sample(void *user, const cdm_sample *s) {
         if (!c->in_dwell) {
             c->in_dwell = true;
             c->dwell.clear();
+            c->dwell_t.clear();
         }
-        if (c->dwell.size() < size_t(c->samples))
+        if (!c->have_t0) {
+            c->have_t0 = true;
+            c->t0_us = s->raw->device_time_us;
+        }
+        if (c->dwell.size() < size_t(c->samples)) {
             c->dwell.push_back({s->raw->lengths_mm[0], s->raw->lengths_mm[1], s->raw->lengths_mm[2],
                                 s->raw->lengths_mm[3]});
+            // The device's own clock: acquisition time however fast the
+            // recording is replayed (realtime=0).
+            c->dwell_t.push_back(double(int64_t(s->raw->device_time_us - c->t0_us)) * 1e-6);
+        }
     } else if (c->in_dwell) {
         close_dwell(*c);
     }

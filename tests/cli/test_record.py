@@ -48,7 +48,9 @@ def test_jig_record_finishes_on_sigterm(tmp_path):
     # Stopped before the plan was complete, or completed first: either way
     # the CSV is in place with its header, and the stop is reported honestly.
     assert rc in (0, 1), stderr
-    assert out.read_text().startswith("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n")
+    # t_s is there once a row is (a file stopped before any has the plain header).
+    assert out.read_text().split("\n")[0] in ("point,x_ref,y_ref,z_ref,l1,l2,l3,l4",
+                                              "point,x_ref,y_ref,z_ref,l1,l2,l3,l4,t_s")
     if rc == 1:
         assert "before the jig plan was complete" in stderr
 
@@ -96,3 +98,19 @@ def test_write_error_keeps_what_was_written_and_names_the_cause(tmp_path):
     assert os.strerror(27) in r.stderr  # EFBIG, the real cause (not a stale errno)
     assert "keeps what was written" in r.stderr
     assert out.is_file() and out.stat().st_size > 12  # the header and the reports before the error
+
+
+def test_jig_record_writes_acquisition_time(tmp_path):
+    # The device's clock in a t_s column, non-decreasing in row order: what
+    # drift over the session is measured against (docs/calibration.md).
+    out = tmp_path / "jig.csv"
+    r = cdm("record", "sim:?motion=jig&jig_n=3&jig_heights=30,40&jig_samples=5&realtime=0", str(out), "--jig")
+    assert r.returncode == 0, r.stderr
+    lines = out.read_text().splitlines()
+    assert lines[0] == "point,x_ref,y_ref,z_ref,l1,l2,l3,l4,t_s"
+    t = [float(l.split(",")[8]) for l in lines[1:]]
+    assert len(t) == 3 * 3 * 2 * 5
+    assert t[0] >= 0 and all(b >= a for a, b in zip(t, t[1:])) and t[-1] > t[0]
+    # and the library reads it back
+    r = cdm("calib", "fit", str(out), "--effects", "cable_offset", "--out", str(tmp_path / "c.json"))
+    assert r.returncode == 0, r.stderr

@@ -103,7 +103,7 @@ def test_fields_beyond_the_minimum_schema(report):
 def test_comparison_lists_both_runs(report):
     out, diag, before, _ = report
     html = (out / "index.html").read_text(encoding="utf-8")
-    sec = html[html.index("Error fell?"):]
+    sec = html[html.index("Error fell? Runs compared</h2>"):]  # the section, not its line in the contents
     assert "<td>nominal</td>" in sec and "<td>cable_gain</td>" in sec
     for d in (diag, before):
         for a in "xyz":
@@ -168,3 +168,13 @@ def test_maps_add_the_current_residual_on_its_own_scale(report):
     """Nominal ~1 mm vs current ~0.04 mm: the shared scale washes the current one out."""
     html = (report[0] / "index.html").read_text(encoding="utf-8")
     assert html.count("and the current residual again on its own colour scale") == 5
+
+
+def test_contents_link_every_section(report):
+    import re
+    out = report[0]
+    html = (out / "index.html").read_text(encoding="utf-8")
+    toc = html[html.index('<nav class="toc">'):html.index("</nav>")]
+    links = re.findall(r'href="#(s\d+)"', toc)
+    heads = re.findall(r'<h2 id="(s\d+)">', html)
+    assert links and links == heads

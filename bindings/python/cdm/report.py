@@ -168,11 +168,16 @@ class Page:
     def __init__(self):
         self.parts = []
         self.notes = []
+        self.toc = []  # section titles (already escaped HTML), in order
 
     def note(self, text):
         self.notes.append(text)
 
     def add(self, s):
+        # Section headings get an anchor for the table of contents.
+        if s.startswith("<h2>") and s.endswith("</h2>"):
+            self.toc.append(s[4:-5])
+            s = f'<h2 id="s{len(self.toc)}">{s[4:-5]}</h2>'
         self.parts.append(s)
 
 
@@ -749,6 +754,73 @@ def section_candidates(diag, page, tmp, figs):
         page.add("</ul>")
 
 
+def section_search(diag, page, tmp, figs):
+    page.add("<h2>3b. The model search: where following the ranking leads</h2>")
+    rec = _dict(diag, "recommended")
+    if rec is None:
+        why = diag.get("search") if isinstance(diag.get("search"), str) else "not in the diagnosis"
+        page.add(f"<p>No model search ({_e(why)}).</p>")
+        return
+    effects = [str(e) for e in (_list(rec, "effects") or [])]
+    name = " + ".join(effects) if effects else "the nominal model"
+    state = ("explains the data" if rec.get("explained") is True else
+             "explains the data to within what matters" if rec.get("negligible_only") is True else
+             "does not explain the data")
+    xr = _num((_dict(_dict(rec, "error_mm") or {}, "x") or {}).get("rms"))
+    nf = _list(rec, "noise_floor_mm") or []
+    nfx = _num(nf[0]) if nf else float("nan")
+    page.add(f"<p><b>Recommended model: {_e(name)}</b>: {_e(state)}; x RMS {fmt_mm(xr)} mm at the "
+             f"noise floor {fmt_mm(nfx)} mm.</p>")
+    path = [st for st in (_list(rec, "path") or []) if isinstance(st, dict)]
+    if path:
+        rows = []
+        for st in path:
+            a, r = st.get("added"), st.get("removed")
+            move = (f"{_e(r)} → {_e(a)}" if a and r else f"+ {_e(a)}" if a else f"− {_e(r)}")
+            rows.append([_e(st.get("step")), move, _e(fmt_g(_num(st.get("bic_change")), 4)),
+                         fmt_mm(_num(st.get("x_rms_mm")))])
+        page.add(_table(["step", "move", "BIC change", "x RMS after (mm)"], rows))
+        xs = np.array([_num(st.get("x_rms_mm")) for st in path])
+        if np.isfinite(xs).all() and (xs > 0).all():
+            start = _num((_dict(_dict(diag, "error_mm") or {}, "x") or {}).get("rms"))
+            ys = np.concatenate([[start], xs]) if np.isfinite(start) and start > 0 else xs
+            labels = (["start"] if len(ys) > len(xs) else []) + [
+                ("+" + str(st.get("added")) if not st.get("removed") else
+                 "−" + str(st.get("removed")) if not st.get("added") else
+                 str(st.get("removed")) + "→" + str(st.get("added"))) for st in path]
+            fig, ax = plt.subplots(figsize=(8.5, 3.2), constrained_layout=True)
+            ax.plot(np.arange(len(ys)), ys, "o-", color="tab:blue")
+            ax.set_yscale("log")
+            ax.set_xticks(np.arange(len(ys)), labels, rotation=25, ha="right", fontsize=8)
+            if np.isfinite(nfx) and nfx > 0:
+                ax.axhline(nfx, color="0.4", ls="--", lw=1, label=f"noise floor {nfx:.3f} mm")
+                ax.legend(fontsize=8)
+            ax.set_ylabel("x RMS (mm)")
+            ax.set_title("x error along the search path")
+            figs.append(_save(fig, tmp, "search_path.png"))
+            page.add(_img("search_path.png", "x error along the search path",
+                          "Each step of the search and the x error it leaves (log scale)."))
+    else:
+        page.add("<p>The search made no move: no addition, removal or swap lowers the criterion.</p>")
+    alts = [a for a in (_list(rec, "alternatives") or []) if isinstance(a, list)]
+    dbic = _list(rec, "alternatives_bic_change") or []
+    if alts:
+        items = "".join(
+            f"<li>{_e(' + '.join(str(x) for x in a) or 'the nominal model')} (BIC "
+            f"{_e(fmt_g(_num(dbic[i]) if i < len(dbic) else float('nan'), 3))})</li>"
+            for i, a in enumerate(alts))
+        page.add(f"<p>Models the data cannot tell from it (BIC within 10):</p><ul>{items}</ul>")
+    left = [x for x in (_list(rec, "significant_left") or []) if isinstance(x, dict)]
+    if left:
+        items = "".join(
+            f"<li>{_e(x.get('effect') or x.get('text'))}"
+            f"{' (negligible: under a tenth of the noise floor)' if x.get('negligible') else ''}</li>"
+            for x in left)
+        page.add(f"<p>Still significant on top of it:</p><ul>{items}</ul>")
+    if isinstance(rec.get("criterion"), str):
+        page.add(f"<p class=\"small\">Criterion: {_e(rec['criterion'])}.</p>")
+
+
 def _corr(a, b):
     ok = np.isfinite(a) & np.isfinite(b)
     if ok.sum() < 3:
@@ -1105,6 +1177,7 @@ def _render(runs, tmp):
     sections = [lambda: section_summary(diag, page, tmp, figs),
                 lambda: section_maps(diag, page, tmp, figs, P),
                 lambda: section_candidates(diag, page, tmp, figs),
+                lambda: section_search(diag, page, tmp, figs),
                 lambda: section_fingerprints(diag, page, tmp, figs, P),
                 lambda: section_variables(diag, page, tmp, figs, P)]
     if len(runs) > 1:
@@ -1131,6 +1204,9 @@ def _render(runs, tmp):
     doc = (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
            f"<title>{_e(title)}</title><style>{CSS}</style></head><body>"
            f"<h1>{_e(title)}</h1><p>From {files}.</p>{notes}"
+           + '<nav class="toc"><b>Contents</b><ol>'
+           + "".join(f'<li><a href="#s{i + 1}">{t}</a></li>' for i, t in enumerate(page.toc))
+           + "</ol></nav>"
            + "\n".join(page.parts) + "</body></html>\n")
     return doc, figs
 

@@ -619,7 +619,10 @@ CDM_API int cdm_simulate_jig_defaults(char **options_json);
  * Writes a simulated jig dataset CSV (`cdm calib simulate`: the seed's
  * experiment in software) from a known model. options_json may be NULL or
  * hold any of: holes, pitch_mm, heights_mm [..], samples, noise_mm, quant_mm,
- * jig_tolerance_mm, seed, effect_seed (numbers); device (device JSON path;
+ * jig_tolerance_mm (each visit's own seating error), jig_hole_mm (each
+ * plate hole's y, z error, shared by every height; since 1.1), jig_fixture_mm
+ * (each height's x error, shared by every hole; since 1.1), seed,
+ * effect_seed (numbers); device (device JSON path;
  * default the nominal geometry), truth (calibration JSON as the true model),
  * effects [..] (hidden effects with random realistic magnitudes), truth_out
  * (where to write the true model). An unknown key or a bad value is

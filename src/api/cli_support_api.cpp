@@ -105,7 +105,8 @@ nlohmann::json sim_options_json(const cdm::JigSimOptions &o, uint64_t effect_see
     return {{"holes", o.n},         {"pitch_mm", o.pitch_mm},
             {"heights_mm", o.heights}, {"samples", o.samples},
             {"noise_mm", o.noise_mm}, {"quant_mm", o.quant_mm},
-            {"jig_tolerance_mm", o.jig_tolerance_mm}, {"seed", o.seed},
+            {"jig_tolerance_mm", o.jig_tolerance_mm}, {"jig_hole_mm", o.jig_hole_mm},
+            {"jig_fixture_mm", o.jig_fixture_mm}, {"seed", o.seed},
             {"effect_seed", effect_seed}};
 }
 
@@ -141,6 +142,8 @@ bool parse_sim_options(const char *text, SimRequest &r, std::string &err) {
         else if (k == "noise_mm") ok = number(v, k, 0, 100, r.o.noise_mm, err);
         else if (k == "quant_mm") ok = number(v, k, 0, 100, r.o.quant_mm, err);
         else if (k == "jig_tolerance_mm") ok = number(v, k, 0, 100, r.o.jig_tolerance_mm, err);
+        else if (k == "jig_hole_mm") ok = number(v, k, 0, 100, r.o.jig_hole_mm, err);
+        else if (k == "jig_fixture_mm") ok = number(v, k, 0, 100, r.o.jig_fixture_mm, err);
         else if (k == "seed") ok = number(v, k, 0, 9007199254740992.0, d, err), r.o.seed = uint64_t(d);
         else if (k == "effect_seed") ok = number(v, k, 0, 9007199254740992.0, d, err), r.effect_seed = uint64_t(d);
         else if (k == "heights_mm" && v.is_array() && !v.empty()) {
@@ -157,7 +160,7 @@ bool parse_sim_options(const char *text, SimRequest &r, std::string &err) {
             return err = "option \"" + k + "\" has the wrong type: " + v.dump(), false;
         } else {
             return err = "unknown option \"" + k + "\" (known: holes, pitch_mm, heights_mm, samples, noise_mm, "
-                         "quant_mm, jig_tolerance_mm, seed, effect_seed, device, truth, effects, truth_out)", false;
+                         "quant_mm, jig_tolerance_mm, jig_hole_mm, jig_fixture_mm, seed, effect_seed, device, truth, effects, truth_out)", false;
         }
         if (!ok) return false;
     }

@@ -27,6 +27,7 @@ LengthView length_view(const Model &m, const std::vector<PreparedPos> &pos) {
     v.lmean.resize(P);
     v.lres.resize(P);
     v.angle.resize(P);
+    v.dir.resize(P);
     for (size_t j = 0; j < P; ++j) {
         double t[3], y[4];
         m.jig_to_device(pos[j].ref.data(), t);
@@ -39,9 +40,18 @@ LengthView length_view(const Model &m, const std::vector<PreparedPos> &pos) {
             auto ho = g.holder(c);
             double d[3] = {t[0] + ho[0] - an[0], t[1] + ho[1] - an[1], t[2] + ho[2] - an[2]};
             v.angle[j][size_t(c)] = std::atan2(d[0], std::hypot(d[1], d[2])) * 180 / M_PI;
+            const V3 u(d[0], d[1], d[2]);
+            v.dir[j][size_t(c)] = u.norm() > 0 ? V3(u / u.norm()) : V3::Zero();
         }
     }
     return v;
+}
+
+LengthView shifted(const LengthView &v, const std::vector<V3> &off) {
+    LengthView out = v;
+    for (size_t j = 0; j < out.lres.size() && j < off.size(); ++j)
+        for (size_t c = 0; c < 4; ++c) out.lres[j][c] -= v.dir[j][c].dot(off[j]);
+    return out;
 }
 
 PeriodPeak length_period(const LengthView &v) {

@@ -28,8 +28,12 @@ constexpr double kFindingLevel = 1e-3;
 // the cable's angle (deg) to the plate.
 struct LengthView {
     std::vector<std::array<double, 4>> lmean, lres, angle;
+    std::vector<std::array<V3, 4>> dir; // d length / d holder position: each cable's unit direction
 };
 LengthView length_view(const Model &m, const std::vector<PreparedPos> &pos);
+// The view with the holder moved by off[j] at each position (the jig's own
+// error, diag_jig.h, taken out of the length residuals).
+LengthView shifted(const LengthView &v, const std::vector<V3> &off);
 
 // The strongest period of the cable-length residual, pooled over the four
 // cables (identical drums share a period) after a quadratic in length is

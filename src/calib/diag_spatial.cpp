@@ -1,6 +1,8 @@
 // See diag_spatial.h. docs/calibration.md explains each statistic.
 #include "calib/diag_spatial.h"
 
+#include "calib/diag_jig.h"
+
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -181,27 +183,11 @@ Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free) {
     const double q = chi2_isf(0.01 / double(std::max<size_t>(1, used)), 3); // 1 % family-wise
     // The height fixture's own error: one constant per height (the same at
     // every hole), like the holes' error a property of the jig, not of the
-    // model. Per-height mean residuals up to 0.15 mm (3x a machined 0.05 mm
-    // tolerance) are taken as the fixture's and removed before the
-    // chi-square, at the cost of their degrees of freedom; larger ones stay.
-    std::map<std::pair<int, int>, std::pair<double, double>> hmean; // (height, axis) -> (sum w r, sum w)
-    for (size_t j = 0; j < P; ++j)
-        if (E.ok[j])
-            for (int a = 0; a < 3; ++a) {
-                const double w = 1.0 / (E.var_mean[j](a) + jig(a) * jig(a));
-                auto &h = hmean[{G.height_index[j], a}];
-                h.first += w * E.res[j](a);
-                h.second += w;
-            }
-    int nuisance = 0;
-    std::map<std::pair<int, int>, double> fixture;
-    for (auto &kv : hmean) {
-        const double m = kv.second.first / kv.second.second;
-        if (std::fabs(m) <= 0.15) {
-            fixture[kv.first] = m;
-            ++nuisance;
-        }
-    }
+    // model (diag_jig.h). Per-height mean residuals up to kFixtureMaxMm are
+    // taken as the fixture's and removed before the chi-square, at the cost
+    // of their degrees of freedom; larger ones stay.
+    const FixtureOffsets fixture = fixture_offsets(E, G, jig);
+    const int nuisance = int(fixture.size());
     for (size_t j = 0; j < P; ++j) {
         if (!E.ok[j]) continue;
         double c = 0;

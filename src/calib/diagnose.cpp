@@ -13,6 +13,7 @@
 #include "calib/diag_candidates.h"
 #include "calib/diag_context.h"
 #include "calib/diag_findings.h"
+#include "calib/diag_jig.h"
 #include "calib/diag_review.h"
 #include "calib/diag_search.h"
 #include "calib/diag_validation.h"
@@ -192,7 +193,16 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     const Model &basis = search ? sr.model : use_top ? cands[0].m : model;
     const Eval &bE = search ? sr.E : use_top ? cands[0].E : cur;
     const LengthView lv = length_view(basis, pos);
-    const json findings = residual_findings(pos, lv, bE, search ? sctx.jig : jig);
+    // The jig's own errors first (diag_jig.h): the fixture's per-height
+    // offsets leave the residual before the trends are looked for, and a
+    // repeat at every hole is named as the plate's or the device's.
+    const V3 bjig = search ? sctx.jig : jig;
+    JigAnalysis ja = jig_analysis(bE, cf.grid, pos, bjig, noise_floor(bE, bjig));
+    json &jig_report = ja.report;
+    Eval bJ = bE;
+    for (size_t j = 0; j < P; ++j) bJ.res[j] -= ja.offset[j];
+    json findings = residual_findings(pos, shifted(lv, ja.offset), bJ, bjig);
+    if (!jig_report["finding"].is_null()) findings.push_back(jig_report["finding"]);
 
     // --- what needs every sample: the maxima of the reported evaluations and
     // the seed's ellipsoid applied to each sample, in one pass over the rows
@@ -302,6 +312,12 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                        " no longer earns its parameters (removing it changes BIC by " +
                        fmt_num(r["bic_change_if_removed"].get<double>(), 0) + "): drop it.";
     }
+    // What the jig's own errors are, after the verdict: they are not the
+    // device's, and the tests above have taken them out.
+    if (!jig_report["text"].empty()) {
+        verdict += " The jig as it is:";
+        for (auto &t : jig_report["text"]) verdict += " " + t.get<std::string>() + ".";
+    }
     if (!findings.empty()) {
         unexplained_summary += "; found: ";
         for (size_t k = 0; k < std::min<size_t>(3, findings.size()); ++k)
@@ -369,6 +385,9 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                                                    : use_top ? "the model plus " + cands[0].name : modelname},
                                     {"findings", findings}};
     out["validation"] = validation;
+    jig_report["fixture_fitted_x_mm"] = search ? sr.rep.fixture_mm : rep.fixture_mm;
+    jig_report["residual_of"] = out["unexplained_structure"]["residual_of"];
+    out["jig"] = jig_report;
     if (opt.per_position) {
         json pj;
         json point = json::array(), ref = json::array(), height = json::array(), n = json::array(), res = json::array(),

@@ -79,7 +79,9 @@ struct Problem {
     const std::vector<PreparedPos> &pos;
     const FitOptions &opt;
     ReadingEvaluator ev;
-    Eigen::VectorXd cur;              // the full parameter vector being evaluated
+    Eigen::VectorXd cur;              // the effects' parameters being evaluated (ev's layout)
+    int F = 0;                        // fixture heights with their own x offset (0: none)
+    Eigen::VectorXd fx;               // their offsets (mm, jig frame x)
     Eigen::VectorXd scale, lo, hi, init;
     Eigen::MatrixXd Q;                // full = base + Q * free
     std::vector<int> rows;            // positions used
@@ -90,7 +92,9 @@ struct Problem {
 
     Problem(Model &m_, const std::vector<PreparedPos> &p_, const FitOptions &o_)
         : m(m_), pos(p_), opt(o_), ev(m_) {
-        const int n = ev.size();
+        if (opt.fixture_count >= 2 && opt.fixture.size() == pos.size()) F = opt.fixture_count;
+        fx = Eigen::VectorXd::Zero(F);
+        const int n = ev.size() + F;
         cur = ev.current();
         scale.resize(n);
         lo.resize(n);
@@ -107,15 +111,22 @@ struct Problem {
                 init(a) = ps[k].init;
             }
         }
+        for (int k = 0; k < F; ++k) {
+            const int a = ev.size() + k;
+            scale(a) = 0.05; // a machined spacer's tolerance
+            lo(a) = -kFixtureMaxMm;
+            hi(a) = kFixtureMaxMm;
+            init(a) = 0;
+        }
         build_gauge();
         for (size_t j = 0; j < pos.size(); ++j)
             if (opt.use.empty() || opt.use[j]) rows.push_back(int(j));
         compute_weights();
     }
-    int n_params() const { return ev.size(); }
+    int n_params() const { return ev.size() + F; }
 
     void build_gauge() {
-        const int n = ev.size();
+        const int n = n_params();
         Q = Eigen::MatrixXd::Zero(n, n);
         int col = 0;
         for (size_t e = 0; e < m.effect_count(); ++e) {
@@ -125,11 +136,24 @@ struct Problem {
             Q.block(o, col, B.rows(), B.cols()) = B;
             col += int(B.cols());
         }
+        // The fixture offsets sum to zero: contrasts e_k - 1/F.
+        for (int k = 0; k + 1 < F; ++k, ++col) {
+            Q.block(ev.size(), col, F, 1).setConstant(-1.0 / F);
+            Q(ev.size() + k, col) += 1.0;
+        }
         Q.conservativeResize(n, col);
     }
+    int n_fixture_free() const { return F > 0 ? F - 1 : 0; }
 
-    void set_full(const Eigen::VectorXd &full) { cur = full; }
-    Eigen::VectorXd get_full() const { return cur; }
+    void set_full(const Eigen::VectorXd &full) {
+        cur = full.head(ev.size());
+        fx = full.tail(F);
+    }
+    Eigen::VectorXd get_full() const {
+        Eigen::VectorXd full(n_params());
+        full << cur, fx;
+        return full;
+    }
 
     // Writes the parameters back into the model, clamped to their bounds
     // (SLSQP honours them to its constraint tolerance, 1e-9).
@@ -146,10 +170,12 @@ struct Problem {
         }
     }
 
-    // Predicted readings and d(readings)/d(full params) at a position.
-    bool eval_position(const PreparedPos &pp, Eigen::Vector4d &y, Eigen::Matrix<double, 4, Eigen::Dynamic> *J,
+    // Predicted readings and d(readings)/d(effect params) at position j
+    // (its fixture height's offset applied to the reference).
+    bool eval_position(size_t j, Eigen::Vector4d &y, Eigen::Matrix<double, 4, Eigen::Dynamic> *J,
                        Eigen::Matrix<double, 4, 3> *dydP) {
-        const double ref[3] = {pp.ref(0), pp.ref(1), pp.ref(2)};
+        const PreparedPos &pp = pos[j];
+        const double ref[3] = {pp.ref(0) + (F > 0 ? fx(opt.fixture[j]) : 0.0), pp.ref(1), pp.ref(2)};
         std::string err;
         if (ev.eval(cur, ref, pp.t_s, y, J, dydP, &err)) return true;
         if (failure.empty()) failure = err;
@@ -162,7 +188,7 @@ struct Problem {
             const auto &pp = pos[rows[r]];
             Eigen::Vector4d y;
             Eigen::Matrix<double, 4, 3> dP;
-            if (!eval_position(pp, y, nullptr, &dP)) dP.setZero();
+            if (!eval_position(size_t(rows[r]), y, nullptr, &dP)) dP.setZero();
             for (int c = 0; c < 4; ++c) {
                 double jig = 0;
                 for (int a = 0; a < 3; ++a) jig += dP(c, a) * dP(c, a) * opt.jig_sigma(a) * opt.jig_sigma(a);
@@ -177,16 +203,40 @@ struct Problem {
         const int n = n_params();
         res.resize(4 * int(rows.size()));
         if (J) J->resize(4 * int(rows.size()), n);
-        Eigen::Matrix<double, 4, Eigen::Dynamic> Jp(4, n);
+        if (J) J->setZero();
+        Eigen::Matrix<double, 4, Eigen::Dynamic> Jp(4, ev.size());
+        Eigen::Matrix<double, 4, 3> dP;
         for (size_t r = 0; r < rows.size(); ++r) {
-            const auto &pp = pos[rows[r]];
+            const size_t j = size_t(rows[r]);
+            const auto &pp = pos[j];
             Eigen::Vector4d y;
-            if (!eval_position(pp, y, J ? &Jp : nullptr, nullptr)) return false;
+            if (!eval_position(j, y, J ? &Jp : nullptr, J && F > 0 ? &dP : nullptr)) return false;
             for (int c = 0; c < 4; ++c) {
                 const double sw = std::sqrt(w(4 * r + c));
                 res(4 * r + c) = sw * (pp.mean(c) - y(c));
-                if (J) J->row(4 * r + c) = sw * Jp.row(c);
+                if (!J) continue;
+                J->row(4 * r + c).head(ev.size()) = sw * Jp.row(c);
+                // d y / d (jig-frame x): the device-frame x derivative; the
+                // jig's rotation (a few mrad) is left out of this column.
+                if (F > 0) (*J)(4 * r + c, ev.size() + opt.fixture[j]) = sw * dP(c, 0);
             }
+        }
+        return true;
+    }
+
+    // The fixture offsets alone fitted at the current effect parameters
+    // (Gauss-Newton; nearly linear in them): the chi-square a model has
+    // with the jig as it is.
+    bool profile_fixture() {
+        if (F == 0) return true;
+        Eigen::MatrixXd Qf = Q.bottomRows(F).rightCols(F - 1);
+        for (int it = 0; it < 3; ++it) {
+            Eigen::VectorXd res;
+            Eigen::MatrixXd J;
+            if (!residuals(res, &J)) return false;
+            Eigen::MatrixXd A = J.rightCols(F) * Qf;
+            Eigen::VectorXd step = (A.transpose() * A).ldlt().solve(A.transpose() * res);
+            fx = (fx + Qf * step).cwiseMax(-kFixtureMaxMm).cwiseMin(kFixtureMaxMm);
         }
         return true;
     }
@@ -271,7 +321,8 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
     rep = FitReport{};
     rep.algorithm = "NLOPT_LD_SLSQP (whitened by the Gauss-Newton Hessian)";
     const int nfree = int(pb.Q.cols());
-    rep.n_free = nfree;
+    rep.n_free = nfree - pb.n_fixture_free();
+    rep.n_fixture = pb.n_fixture_free();
     rep.n_obs = 4 * int(pb.rows.size());
     auto fail = [&] {
         rep.message = "fit failed: " + pb.failure;
@@ -345,7 +396,9 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         prev = W.best;
     }
     pb.commit();
-    pb.set_full(pb.ev.current());
+    pb.cur = pb.ev.current(); // as committed: clamped to the bounds
+    pb.fx = pb.fx.cwiseMax(-kFixtureMaxMm).cwiseMin(kFixtureMaxMm);
+    rep.fixture_mm.assign(pb.fx.data(), pb.fx.data() + pb.fx.size());
     Eigen::VectorXd res;
     if (!pb.residuals(res, nullptr)) return fail();
     rep.chi2 = res.squaredNorm();
@@ -433,7 +486,7 @@ double model_chi2(const Model &m, const std::vector<PreparedPos> &pos, const Fit
     Eigen::VectorXd res;
     if (n_obs) *n_obs = 4 * int(pb.rows.size());
     // A model whose user effect cannot be evaluated explains nothing.
-    if (!pb.residuals(res, nullptr)) return INFINITY;
+    if (!pb.profile_fixture() || !pb.residuals(res, nullptr)) return INFINITY;
     return res.squaredNorm();
 }
 

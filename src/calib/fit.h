@@ -33,6 +33,14 @@ std::vector<PreparedPos> prepare(const Dataset &d);
 struct FitOptions {
     Eigen::Vector3d jig_sigma{0.03, 0.03, 0.03}; // mm, per axis, std of each position's own error
     std::vector<char> use;                       // positions that take part (empty: all)
+    // The jig as it is: each fixture height's own x error (jig frame, the
+    // axis the spacer sets), fitted as nuisance offsets beside the model's
+    // parameters, summing to zero (their common part is the jig's placement
+    // or the model's). fixture[j]: position j's height index; empty, or
+    // fewer than two heights: none. Bounded by kFixtureMaxMm: a larger
+    // per-height error is not a machined spacer's and is left to the model.
+    std::vector<int> fixture;
+    int fixture_count = 0;
     int max_evals = 400;
     std::function<bool(double)> progress;        // fraction done; false cancels
 };
@@ -48,7 +56,13 @@ struct FitReport {
     // per effect (model order), per parameter
     std::vector<std::vector<double>> std;
     std::string message;
+    std::vector<double> fixture_mm; // fitted per-height x offsets (FitOptions::fixture), sum zero
+    int n_fixture = 0;              // their free parameters (not in n_free: the same in every model)
 };
+
+// The largest per-height error taken as the height fixture's (mm): 3x a
+// machined 0.05 mm tolerance. The judge (diag_spatial.cpp) uses the same.
+constexpr double kFixtureMaxMm = 0.15;
 
 // Fits every parameter of every effect in `m` except the ellipsoid's, from
 // their current values. Gauge freedoms are fixed explicitly (see fit.cpp).

@@ -18,6 +18,13 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
         return false;
     }
     out.grid = diag::make_grid(pos, data.heights);
+    // The jig as it is (diag_jig.h): each fixture height's own x error is
+    // fitted beside the model, so that no device effect is bent to follow
+    // a spacer's error.
+    if (out.grid.layered && data.heights.size() >= 2) {
+        out.fit_options.fixture = out.grid.height_index;
+        out.fit_options.fixture_count = int(data.heights.size());
+    }
     // A machined plate is within ~0.05 mm: white scatter beyond that is not
     // the jig's and must not hide an effect. Without repeated samples the
     // pots' noise is white scatter too, and there is nothing to cap against.

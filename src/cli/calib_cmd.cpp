@@ -216,7 +216,7 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
 struct SimArgs {
     std::string out, effects, truth, device, plugin, heights, truth_out;
     int holes = 0, samples = 0;
-    double pitch_mm = 0, noise_mm = 0, quant_mm = 0, jig_tolerance_mm = 0;
+    double pitch_mm = 0, noise_mm = 0, quant_mm = 0, jig_tolerance_mm = 0, jig_hole_mm = 0, jig_fixture_mm = 0;
     uint64_t seed = 0, effect_seed = 0;
 };
 
@@ -232,6 +232,8 @@ void sim_defaults(SimArgs &s) {
     s.noise_mm = d.at("noise_mm").get<double>();
     s.quant_mm = d.at("quant_mm").get<double>();
     s.jig_tolerance_mm = d.at("jig_tolerance_mm").get<double>();
+    s.jig_hole_mm = d.at("jig_hole_mm").get<double>();
+    s.jig_fixture_mm = d.at("jig_fixture_mm").get<double>();
     s.seed = d.at("seed").get<uint64_t>();
     s.effect_seed = d.at("effect_seed").get<uint64_t>();
 }
@@ -239,6 +241,7 @@ void sim_defaults(SimArgs &s) {
 int cmd_simulate(const SimArgs &a) {
     nlohmann::json o = {{"holes", a.holes},       {"samples", a.samples},   {"pitch_mm", a.pitch_mm},
                         {"noise_mm", a.noise_mm}, {"quant_mm", a.quant_mm}, {"jig_tolerance_mm", a.jig_tolerance_mm},
+                        {"jig_hole_mm", a.jig_hole_mm},   {"jig_fixture_mm", a.jig_fixture_mm},
                         {"seed", a.seed},         {"effect_seed", a.effect_seed}};
     if (!a.heights.empty()) o["heights_mm"] = parse_number_list(a.heights, "--heights");
     if (!a.effects.empty()) o["effects"] = split_list(a.effects);
@@ -304,6 +307,12 @@ void add_simulate(CLI::App *calib) {
     sim->add_option("--noise-mm", s.noise_mm, "Per-sample pot noise std (mm)")->check(range(0, 100));
     sim->add_option("--quant-mm", s.quant_mm, "ADC step (mm)")->check(range(0, 100));
     sim->add_option("--jig-tolerance-mm", s.jig_tolerance_mm, "Std of each position's own error (mm)")
+        ->check(range(0, 100));
+    sim->add_option("--jig-hole-mm", s.jig_hole_mm,
+                    "Std of each plate hole's (y, z) error, the same at every height (a plate drilled once) (mm)")
+        ->check(range(0, 100));
+    sim->add_option("--jig-fixture-mm", s.jig_fixture_mm,
+                    "Std of each fixture height's x error, the same at every hole (a spacer machined once) (mm)")
         ->check(range(0, 100));
     sim->add_option("--samples", s.samples, "Samples per position")->check(range(1, 1000000));
     sim->add_option("--holes", s.holes, "Holes per side of the plate")->check(range(1, 1000));

@@ -1,0 +1,288 @@
+// See diag_jig.h. docs/calibration.md, "The jig as it is", explains the
+// tests and their wording.
+#include "calib/diag_jig.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <set>
+#include <string>
+
+#include "calib/diag_findings.h"
+#include "calib/diag_stats.h"
+#include "calib/fit.h"
+
+namespace cdm {
+namespace diag {
+
+using nlohmann::json;
+
+namespace {
+
+const char *kAxis[3] = {"x", "y", "z"};
+
+std::string num(double v, int prec, bool sign = false) {
+    char b[64];
+    std::snprintf(b, sizeof b, sign ? "%+.*f" : "%.*f", prec, v);
+    return b;
+}
+std::string pstr(double p) {
+    char b[64];
+    if (p >= 0.001)
+        std::snprintf(b, sizeof b, "p = %.3f", p);
+    else if (p > 0)
+        std::snprintf(b, sizeof b, "p = %.1e", p);
+    else
+        std::snprintf(b, sizeof b, "p < 1e-300");
+    return b;
+}
+
+// Weighted per-height mean residual and its standard error, per axis.
+struct HeightMean {
+    double sw = 0, swr = 0;
+    double mean() const { return sw > 0 ? swr / sw : 0.0; }
+    double se() const { return sw > 0 ? 1.0 / std::sqrt(sw) : INFINITY; }
+};
+std::map<std::pair<int, int>, HeightMean> height_means(const Eval &E, const Grid &G, const V3 &jig) {
+    std::map<std::pair<int, int>, HeightMean> hm;
+    for (size_t j = 0; j < E.res.size(); ++j)
+        if (E.ok[j])
+            for (int a = 0; a < 3; ++a) {
+                const double w = 1.0 / (E.var_mean[j](a) + jig(a) * jig(a));
+                auto &h = hm[{G.height_index[j], a}];
+                h.sw += w;
+                h.swr += w * E.res[j](a);
+            }
+    return hm;
+}
+
+} // namespace
+
+FixtureOffsets fixture_offsets(const Eval &E, const Grid &G, const V3 &jig) {
+    FixtureOffsets f;
+    for (auto &kv : height_means(E, G, jig))
+        if (std::fabs(kv.second.mean()) <= kFixtureMaxMm) f[kv.first] = kv.second.mean();
+    return f;
+}
+
+Eval without_fixture(const Eval &E, const Grid &G, const FixtureOffsets &f) {
+    Eval out = E;
+    for (size_t j = 0; j < out.res.size(); ++j)
+        for (int a = 0; a < 3; ++a) {
+            auto it = f.find({G.height_index[j], a});
+            if (it != f.end()) out.res[j](a) -= it->second;
+        }
+    return out;
+}
+
+JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<PreparedPos> &pos, const V3 &jig,
+                         const V3 &noise) {
+    JigAnalysis A;
+    json &out = A.report;
+    out = {{"fixture", nullptr}, {"holes", nullptr}, {"text", json::array()}, {"finding", nullptr}};
+    const size_t P = E.res.size();
+    A.offset.assign(P, V3::Zero());
+    const double small = 0.1 * noise.norm(); // what the verdict calls negligible
+    std::set<int> heights;
+    for (size_t j = 0; j < P; ++j)
+        if (E.ok[j]) heights.insert(G.height_index[j]);
+    const int K = int(heights.size());
+    if (!G.layered || K < 2) return A; // no fixture heights: nothing repeats
+
+    // --- the fixture: per-height means, relative to their common part
+    // (the jig's placement), tested against their standard errors.
+    const auto hm = height_means(E, G, jig);
+    json fx = {{"heights_mm", json::array()}, {"offsets_mm", json::object()}, {"max_mm", json::object()},
+               {"p_value", json::object()}, {"taken_as_jig", true},
+               {"test", "chi-square of the per-height weighted mean residuals about their common mean, K - 1 "
+                        "degrees of freedom, per axis; Bonferroni over the three axes"}};
+    {
+        std::map<int, double> href; // a height index's fixture height (mm): the mean x reference
+        std::map<int, int> hn;
+        for (size_t j = 0; j < P; ++j) {
+            href[G.height_index[j]] += pos[j].ref(0);
+            hn[G.height_index[j]] += 1;
+        }
+        for (int h : heights) fx["heights_mm"].push_back(href[h] / hn[h]);
+    }
+    std::string fx_words;
+    double fx_worst = 0;
+    int fx_axis = -1;
+    for (int a = 0; a < 3; ++a) {
+        double sw = 0, swm = 0;
+        for (int h : heights) {
+            const auto &m = hm.at({h, a});
+            sw += 1 / (m.se() * m.se());
+            swm += m.mean() / (m.se() * m.se());
+        }
+        const double common = swm / sw;
+        double chi2 = 0, mx = 0;
+        json offs = json::array();
+        for (int h : heights) {
+            const auto &m = hm.at({h, a});
+            const double d = m.mean() - common;
+            chi2 += d * d / (m.se() * m.se());
+            mx = std::max(mx, std::fabs(d));
+            offs.push_back(d);
+            if (std::fabs(m.mean()) > kFixtureMaxMm) fx["taken_as_jig"] = false;
+        }
+        const double p = std::min(1.0, 3 * chi2_sf(chi2, K - 1));
+        fx["offsets_mm"][kAxis[a]] = offs;
+        fx["max_mm"][kAxis[a]] = mx;
+        fx["p_value"][kAxis[a]] = p;
+        if (p < kFindingLevel && mx >= small && mx > fx_worst) {
+            fx_worst = mx;
+            fx_axis = a;
+        }
+    }
+    out["fixture"] = fx;
+    if (fx_axis >= 0 && fx["taken_as_jig"].get<bool>()) {
+        std::string per;
+        for (auto &v : fx["offsets_mm"][kAxis[fx_axis]]) per += (per.empty() ? "" : ", ") + num(v.get<double>(), 3, true);
+        out["text"].push_back("each fixture height has its own offset, up to " + num(fx_worst, 3) + " mm in " +
+                              kAxis[fx_axis] + " (per height: " + per + " mm; " +
+                              pstr(fx["p_value"][kAxis[fx_axis]].get<double>()) +
+                              "): the height fixture's spacers, the jig's error, taken out of the fit and the "
+                              "tests (up to " + num(kFixtureMaxMm, 2) + " mm per height)");
+    }
+
+    // --- the holes: one-way analysis of variance of the residual (the
+    // fixture's offsets removed) by hole, over the holes seen at two
+    // heights or more.
+    const FixtureOffsets fo = fixture_offsets(E, G, jig);
+    for (size_t j = 0; j < P; ++j)
+        for (int a = 0; a < 3; ++a) {
+            auto it = fo.find({G.height_index[j], a});
+            if (it != fo.end()) A.offset[j](a) = it->second;
+        }
+    const Eval R = without_fixture(E, G, fo);
+    std::map<std::pair<long, long>, std::vector<size_t>> holes;
+    for (size_t j = 0; j < P; ++j)
+        if (R.ok[j]) holes[{std::lround(pos[j].ref(1) / G.pitch), std::lround(pos[j].ref(2) / G.pitch)}].push_back(j);
+    std::vector<std::pair<std::pair<long, long>, std::vector<size_t>>> H;
+    for (auto &kv : holes)
+        if (kv.second.size() >= 2) H.push_back(kv);
+    const double I = double(H.size());
+    double N = 0, sn2 = 0;
+    for (auto &h : H) {
+        N += double(h.second.size());
+        sn2 += double(h.second.size()) * double(h.second.size());
+    }
+    const double df1 = I - 1, df2 = N - I - (K - 1);
+    if (I < 10 || df2 < 10) return A;
+    const double n0 = (N - sn2 / N) / df1; // the effective heights per hole
+    // The hole means' neighbour graph over the plate (adjacent holes).
+    std::map<std::pair<long, long>, int> hidx;
+    for (size_t i = 0; i < H.size(); ++i) hidx[H[i].first] = int(i);
+    Grid hg;
+    hg.nb.resize(H.size());
+    hg.height_index.assign(H.size(), 0);
+    for (size_t i = 0; i < H.size(); ++i)
+        for (auto d : {std::pair<long, long>{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+            auto it = hidx.find({H[i].first.first + d.first, H[i].first.second + d.second});
+            if (it != hidx.end()) hg.nb[i].push_back(it->second);
+        }
+    const std::vector<char> all_ok(H.size(), 1);
+    json ho = {{"holes", I}, {"heights_per_hole", n0}, {"std_mm", json::object()}, {"F", json::object()},
+               {"dof", {df1, df2}}, {"p_value", json::object()}, {"smooth_z", json::object()},
+               {"smooth_p", json::object()}, {"named", nullptr},
+               {"test", "one-way analysis of variance of the residual by hole (per-height means removed), F-test, "
+                        "Bonferroni over the three axes; the hole means' Moran's I over adjacent holes (normal "
+                        "approximation, two axes' worth of Bonferroni) tells a plate's independent hole errors "
+                        "(white) from a device effect that does not vary with height (smooth)"}};
+    V3 seat = V3::Zero(), var_hole_a = V3::Zero(), msw_a = V3::Zero(), grand = V3::Zero();
+    std::vector<int> plate_axes, device_axes;
+    double dev_p = 1, dev_amp = 0;
+    for (int a = 0; a < 3; ++a) {
+        double g = 0;
+        for (auto &h : H)
+            for (size_t j : h.second) g += R.res[j](a);
+        g /= N;
+        double ssb = 0, ssw = 0, noise = 0;
+        std::vector<double> hmeans;
+        for (auto &h : H) {
+            double m = 0;
+            for (size_t j : h.second) m += R.res[j](a);
+            m /= double(h.second.size());
+            hmeans.push_back(m);
+            ssb += double(h.second.size()) * (m - g) * (m - g);
+            for (size_t j : h.second) {
+                ssw += (R.res[j](a) - m) * (R.res[j](a) - m);
+                noise += R.var_mean[j](a);
+            }
+        }
+        const double msb = ssb / df1, msw = ssw / df2;
+        const double F = msw > 0 ? msb / msw : 0;
+        const double p = std::min(1.0, 3 * f_sf(F, df1, df2));
+        const double var_hole = std::max(0.0, (msb - msw) / n0);
+        var_hole_a(a) = var_hole;
+        msw_a(a) = msw;
+        grand(a) = g;
+        seat(a) = std::sqrt(std::max(0.0, msw - noise / N));
+        const double mz = moran_z(hmeans, all_ok, hg);
+        const double mp = std::min(1.0, 3 * normal_sf(mz));
+        ho["std_mm"][kAxis[a]] = std::sqrt(var_hole);
+        ho["F"][kAxis[a]] = F;
+        ho["p_value"][kAxis[a]] = p;
+        ho["smooth_z"][kAxis[a]] = mz;
+        ho["smooth_p"][kAxis[a]] = mp;
+        if (p < kFindingLevel && std::sqrt(var_hole) >= small) {
+            if (mp >= kFindingLevel) {
+                plate_axes.push_back(a);
+            } else {
+                device_axes.push_back(a);
+                if (std::sqrt(var_hole) > dev_amp) dev_amp = std::sqrt(var_hole), dev_p = std::max(p, mp);
+            }
+        }
+    }
+    out["seat_std_mm"] = {seat(0), seat(1), seat(2)};
+    if (!device_axes.empty()) {
+        ho["named"] = "device";
+        std::string ax;
+        for (int a : device_axes) ax += (ax.empty() ? "" : ", ") + std::string(kAxis[a]);
+        out["finding"] = {{"variable", "hole"},
+                          {"variable_kind", "hole"},
+                          {"cable", nullptr},
+                          {"kind", "repeat"},
+                          {"axis", kAxis[device_axes[0]]},
+                          {"period_mm", nullptr},
+                          {"amplitude_mm", dev_amp},
+                          {"p_value", dev_p},
+                          {"r2", nullptr},
+                          {"test", ho["test"]},
+                          {"text", "the " + ax + " residual repeats at the same hole at every height and is smooth "
+                                   "over the plate (about " + num(dev_amp, 3) + " mm): a device effect that does not "
+                                   "change with height, not the plate's holes (a plate's hole errors are independent "
+                                   "from hole to hole)"}};
+    } else if (!plate_axes.empty()) {
+        ho["named"] = "plate";
+        // Each hole's error, its mean over the heights shrunk by the share
+        // of the hole variance in it (the best linear unbiased predictor of
+        // a random effect), out of the residual the device is judged on.
+        for (auto &h : H)
+            for (int a : plate_axes) {
+                double m = 0;
+                for (size_t j : h.second) m += R.res[j](a);
+                m /= double(h.second.size());
+                const double shrink = var_hole_a(a) / (var_hole_a(a) + msw_a(a) / double(h.second.size()));
+                for (size_t j : h.second) A.offset[j](a) += shrink * (m - grand(a));
+            }
+        std::string what, tests;
+        for (int a : plate_axes) {
+            what += (what.empty() ? "" : " and ") + num(ho["std_mm"][kAxis[a]].get<double>(), 3) + " mm in " + kAxis[a];
+            tests += (tests.empty() ? "" : "; ") + std::string(kAxis[a]) + " F = " +
+                     num(ho["F"][kAxis[a]].get<double>(), 2) + ", " + pstr(ho["p_value"][kAxis[a]].get<double>()) +
+                     ", Moran z = " + num(ho["smooth_z"][kAxis[a]].get<double>(), 1);
+        }
+        out["text"].push_back("the residual repeats at the same hole at every height: the plate's holes are off by "
+                              "about " + what + " (analysis of variance by hole: " + tests +
+                              "; independent from hole to hole): the jig's error, not the device's; the fit weighs "
+                              "it as the jig's tolerance");
+    }
+    out["holes"] = ho;
+    return A;
+}
+
+} // namespace diag
+} // namespace cdm

@@ -1,0 +1,58 @@
+// The jig as it is: the plate's and the fixture's own errors told apart
+// from the device's, so that a real jig's signature is named as the jig's
+// and never sent to the user as a missing device effect.
+//
+// A plate is drilled once: each hole's error is the same at every fixture
+// height, and independent from hole to hole (drilling errors do not follow
+// each other). A spacer is machined once: each height's error is the same at
+// every hole. jig/errors.h simulates both. Here they are estimated from a
+// model's position residuals:
+//  - fixture: the per-height mean residual per axis (taken out by the fit,
+//    FitOptions::fixture, in x, and by the judge on every axis), up to
+//    kFixtureMaxMm; larger ones are not a spacer's and stay the model's;
+//  - holes: a variance component, from a one-way analysis of variance of
+//    the residual by hole (per-height means removed); named as the plate's
+//    only when the hole means are spatially white (Moran's I over the
+//    plate), since a device effect that does not vary with height also
+//    repeats at every height but is smooth over the plate.
+#pragma once
+
+#include <map>
+#include <utility>
+
+#include <nlohmann/json.hpp>
+
+#include "calib/diag_eval.h"
+#include "calib/diag_spatial.h"
+
+namespace cdm {
+namespace diag {
+
+// (height index, axis) -> the fixture's offset (mm): the weighted per-height
+// mean residual, for every (height, axis) whose mean is within
+// kFixtureMaxMm. Empty for a layout without fixture heights.
+using FixtureOffsets = std::map<std::pair<int, int>, double>;
+FixtureOffsets fixture_offsets(const Eval &E, const Grid &G, const V3 &jig);
+
+// E with the fixture's offsets subtracted from its residuals.
+Eval without_fixture(const Eval &E, const Grid &G, const FixtureOffsets &f);
+
+// The jig's own errors in E's residual. report: {"fixture": {...},
+// "holes": {...}, "seat_std_mm": [x,y,z], "text": [...], "finding": ...}
+// (docs/calibration.md, "The jig as it is"); a sentence in "text" only for
+// what is significant and at least a tenth of the noise floor `noise` (3-D).
+// When the residual repeats at every height but is smooth over the plate,
+// "finding" holds a residual finding (the device's, not the jig's) in the
+// shape of residual_findings(). offset: per position, the jig's estimated
+// error (the fixture's per-height offsets, and each hole's shrunken mean
+// when the plate's holes are named), for the residual analysis to take out
+// before it looks for the device's structure.
+struct JigAnalysis {
+    nlohmann::json report;
+    std::vector<V3> offset;
+};
+JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<PreparedPos> &pos, const V3 &jig,
+                         const V3 &noise);
+
+} // namespace diag
+} // namespace cdm

@@ -128,7 +128,8 @@ int cmd_bridge_dds(const BridgeArgs &a) {
         if (status_period) deadline = std::min(deadline, std::max(next_status, now));
         cdm_pose p{};
         p.struct_size = sizeof p;
-        int rc = cdm_wait_pose_after(dev.get(), last_hs, int((deadline - now) / 1000000), &p);
+        // Rounded up: a 0 ms wait only looks, and would spin until the deadline.
+        int rc = cdm_wait_pose_after(dev.get(), last_hs, int((deadline - now + 999999) / 1000000), &p);
         if (rc == CDM_ERR_TIMEOUT) rc = cdm_get_pose(dev.get(), &p); // the flags now (stale), not at the last report
         now = now_ns();
         const bool have_pose = rc != CDM_ERR_NO_DATA && !(p.flags & CDM_POSE_NO_POSITION);

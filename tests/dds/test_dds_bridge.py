@@ -12,7 +12,10 @@ subscribers read it as a ROS 2 node would see it.
   against the same bridge.
 - test_stale_when_the_device_stalls: sim:?stall_after=N: poses stop at report
   N-1 and the status turns stale, reliably delivered.
-- usage errors: no --dds, a bad --prefix.
+- test_disconnect_and_reconnect: sim:?disconnect=500:400: disconnected, then
+  back, the lost reports counted.
+- usage errors: no --dds, a bad --prefix; the status type agrees in the IDL,
+  the ROS .msg and the Python type.
 """
 import ctypes
 import itertools
@@ -214,6 +217,24 @@ def test_stale_when_the_device_stalls():
     newest = max(sub.got["pose"], key=lambda pt: T.stamp_ns(pt[0].header))[0]
     assert T.stamp_ns(newest.header) == T.stamp_ns(st.header)
 
+
+def test_disconnect_and_reconnect():
+    """sim:?disconnect=500:400: unplugged at report 500 for 400 ms, then back
+    with the same serial. The status says disconnected, then not, with the
+    lost reports counted; poses resume."""
+    bridge = Bridge("sim:?disconnect=500:400", 3)
+    sub = Subscriber(bridge)
+    back = lambda s: any(st.disconnected for st, _ in s.got["status"]) and not s.got["status"][-1][0].disconnected
+    assert sub.collect(back, 10), [st for st, _ in sub.got["status"]][-3:]
+    sub.collect(lambda s: False, 0.3)
+    bridge.finish()
+    statuses = [st for st, _ in sub.got["status"]]
+    i = next(i for i, st in enumerate(statuses) if st.disconnected)
+    assert statuses[i].report_sequence == 499, statuses[i]  # the last report before the unplug
+    j = next(j for j in range(i, len(statuses)) if not statuses[j].disconnected)
+    # The device samples on while unplugged: ~400 reports at 1 kHz are lost.
+    assert statuses[j].report_sequence > 499 and statuses[j].dropped > 300, statuses[j]
+    assert max(T.stamp_ns(p.header) for p, _ in sub.got["pose"]) > T.stamp_ns(statuses[i].header)  # poses resumed
 
 def test_usage_errors():
     r = subprocess.run([CLI, "bridge", "sim:"], capture_output=True, text=True, timeout=30)

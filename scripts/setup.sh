@@ -18,7 +18,9 @@ DEB_PKGS=(build-essential cmake ninja-build pkg-config git
   # test needs venv, unzip, and patchelf for auditwheel repair.
   dpkg-dev file nuget unzip python3-venv patchelf
   # fuzzing (scripts/fuzz.sh): clang with libFuzzer's runtime
-  clang libclang-rt-14-dev)
+  clang libclang-rt-14-dev
+  # `cdm bridge --dds` (src/bridge): Cyclone DDS's C library and its IDL compiler
+  cyclonedds-dev cyclonedds-tools)
 
 missing=()
 for p in "${DEB_PKGS[@]}"; do
@@ -35,6 +37,11 @@ need_py=()
 for m in numpy matplotlib pytest mujoco mypy; do
   "$PY" -c "import $m" 2>/dev/null || need_py+=("$m")
 done
+# cyclonedds: the DDS bridge's subscribers (tests/dds, examples/ros2). Its
+# wheel bundles its own libddsc (11.x), which speaks the same DDSI wire
+# protocol as Debian's 0.10.2 (tests/dds proves it); 11.0.1 is the release
+# with a binary wheel for CPython 3.11, so no CYCLONEDDS_HOME build is needed.
+"$PY" -c "import cyclonedds.idl" 2>/dev/null || need_py+=("cyclonedds==11.0.1")
 # auditwheel: the wheel test repairs the wheel with it (skipped without it).
 "$PY" -c "import auditwheel" 2>/dev/null || need_py+=(auditwheel)
 if [ ${#need_py[@]} -gt 0 ]; then
@@ -43,7 +50,7 @@ if [ ${#need_py[@]} -gt 0 ]; then
     if grep -q externally-managed /tmp/cdm-pip.log; then
       # Debian's system python: its own packages, mujoco from PyPI beside them.
       DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-numpy python3-matplotlib python3-pytest python3-mypy
-      "$PY" -m pip install -q --break-system-packages mujoco
+      "$PY" -m pip install -q --break-system-packages mujoco "cyclonedds==11.0.1"
     else
       cat /tmp/cdm-pip.log >&2
       exit 1

@@ -27,8 +27,6 @@ try:
 except ImportError:  # pragma: no cover - told to the user, not a test
     sys.exit("mujoco_teleop: needs MuJoCo's Python package (pip install mujoco)")
 
-import cdm
-
 # A 6-DoF arm: base yaw, shoulder and elbow pitch, a roll-pitch-yaw wrist, a
 # tool site 8 cm past the last joint. (A roll-pitch-roll wrist would be
 # singular at zero pitch, right in the middle of a hand's range; this one is
@@ -197,6 +195,10 @@ def quat_angle(a, b):
 
 
 def run(uri, seconds, scale, control_hz=500.0, feedforward=True, verbose=True):
+    # Imported here, not at the top: examples/ros2/dds_teleop.py reuses the
+    # arm on a machine that gets its poses over DDS and may not have cdm.
+    import cdm
+
     arm = Arm()
     tool_pos, tool_quat = arm.tool_pose()
     mapper = TeleopMapper(tool_pos, tool_quat, scale)

@@ -28,10 +28,11 @@ struct UsageError : std::runtime_error {
 };
 
 // `cdm list|info|stream` (device_cmd.cpp), `cdm record` (record_cmd.cpp),
-// `cdm calib ...` (calib_cmd.cpp).
+// `cdm calib ...` (calib_cmd.cpp), `cdm bridge` (bridge_cmd.cpp).
 void add_device_commands(CLI::App &app);
 void add_record_command(CLI::App &app);
 void add_calib_commands(CLI::App &app);
+void add_bridge_command(CLI::App &app);
 
 // Monotonic clock of our own (CLOCK_MONOTONIC, the clock libcdm stamps
 // host_time_ns with, so ages computed from the two agree).

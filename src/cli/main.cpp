@@ -66,6 +66,7 @@ int run(int argc, char **argv) {
     add_device_commands(app);
     add_record_command(app);
     add_calib_commands(app);
+    add_bridge_command(app);
     set_footer(&app);
     if (argc < 2) {
         std::fprintf(stderr, "%s", app.help().c_str());

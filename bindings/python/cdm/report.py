@@ -423,6 +423,18 @@ def section_summary(diag, page, tmp, figs):
                          if _finite(fit.get("free_parameters")) else "")
                       + (f"; {_e(fit['message'])}" if isinstance(fit.get("message"), str)
                          and fit["message"] else "")))
+    jig = _dict(diag, "jig")
+    if jig is not None:
+        # The jig's own errors (plate holes, fixture heights), named as the
+        # jig's by the diagnosis and taken out of its tests.
+        texts = [t for t in (jig.get("text") or []) if isinstance(t, str)]
+        holes = jig.get("holes") if isinstance(jig.get("holes"), dict) else {}
+        hs = holes.get("std_mm") if isinstance(holes.get("std_mm"), dict) else {}
+        line = "; ".join(_e(t) for t in texts) if texts else "nothing of the jig's own beyond its tolerance"
+        if hs:
+            line += (" (hole error std x, y, z: "
+                     + ", ".join(fmt_g(hs.get(a), 3) for a in ("x", "y", "z")) + " mm)")
+        facts.append(("The jig as it is", line))
     el = _dict(diag, "ellipsoid")
     if el is not None:
         facts.append(("Seed ellipsoid L, M, N (mm)",

@@ -245,3 +245,26 @@ def test_hostile_and_truncated_mcap(tmp_path):
             w.finish()
         rc, err = replay_error(path)
         assert rc == 1 and expect in err, err
+
+
+def test_full_disk_keeps_whole_chunks_that_replay(tmp_path):
+    # A file-size limit stands in for a full disk (EFBIG as ENOSPC would):
+    # the chunk that does not fit is cut off again, the chunks before it
+    # stay, and replay: plays them, saying the footer is missing.
+    import os
+    import resource
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (300000, 300000))
+
+    out = tmp_path / "full.mcap"
+    r = subprocess.run([CLI, "record", "sim:", str(out), "--seconds", "5"], preexec_fn=limit, capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 1
+    assert os.strerror(27) in r.stderr and "keeps what was written" in r.stderr
+    csv_out = tmp_path / "full.csv"
+    r = cdm("export", str(out), str(csv_out))
+    assert r.returncode == 0, r.stderr
+    assert "without its footer" in r.stderr
+    assert len(csv_out.read_text().splitlines()) > 100  # two chunks' worth of reports, not an empty file

@@ -67,14 +67,19 @@ public:
             err = path_ + ": a CSV recording holds poses: every row needs one";
             return CDM_ERR_INVALID_ARG;
         }
-        char row[512];
         const double *v = p->struct_size >= offsetof(cdm_pose, velocity) + sizeof p->velocity ? p->velocity : zero_;
-        std::snprintf(row, sizeof row,
-                      "%llu,%u,%llu,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%u,%u,%.17g,%.17g,%.17g,%u\n",
-                      (unsigned long long)host_ns, p->sequence, (unsigned long long)p->device_time_us, p->position[0],
-                      p->position[1], p->position[2], p->orientation[0], p->orientation[1], p->orientation[2],
-                      p->orientation[3], p->grip, p->buttons, p->flags, v[0], v[1], v[2], p->dropped);
-        buf_ += row;
+        buf_ += std::to_string(host_ns) + "," + std::to_string(p->sequence) + "," + std::to_string(p->device_time_us);
+        for (double x : {p->position[0], p->position[1], p->position[2], p->orientation[0], p->orientation[1],
+                         p->orientation[2], p->orientation[3], p->grip}) {
+            buf_ += ',';
+            append_number(buf_, x);
+        }
+        buf_ += "," + std::to_string(p->buttons) + "," + std::to_string(p->flags);
+        for (int k = 0; k < 3; ++k) {
+            buf_ += ',';
+            append_number(buf_, v[k]);
+        }
+        buf_ += "," + std::to_string(p->dropped) + "\n";
         ++rows_;
         return buf_.size() < (64u << 10) ? CDM_OK : flush(err);
     }

@@ -1,5 +1,6 @@
 #include "device/recording_mcap.h"
 
+#include <charconv>
 #include <cmath>
 #include <cstddef>
 #include <cstdio>
@@ -53,16 +54,13 @@ const char *const kStateSchemaJson = R"json({
   }
 })json";
 
-// 17 significant digits: a double read back is the one written. JSON has
-// no NaN; libcdm publishes none, but a null says so if it ever did.
+// JSON has no NaN; libcdm publishes none, but a null says so if it ever did.
 void num(std::string &s, double v) {
     if (!std::isfinite(v)) {
         s += "null";
         return;
     }
-    char b[32];
-    std::snprintf(b, sizeof b, "%.17g", v);
-    s += b;
+    append_number(s, v);
 }
 void stamp(std::string &s, uint64_t ns) {
     s += "{\"sec\":" + std::to_string(ns / 1000000000u) + ",\"nsec\":" + std::to_string(ns % 1000000000u) + "}";
@@ -161,6 +159,12 @@ int parse_error(const std::string &name, size_t offset, const std::string &what,
 }
 
 } // namespace
+
+void append_number(std::string &s, double v) {
+    char b[32];
+    const auto r = std::to_chars(b, b + sizeof b, v, std::chars_format::general, 17);
+    s.append(b, r.ptr);
+}
 
 std::string pose_json(uint64_t host_ns, const cdm_pose &p) {
     std::string s = "{\"timestamp\":";

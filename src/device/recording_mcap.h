@@ -24,6 +24,10 @@ constexpr const char *kStateSchema = "cdm.State"; // the whole cdm_pose in the l
 constexpr const char *kDeviceMetadata = "cdm.device";
 constexpr const char *kPoseFrame = "cdm";
 
+// A double with 17 significant digits (read back, it is the one written),
+// '.' as the decimal point whatever the process's locale (std::to_chars).
+void append_number(std::string &s, double v);
+
 // The two JSON messages of one pose (exact: doubles with 17 significant
 // digits, so a reader gets the library's numbers bit for bit).
 std::string pose_json(uint64_t host_ns, const cdm_pose &p);

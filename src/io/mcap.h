@@ -150,7 +150,8 @@ struct File {
 
 // Upper bounds on what a hostile file can make the reader allocate beyond
 // the file itself: ids and channels are 16-bit in MCAP anyway.
-constexpr size_t kMaxMessages = size_t(64) << 20;
+// 16 M messages: 2 GiB of cdm's recording holds about 7 M.
+constexpr size_t kMaxMessages = size_t(16) << 20;
 
 // Reads the data section: Header, Schemas, Channels, Messages (top level or
 // in uncompressed chunks, whose CRC is checked when not 0), Metadata;

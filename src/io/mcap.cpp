@@ -530,7 +530,7 @@ struct Parser {
 
     bool run() {
         if (size < sizeof kMagic || std::memcmp(data, kMagic, sizeof kMagic) != 0) {
-            if (size >= 5 && std::memcmp(data + 1, "MCAP", 4) == 0 && data[0] == 0x89)
+            if (size >= 6 && std::memcmp(data + 1, "MCAP", 4) == 0 && data[0] == 0x89)
                 return fail(5, "MCAP major version '" + std::string(1, char(data[5])) + "', this reader takes '0'");
             return fail(0, "not an MCAP file (magic \\x89MCAP0\\r\\n missing)");
         }

@@ -42,15 +42,18 @@ done
 # protocol as Debian's 0.10.2 (tests/dds proves it); 11.0.1 is the release
 # with a binary wheel for CPython 3.11, so no CYCLONEDDS_HOME build is needed.
 "$PY" -c "import cyclonedds.idl" 2>/dev/null || need_py+=("cyclonedds==11.0.1")
+# mcap: the MCAP test (tests/cli/test_mcap.py) reads cdm's recordings back
+# with the format's own Python reader (no Debian package exists).
+"$PY" -c "import mcap" 2>/dev/null || need_py+=(mcap)
 # auditwheel: the wheel test repairs the wheel with it (skipped without it).
 "$PY" -c "import auditwheel" 2>/dev/null || need_py+=(auditwheel)
 if [ ${#need_py[@]} -gt 0 ]; then
   echo "setup: installing Python packages for $("$PY" -c 'import sys; print(sys.executable)'): ${need_py[*]}"
   if ! "$PY" -m pip install -q "${need_py[@]}" 2>/tmp/cdm-pip.log; then
     if grep -q externally-managed /tmp/cdm-pip.log; then
-      # Debian's system python: its own packages, mujoco from PyPI beside them.
+      # Debian's system python: its own packages, mujoco and mcap from PyPI beside them.
       DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-numpy python3-matplotlib python3-pytest python3-mypy
-      "$PY" -m pip install -q --break-system-packages mujoco "cyclonedds==11.0.1"
+      "$PY" -m pip install -q --break-system-packages mujoco mcap "cyclonedds==11.0.1"
     else
       cat /tmp/cdm-pip.log >&2
       exit 1

@@ -220,6 +220,10 @@ typedef struct cdm_sample {
     const uint8_t *report;     /**< the input report's bytes, report ID first */
     const cdm_raw *raw;
     const cdm_pose *pose;
+    /** since 1.1 (size 40): when the report was first received, ns: for
+     *  replay: the host time recorded with it (so a replay recorded again,
+     *  or exported, keeps its times); otherwise raw->host_time_ns. */
+    uint64_t source_time_ns;
 } cdm_sample;
 
 /**
@@ -555,17 +559,29 @@ CDM_API int cdm_device_info_report(cdm_device *dev, uint8_t *buf, size_t cap, si
 CDM_API int cdm_sim_truth(cdm_device *dev, uint32_t sequence, double position_mm[3]);
 
 /**
- * A recording for `replay:FILE` (docs/protocol.md, "Replay files"): opened
- * with the device-info report (cdm_device_info_report), then every input
- * report with its host receipt time (cdm_sample.raw->host_time_ns, report and
- * report_len). The handle is the caller's until cdm_recorder_close, which
- * flushes, closes and frees it (NULL is fine) and reports a failure to
- * complete the file. One thread at a time per recorder (the caller
- * serialises); write may be called from the on_sample callback.
+ * A recording for `replay:FILE` (docs/protocol.md, "Replay files"; MCAP and
+ * CSV: docs/recording.md): opened with the device-info report
+ * (cdm_device_info_report), then every input report with its host receipt
+ * time (cdm_sample.raw->host_time_ns, report and report_len). The handle is
+ * the caller's until cdm_recorder_close, which flushes, completes (MCAP: the
+ * summary and footer), closes and frees it (NULL is fine) and reports a
+ * failure to complete the file. `path` must not exist. One thread at a time
+ * per recorder (the caller serialises); write may be called from the
+ * on_sample callback. cdm_recorder_open picks the format by the extension:
+ * ".mcap" MCAP, ".csv" a CSV of poses, anything else the replay format.
  */
 typedef struct cdm_recorder cdm_recorder;
 CDM_API int cdm_recorder_open(const char *path, const uint8_t *info_report, size_t len, cdm_recorder **out);
+/** since 1.1: `format` "cdmrec", "mcap" or "csv" whatever the name (a
+ *  temporary's), or NULL for the extension's. */
+CDM_API int cdm_recorder_open_ex(const char *path, const char *format, const uint8_t *info_report, size_t len,
+                                 cdm_recorder **out);
+/** The report only: MCAP gets no pose for it, a CSV refuses it
+ *  (CDM_ERR_INVALID_ARG). */
 CDM_API int cdm_recorder_write(cdm_recorder *rec, uint64_t host_time_ns, const uint8_t *report, size_t len);
+/** since 1.1: one on_sample sample: its report at source_time_ns and (MCAP,
+ *  CSV) its pose. */
+CDM_API int cdm_recorder_write_sample(cdm_recorder *rec, const cdm_sample *sample);
 CDM_API int cdm_recorder_close(cdm_recorder *rec);
 
 /**

@@ -5,6 +5,7 @@
 // own beyond argument checks.
 #include <cerrno>
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -25,6 +26,7 @@
 #include "calib/simulate.h"
 #include "cdm/cdm.h"
 #include "device/device.h"
+#include "device/recording.h"
 #include "device/replay_format.h"
 #include "device/sim/sim_truth.h"
 #include "device/transport.h"
@@ -32,7 +34,7 @@
 #include "model/model.h"
 
 struct cdm_recorder {
-    cdm::replay::Writer writer;
+    std::unique_ptr<cdm::recording::Writer> writer;
 };
 
 struct cdm_jig_plan {
@@ -202,14 +204,24 @@ int cdm_sim_truth(cdm_device *dev, uint32_t sequence, double position_mm[3]) {
 }
 
 int cdm_recorder_open(const char *path, const uint8_t *info_report, size_t len, cdm_recorder **out) {
+    return cdm_recorder_open_ex(path, nullptr, info_report, len, out);
+}
+
+int cdm_recorder_open_ex(const char *path, const char *format, const uint8_t *info_report, size_t len,
+                         cdm_recorder **out) {
     return cdm::guarded("cdm_recorder_open", [&] {
         if (!out) return null_arg("cdm_recorder_open", "out");
         *out = nullptr;
         if (!path) return null_arg("cdm_recorder_open", "path");
         if (!info_report || len == 0) return null_arg("cdm_recorder_open", "info_report");
+        cdm::recording::Format f = cdm::recording::format_for_path(path);
+        if (format && !cdm::recording::parse_format(format, f))
+            return cdm::fail(CDM_ERR_INVALID_ARG, std::string("cdm_recorder_open: format \"") + format +
+                                                      "\" is not one of cdmrec, mcap, csv");
         auto rec = std::make_unique<cdm_recorder>();
         std::string err;
-        if (int rc = rec->writer.open(path, info_report, len, err); rc != CDM_OK) return cdm::fail(rc, err);
+        if (int rc = cdm::recording::open_writer(path, f, info_report, len, rec->writer, err); rc != CDM_OK)
+            return cdm::fail(rc, err);
         *out = rec.release();
         return int(CDM_OK);
     });
@@ -220,7 +232,24 @@ int cdm_recorder_write(cdm_recorder *rec, uint64_t host_time_ns, const uint8_t *
         if (!rec) return null_arg("cdm_recorder_write", "rec");
         if (!report) return null_arg("cdm_recorder_write", "report");
         std::string err;
-        if (int rc = rec->writer.write(host_time_ns, report, len, err); rc != CDM_OK) return cdm::fail(rc, err);
+        if (int rc = rec->writer->write(host_time_ns, report, len, nullptr, err); rc != CDM_OK)
+            return cdm::fail(rc, err);
+        return int(CDM_OK);
+    });
+}
+
+int cdm_recorder_write_sample(cdm_recorder *rec, const cdm_sample *sample) {
+    return cdm::guarded("cdm_recorder_write_sample", [&] {
+        if (!rec) return null_arg("cdm_recorder_write_sample", "rec");
+        if (!sample || !sample->report || !sample->raw)
+            return null_arg("cdm_recorder_write_sample", "sample (or its report, raw)");
+        // A sample from a 1.0 library has no source time: its receipt time is the best there is.
+        const uint64_t t = sample->struct_size >= offsetof(cdm_sample, source_time_ns) + sizeof(uint64_t)
+                               ? sample->source_time_ns
+                               : sample->raw->host_time_ns;
+        std::string err;
+        if (int rc = rec->writer->write(t, sample->report, sample->report_len, sample->pose, err); rc != CDM_OK)
+            return cdm::fail(rc, err);
         return int(CDM_OK);
     });
 }
@@ -230,7 +259,7 @@ int cdm_recorder_close(cdm_recorder *rec) {
     std::unique_ptr<cdm_recorder> owned(rec);
     return cdm::guarded("cdm_recorder_close", [&] {
         std::string err;
-        if (int rc = owned->writer.close(err); rc != CDM_OK) return cdm::fail(rc, err);
+        if (int rc = owned->writer->close(err); rc != CDM_OK) return cdm::fail(rc, err);
         return int(CDM_OK);
     });
 }

@@ -24,7 +24,7 @@ static_assert(offsetof(cdm_stats, sequence_jumps) == 48, "cdm_stats 1.0 is 48 by
 static_assert(sizeof(cdm_stats) == 72, "cdm_stats 1.1 is 72 bytes");
 static_assert(offsetof(cdm_open_options, on_event) == 24 && sizeof(cdm_open_options) == 32,
               "cdm_open_options 1.0 is 24 bytes, 1.1 is 32");
-static_assert(sizeof(cdm_sample) == 32, "cdm_sample 1.0 is 32 bytes");
+static_assert(sizeof(cdm_sample) == 40, "cdm_sample 1.1 is 40 bytes (1.0: 32)");
 
 struct cdm_device_list {
     std::vector<cdm_device_info> items;

@@ -1,5 +1,7 @@
-// `cdm record`: a device's reports to a replay file, or with --jig a
-// calibration dataset CSV. Kill-safe: SIGINT, SIGTERM and SIGHUP all finish
+// `cdm record`: a device's reports to a recording (the replay format, MCAP
+// or a pose CSV, by the file's extension: docs/recording.md), or with --jig
+// a calibration dataset CSV; `cdm export`: a recording converted, by
+// recording its replay. Kill-safe: SIGINT, SIGTERM and SIGHUP all finish
 // the file cleanly; a write error (a full disk) keeps what was written and
 // names the real cause; the output never replaces one of its inputs or a
 // file that is not a regular file.
@@ -7,6 +9,7 @@
 #include <unistd.h>
 
 #include <array>
+#include <cctype>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -47,7 +50,15 @@ struct RecordCtx {
     std::mutex mu;
     // replay
     cdm_recorder *rec = nullptr;
-    std::vector<std::pair<uint64_t, std::vector<uint8_t>>> pending; // before the recorder is open
+    // Samples that arrive before the recorder is open (it needs the
+    // device-info report, read after cdm_open_ex returns).
+    struct Pending {
+        std::vector<uint8_t> report;
+        cdm_raw raw;
+        cdm_pose pose;
+        uint64_t source_ns;
+    };
+    std::vector<Pending> pending;
     bool write_failed = false;
     std::string write_err;
     // jig
@@ -98,11 +109,11 @@ void record_sample(void *user, const cdm_sample *s) {
     ++c->reports;
     if (!c->jig) {
         if (!c->rec) {
-            c->pending.emplace_back(s->raw->host_time_ns, std::vector<uint8_t>(s->report, s->report + s->report_len));
+            c->pending.push_back({std::vector<uint8_t>(s->report, s->report + s->report_len), *s->raw, *s->pose,
+                                  s->source_time_ns});
             return;
         }
-        if (!c->write_failed &&
-            cdm_recorder_write(c->rec, s->raw->host_time_ns, s->report, s->report_len) != CDM_OK) {
+        if (!c->write_failed && cdm_recorder_write_sample(c->rec, s) != CDM_OK) {
             c->write_failed = true;
             c->write_err = cdm_thread_error(); // this thread's: the reader's
             c->done = true;
@@ -165,6 +176,19 @@ void check_output(const std::string &uri, const std::string &file) {
     }
 }
 
+// The recording format FILE's extension asks for (cdm_recorder_open_ex's
+// names): the recorder writes to FILE.tmp, whose own extension says nothing.
+const char *format_of(const std::string &file) {
+    auto ends = [&](const char *x) {
+        const size_t n = std::strlen(x);
+        if (file.size() < n) return false;
+        for (size_t i = 0; i < n; ++i)
+            if (std::tolower(static_cast<unsigned char>(file[file.size() - n + i])) != x[i]) return false;
+        return true;
+    };
+    return ends(".mcap") ? "mcap" : ends(".csv") ? "csv" : "cdmrec";
+}
+
 cdm_jig_plan *jig_plan_for(const std::string &uri, const JigArgs &a) {
     std::vector<double> heights;
     if (!a.heights.empty()) heights = parse_number_list(a.heights, "--jig-heights");
@@ -176,21 +200,30 @@ cdm_jig_plan *jig_plan_for(const std::string &uri, const JigArgs &a) {
 
 // The replay header: the device's own info report, byte for byte, so a
 // replay converts exactly as this device did.
-int open_recorder(cdm_device *dev, const std::string &tmp, RecordCtx &ctx) {
+int open_recorder(cdm_device *dev, const std::string &tmp, const char *format, RecordCtx &ctx) {
     uint8_t info[1024];
     size_t len = 0;
     int rc = cdm_device_info_report(dev, info, sizeof info, &len);
     if (rc != CDM_OK) return report_error("record: device-info report", rc);
     cdm_recorder *rec = nullptr;
-    if ((rc = cdm_recorder_open(tmp.c_str(), info, len, &rec)) != CDM_OK) return report_error("record", rc);
+    if ((rc = cdm_recorder_open_ex(tmp.c_str(), format, info, len, &rec)) != CDM_OK)
+        return report_error("record", rc);
     std::lock_guard<std::mutex> lock(ctx.mu);
     ctx.rec = rec;
-    for (const auto &r : ctx.pending)
-        if (!ctx.write_failed && cdm_recorder_write(rec, r.first, r.second.data(), r.second.size()) != CDM_OK) {
+    for (const auto &r : ctx.pending) {
+        cdm_sample s{};
+        s.struct_size = sizeof s;
+        s.report_len = uint32_t(r.report.size());
+        s.report = r.report.data();
+        s.raw = &r.raw;
+        s.pose = &r.pose;
+        s.source_time_ns = r.source_ns;
+        if (!ctx.write_failed && cdm_recorder_write_sample(rec, &s) != CDM_OK) {
             ctx.write_failed = true;
             ctx.write_err = cdm_thread_error();
             ctx.done = true;
         }
+    }
     ctx.pending.clear();
     return kExitOk;
 }
@@ -267,13 +300,14 @@ int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, cons
             return kExitFailure;
         }
     } else {
-        std::printf("wrote %s: %llu reports (%llu dropped, %llu malformed)\n", file.c_str(),
+        std::printf("wrote %s (%s): %llu reports (%llu dropped, %llu malformed)\n", file.c_str(), format_of(file),
                     (unsigned long long)ctx.reports, (unsigned long long)st.dropped, (unsigned long long)st.malformed);
     }
     return kExitOk;
 }
 
-int cmd_record(const std::string &uri, const std::string &file, double seconds, const JigArgs &ja) {
+int cmd_record(const std::string &uri, const std::string &file, double seconds, const JigArgs &ja,
+               bool exporting = false) {
     check_output(uri, file);
     RecordCtx ctx;
     ctx.jig = ja.jig;
@@ -298,7 +332,13 @@ int cmd_record(const std::string &uri, const std::string &file, double seconds, 
     o.user = &ctx;
     cdm_device *dev = nullptr;
     int rc = cdm_open_ex(uri.c_str(), &o, &dev);
-    if (rc == CDM_OK && !ja.jig && (rc = open_recorder(dev, tmp, ctx)) != kExitOk) {
+    if (rc == CDM_OK && exporting) {
+        // A recording cut short plays what it holds: say what was lost.
+        char warn[512] = "";
+        cdm_device_error(dev, warn, sizeof warn);
+        if (std::strncmp(warn, "warning:", 8) == 0) std::fprintf(stderr, "cdm: export: %s\n", warn);
+    }
+    if (rc == CDM_OK && !ja.jig && (rc = open_recorder(dev, tmp, format_of(file), ctx)) != kExitOk) {
         cdm_close(dev);
         return rc;
     }
@@ -321,8 +361,9 @@ int cmd_record(const std::string &uri, const std::string &file, double seconds, 
 
 void add_record_command(CLI::App &app) {
     auto *record = app.add_subcommand(
-        "record", "Record a device's reports to a replay file, or with --jig a calibration dataset CSV. "
-                  "Ctrl-C, SIGTERM and SIGHUP stop it and finish the file.");
+        "record", "Record a device's reports to a recording: FILE.mcap MCAP (raw reports and poses, for "
+                  "Foxglove), FILE.csv the poses, anything else the replay format; or with --jig a calibration "
+                  "dataset CSV. Ctrl-C, SIGTERM and SIGHUP stop it and finish the file.");
     static std::string r_uri, r_file;
     static double r_seconds = 0;
     static JigArgs ja;
@@ -344,6 +385,21 @@ void add_record_command(CLI::App &app) {
     record->add_option("--jig-samples", ja.samples, "samples kept per position (0: 100, or the sim: URI's)")
         ->check(range(0, 1000000));
     record->callback([] { select_command([] { return cmd_record(r_uri, r_file, r_seconds, ja); }); });
+
+    auto *exp = app.add_subcommand(
+        "export", "Convert a recording (replay format or MCAP) to MCAP, CSV or the replay format, by OUT's "
+                  "extension (.mcap, .csv, anything else: replay format): its reports replayed as fast as read, "
+                  "with their recorded times, and recorded again with the poses libcdm decodes (docs/recording.md)");
+    static std::string e_in, e_out;
+    exp->add_option("REC", e_in, "a recording made by cdm record (.cdmrec or .mcap)")->required();
+    exp->add_option("OUT", e_out, "output file (written to OUT.tmp, which must not exist, then renamed)")->required();
+    exp->callback([] {
+        select_command([] {
+            if (e_in.find('?') != std::string::npos)
+                throw UsageError("export: REC \"" + e_in + "\" contains '?', which a replay: URI cannot hold");
+            return cmd_record("replay:" + e_in + "?speed=0", e_out, 0, JigArgs{}, true);
+        });
+    });
 }
 
 } // namespace cdm::cli

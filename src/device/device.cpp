@@ -445,6 +445,8 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len, uint64_t host_ns)
         smp.report = buf;
         smp.raw = &raw;
         smp.pose = &cb_pose;
+        const uint64_t recorded = transport_->record_time_ns();
+        smp.source_time_ns = recorded != 0 ? recorded : host_ns;
         on_sample_(user_, &smp);
     }
 }

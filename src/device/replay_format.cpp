@@ -10,6 +10,7 @@
 
 #include "cdm/cdm.h"
 #include "device/protocol.h"
+#include "device/recording_mcap.h"
 
 namespace cdm::replay {
 
@@ -30,6 +31,10 @@ void truncated_tail(const std::string &name, size_t off, size_t n, const std::st
 
 int parse(std::vector<uint8_t> bytes, const std::string &name, File &out, std::string &err) {
     const size_t n = bytes.size();
+    // An MCAP recording (docs/recording.md) plays the same way: its report
+    // channel becomes the records.
+    if (n >= 5 && bytes[0] == 0x89 && std::memcmp(bytes.data() + 1, "MCAP", 4) == 0)
+        return recording::parse_mcap(std::move(bytes), name, out, err);
     if (n < kHeaderSize)
         return parse_error(name, n, "file ends inside the " + std::to_string(kHeaderSize) + "-byte header", err);
     if (std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0)

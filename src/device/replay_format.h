@@ -37,7 +37,9 @@ struct File {
     std::string warning;
 };
 
-// Checks the whole framing up front, so that a corrupt file is refused when
+// Reads either format: a file starting with MCAP's magic is read as the
+// MCAP layout of docs/recording.md (recording_mcap.h), with the same error
+// and truncation rules. Checks the whole framing up front, so that a corrupt file is refused when
 // opened (CDM_ERR_PARSE, err = "NAME: byte OFFSET: what") rather than
 // failing half-way through a replay. The one damage accepted is a truncated
 // tail (an incomplete last record): every complete record before it plays.

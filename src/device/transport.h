@@ -70,6 +70,10 @@ public:
     // cdm_open puts it into cdm_device_error; truncated_bytes goes into
     // cdm_stats.replay_truncated_bytes.
     virtual std::string open_warning() const { return {}; }
+    // OPTIONAL (default: 0, live). After a read(): the host time the report
+    // was first received at, when the transport plays a recording, so that
+    // re-recording a replay keeps its times (cdm_sample.source_time_ns).
+    virtual uint64_t record_time_ns() const { return 0; }
     virtual uint64_t truncated_bytes() const { return 0; }
 };
 

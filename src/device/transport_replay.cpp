@@ -48,6 +48,7 @@ public:
             return kReadError;
         }
         std::memcpy(buf, file_.bytes.data() + r.offset, r.length);
+        last_ns_ = r.host_ns;
         ++next_;
         return r.length;
     }
@@ -64,6 +65,7 @@ public:
 
     std::string open_warning() const override { return file_.warning; }
     uint64_t truncated_bytes() const override { return file_.truncated_bytes; }
+    uint64_t record_time_ns() const override { return last_ns_; }
     const char *name() const override { return "replay"; }
     std::string uri() const override { return uri_; }
 
@@ -73,6 +75,7 @@ private:
     double speed_;
     size_t next_ = 0;
     uint64_t start_ns_ = 0;
+    uint64_t last_ns_ = 0;
 };
 
 } // namespace

@@ -104,6 +104,7 @@ namespace Cdm
         public IntPtr report;
         public IntPtr raw;
         public IntPtr pose;
+        public ulong source_time_ns; // since 1.1
     }
 
     [CStruct("cdm_open_options"), StructLayout(LayoutKind.Sequential)]

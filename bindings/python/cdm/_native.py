@@ -102,6 +102,7 @@ class cdm_sample(_Sized):
         ("report", ctypes.POINTER(ctypes.c_uint8)),
         ("raw", ctypes.POINTER(cdm_raw)),
         ("pose", ctypes.POINTER(cdm_pose)),
+        ("source_time_ns", ctypes.c_uint64),  # since 1.1
     ]
 
 
@@ -215,6 +216,8 @@ PROTOTYPES = {
     "cdm_recorder_open": (_int, [_str, ctypes.POINTER(ctypes.c_uint8), _size, _handle_p]),
     "cdm_recorder_write": (_int, [_handle, ctypes.c_uint64, ctypes.POINTER(ctypes.c_uint8), _size]),
     "cdm_recorder_close": (_int, [_handle]),
+    "cdm_recorder_open_ex": (_int, [_str, _str, ctypes.POINTER(ctypes.c_uint8), _size, _handle_p]),
+    "cdm_recorder_write_sample": (_int, [_handle, ctypes.POINTER(cdm_sample)]),
     "cdm_jig_plan_create": (_int, [_str, _int, ctypes.c_double, c_double_p, _size, _int, _handle_p]),
     "cdm_jig_plan_count": (_size, [_handle]),
     "cdm_jig_plan_samples": (_int, [_handle]),

@@ -148,6 +148,9 @@ class Sample:
     report: bytes
     raw: Raw
     pose: Pose
+    #: since 1.1: ns when the report was first received (a replay: the time
+    #: recorded with it; otherwise raw.host_time_ns)
+    source_time_ns: int = 0
 
 
 def _make_sample_callback(fn):
@@ -156,7 +159,7 @@ def _make_sample_callback(fn):
         report = ctypes.string_at(s.report, s.report_len) if s.report else b""
         raw = Raw._from_c(s.raw.contents) if s.raw else None
         pose = Pose._from_c(s.pose.contents) if s.pose else None
-        fn(Sample(report, raw, pose))
+        fn(Sample(report, raw, pose, s.source_time_ns))
     return _native.cdm_sample_fn(trampoline)
 
 

@@ -1,0 +1,49 @@
+// The recordings `cdm record` and `cdm export` write (docs/recording.md):
+// the replay format (replay_format.h), MCAP with the raw reports and the
+// decoded poses as channels (recording_mcap.h), or a CSV of the poses. One
+// interface, so the command records the same way whatever the format.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "cdm/cdm.h"
+
+namespace cdm::recording {
+
+enum class Format { Replay, Mcap, Csv };
+
+// By the file name's extension: ".mcap" MCAP, ".csv" the pose CSV,
+// anything else the replay format (".cdmrec" by convention).
+Format format_for_path(const std::string &path);
+// "cdmrec", "mcap", "csv" (what cdm_recorder_open_ex takes); false if none.
+bool parse_format(const std::string &name, Format &out);
+
+// Not thread-safe: the caller serialises (the C API's recorder says so).
+class Writer {
+public:
+    virtual ~Writer() = default;
+    // One input report as received, its host time (ns, CLOCK_MONOTONIC of
+    // the recording machine) and, when known, the pose libcdm decoded from
+    // it (MCAP and CSV keep it; the replay format keeps only the bytes).
+    // Returns CDM_OK or a cdm_error with err set.
+    virtual int write(uint64_t host_ns, const uint8_t *report, size_t len, const cdm_pose *pose,
+                      std::string &err) = 0;
+    // Completes the file (MCAP: summary and footer) and fsyncs it. What was
+    // written before an error stays.
+    virtual int close(std::string &err) = 0;
+    virtual uint64_t reports() const = 0;
+};
+
+// Creates `path` (a new file: never over an existing one) in `format`,
+// starting with the device-info feature report (report ID first; checked
+// by the protocol parser, since every replay needs it).
+int open_writer(const std::string &path, Format format, const uint8_t *info, size_t info_len,
+                std::unique_ptr<Writer> &out, std::string &err);
+
+// The CSV's header line (docs/recording.md lists the columns and units).
+extern const char *const kCsvHeader;
+
+} // namespace cdm::recording

@@ -5,6 +5,7 @@
 #include <sys/eventfd.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <set>
@@ -132,9 +133,20 @@ void MasterWatcher::loop(bool enumerate) {
         if (mon_->wait(0, &events) == 0) continue;
         // A node's removal is reported from its event, not only from the
         // enumeration after the batch: an unplug and a replug under the
-        // same node within one batch are a departure and an arrival.
+        // same node within one batch are a departure and an arrival. And a
+        // node whose last event was "remove" is gone until its "add", even
+        // if sysfs still shows it: udev sends "remove" once the kernel has
+        // torn the device down, but an emulator (umockdev) sends it before
+        // it removes the tree, and the enumeration would bring the dead
+        // node straight back.
         for (const UdevEvent &e : events) {
-            if (e.action != "remove" || e.subsystem != "hidraw") continue;
+            if (e.subsystem != "hidraw" || e.devnode.empty()) continue;
+            if (e.action == "add") {
+                removed_.erase(e.devnode);
+                continue;
+            }
+            if (e.action != "remove") continue;
+            removed_.insert(e.devnode);
             auto it = known_.find(e.devnode);
             if (it == known_.end()) continue;
             const cdm_device_info info = it->second;
@@ -153,6 +165,9 @@ void MasterWatcher::rescan(bool report) {
     hid_list_master_nodes(nodes, err);
     if (!err.empty()) log::message(log::kWarning, "watcher: " + err);
     std::set<std::string> now;
+    nodes.erase(std::remove_if(nodes.begin(), nodes.end(),
+                               [&](const MasterNode &n) { return removed_.count(n.path) != 0; }),
+                nodes.end());
     for (const MasterNode &n : nodes) now.insert(n.path);
     for (auto it = known_.begin(); it != known_.end();) {
         if (now.count(it->first)) {

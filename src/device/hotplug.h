@@ -14,6 +14,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -91,6 +92,7 @@ private:
     int stop_fd_ = -1;
     Callback cb_;
     std::map<std::string, cdm_device_info> known_; // by node path
+    std::set<std::string> removed_;                // nodes whose last udev event was "remove"
     std::thread thread_;
 };
 

@@ -7,6 +7,8 @@
 // ever changes the pointer.
 #include <hidapi.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cstring>
 #include <cwchar>
 #include <memory>
@@ -133,10 +135,21 @@ public:
 
     bool wait_arrival(int timeout_ms) override {
         if (!mon_ || !mon_->ok()) return Transport::wait_arrival(timeout_ms);
-        // Any hidraw or USB device event: under udev the master's hidraw
+        // Any hidraw or USB device "add": under udev the master's hidraw
         // "add" is the last of its events, under umockdev the first
-        // (docs/testing.md), and a reopen costs one enumeration.
-        return mon_->wait(timeout_ms) > 0;
+        // (docs/testing.md), and a reopen costs one enumeration. Removals
+        // (the unplug's own events, which udev delivers after the read has
+        // already failed) do not wake the reader.
+        const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+        for (;;) {
+            const auto left =
+                std::chrono::duration_cast<std::chrono::milliseconds>(end - std::chrono::steady_clock::now()).count();
+            std::vector<UdevEvent> events;
+            if (mon_->wait(int(std::max<long long>(0, left)), &events) == 0) return false;
+            for (const UdevEvent &e : events)
+                if (e.action == "add") return true;
+            if (left <= 0) return false;
+        }
     }
 
     int get_feature(uint8_t *buf, size_t len, std::string &err) override {

@@ -182,10 +182,26 @@ std::string MasterTestbed::Impl::tree_text(bool with_node) const {
 
 void MasterTestbed::Impl::add_tree() {
     GError *e = nullptr;
-    if (!umockdev_testbed_add_from_string(tb, tree_text(!attached).c_str(), &e)) {
-        std::string m = e ? e->message : "unknown";
-        g_clear_error(&e);
-        throw std::runtime_error("umockdev_testbed_add_from_string: " + m);
+    // One device at a time, parents first: umockdev sends each device's
+    // "add" uevent as it adds it, and the kernel announces the USB device
+    // first and the hidraw node last, once everything under it exists. The
+    // whole text at once would announce hidraw0 before its parents'
+    // attributes are there (umockdev's record format lists children
+    // first), an order no kernel produces.
+    const std::string text = tree_text(!attached);
+    std::vector<std::string> blocks;
+    for (size_t at = 0; at < text.size();) {
+        size_t end = text.find("\n\n", at);
+        if (end == std::string::npos) end = text.size();
+        blocks.push_back(text.substr(at, end - at) + "\n");
+        at = end + 2;
+    }
+    for (auto it = blocks.rbegin(); it != blocks.rend(); ++it) {
+        if (!umockdev_testbed_add_from_string(tb, it->c_str(), &e)) {
+            std::string m = e ? e->message : "unknown";
+            g_clear_error(&e);
+            throw std::runtime_error("umockdev_testbed_add_from_string: " + m);
+        }
     }
     // The ioctl socket must be served by the handler thread's context: it
     // is the thread-default one while attaching.

@@ -5,6 +5,7 @@
 // replug with the gap counted exactly. Runs under umockdev-wrapper.
 #include <chrono>
 #include <condition_variable>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <mutex>
@@ -51,6 +52,8 @@ struct Collector {
         std::lock_guard<std::mutex> lock(c->mu);
         c->thread = std::this_thread::get_id();
         c->events.push_back({e->kind, e->info->uri, e->info->serial, e->info->firmware, e->struct_size});
+        if (std::getenv("WATCH_DEBUG"))
+            std::fprintf(stderr, "event %u %s %s fw %s\n", e->kind, e->info->uri, e->info->serial, e->info->firmware);
         c->cv.notify_all();
     }
     // Waits until `n` events have come; returns whether they did.
@@ -199,6 +202,9 @@ void track_sample(void *user, const cdm_sample *s) {
     t->seqs.push_back(s->pose->sequence);
 }
 void track_event(void *user, const cdm_event *e) {
+    // Only the connection's edges: a STALE/FRESH pair, should the loaded
+    // machine delay the reader, is no part of what is checked here.
+    if (e->kind != CDM_EVENT_DISCONNECTED && e->kind != CDM_EVENT_RECONNECTED) return;
     auto *t = static_cast<Track *>(user);
     std::lock_guard<std::mutex> lock(t->mu);
     t->events.push_back(e->kind);
@@ -240,7 +246,7 @@ void test_replug_reconnects_gap_counted(void **) {
     assert_int_equal(cdm_get_stats(dev, &st), CDM_OK);
     cdm_close(dev); // joins the reader: tr is ours alone from here
 
-    assert_true(tr.events.size() >= 2);
+    assert_int_equal(tr.events.size(), 2);
     assert_int_equal(tr.events[0], CDM_EVENT_DISCONNECTED);
     assert_int_equal(tr.events[1], CDM_EVENT_RECONNECTED);
     // While streaming every step is 1 (nothing dropped); across the

@@ -135,9 +135,9 @@ public:
 
     bool wait_arrival(int timeout_ms) override {
         if (!mon_ || !mon_->ok()) return Transport::wait_arrival(timeout_ms);
-        // Any hidraw or USB device "add": under udev the master's hidraw
-        // "add" is the last of its events, under umockdev the first
-        // (docs/testing.md), and a reopen costs one enumeration. Removals
+        // Any hidraw or USB device "add": the master's hidraw "add" comes
+        // last, but a reopen costs only one enumeration and so nothing
+        // depends on the order (docs/reliability.md, "Hot-plug"). Removals
         // (the unplug's own events, which udev delivers after the read has
         // already failed) do not wake the reader.
         const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);

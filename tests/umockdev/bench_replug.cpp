@@ -10,7 +10,8 @@
 // gap would measure one phase only), plug, and time from just before
 // plug() to (a) the RECONNECTED event and (b) the first report handed over
 // after it. The two modes alternate cycle by cycle, so that the machine's
-// load falls on both alike.
+// load falls on both alike. BENCH_LOG=1 prints libcdm's messages (every
+// failed reconnection attempt) with the times of the plugs.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -63,6 +64,11 @@ void print_row(const char *name, const std::vector<double> &v) {
                 pct(v, 0.5), mean(v), pct(v, 0.9), pct(v, 1.0));
 }
 
+void on_log(void *, int level, const char *m) {
+    if (std::getenv("BENCH_LOG"))
+        std::fprintf(stderr, "%.3f [%d] %s\n", double(cdm::monotonic_ns() % 100000000000ull) * 1e-6, level, m);
+}
+
 } // namespace
 
 int main(int argc, char **argv) {
@@ -75,6 +81,7 @@ int main(int argc, char **argv) {
         std::fprintf(stderr, "usage: bench_replug [CYCLES >= 2 per mode]\n");
         return 2;
     }
+    cdm_set_log_fn(on_log, nullptr);
     cdm_umock::MasterTestbed tb;
     Probe probe;
     cdm_open_options o{};
@@ -112,6 +119,7 @@ int main(int argc, char **argv) {
         probe.reconnected_ns = 0;
         probe.first_ns = 0;
         const uint64_t t0 = cdm::monotonic_ns();
+        if (std::getenv("BENCH_LOG")) std::fprintf(stderr, "%.3f plug (%s)\n", double(t0 % 100000000000ull) * 1e-6, mode ? "poll" : "event");
         tb.plug();
         plug_call_ms.push_back(double(cdm::monotonic_ns() - t0) * 1e-6);
         const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(5);

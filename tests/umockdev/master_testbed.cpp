@@ -188,6 +188,15 @@ void MasterTestbed::Impl::add_tree() {
     // whole text at once would announce hidraw0 before its parents'
     // attributes are there (umockdev's record format lists children
     // first), an order no kernel produces.
+    // A replug: the node answers before the first uevent goes out, as a
+    // kernel's hidraw node does by the time udev announces it. umockdev
+    // serves ioctls while it adds devices (the handler's context runs
+    // during the add), so an "add" watcher that opens at once would
+    // otherwise meet ENODEV and wait for its next retry.
+    if (attached) {
+        write_readable_line();
+        plugged = true;
+    }
     const std::string text = tree_text(!attached);
     std::vector<std::string> blocks;
     for (size_t at = 0; at < text.size();) {
@@ -208,11 +217,7 @@ void MasterTestbed::Impl::add_tree() {
     // Attached once for the testbed's life: umockdev's preload ends the
     // client process when an open fd's socket disappears, which a detach
     // on unplug would do to the driver's handle under test.
-    if (attached) {
-        write_readable_line();
-        plugged = true;
-        return;
-    }
+    if (attached) return;
     g_main_context_push_thread_default(ctx);
     const gboolean ok = umockdev_testbed_attach_ioctl(tb, "/dev/hidraw0", handler, &e);
     g_main_context_pop_thread_default(ctx);

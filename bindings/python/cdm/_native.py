@@ -218,6 +218,7 @@ PROTOTYPES = {
     # since 1.1: the one dataset writer
     "cdm_dataset_writer_open": (_int, [_str, ctypes.POINTER(ctypes.c_char_p), ctypes.c_size_t, _handle_p]),
     "cdm_dataset_writer_add": (_int, [_handle, _int, c_double_p, c_double_p]),
+    "cdm_dataset_writer_add_at": (_int, [_handle, _int, c_double_p, c_double_p, ctypes.c_double]),
     "cdm_dataset_writer_commit": (_int, [_handle]),
     "cdm_dataset_writer_free": (None, [_handle]),
     # CDM_EXPERIMENTAL, tools (the `cdm` command's needs)

@@ -8,11 +8,13 @@ SUDO=""
 [ "$(id -u)" -eq 0 ] || SUDO="sudo"
 
 DEB_PKGS=(build-essential cmake ninja-build pkg-config git
-  libhidapi-dev libusb-1.0-0-dev libeigen3-dev libnlopt-dev libnlopt-cxx-dev libcmocka-dev
+  libhidapi-dev libudev-dev libeigen3-dev libnlopt-dev libnlopt-cxx-dev libcmocka-dev
   nlohmann-json3-dev libboost-math-dev libcli11-dev libfmt-dev libbenchmark-dev
   mono-mcs mono-runtime python3 python3-pip
-  # the emulated kernel device (tests/umockdev): umockdev's wrapper and library
-  umockdev libumockdev-dev libudev-dev
+  # the emulated kernel device (tests/umockdev): umockdev's wrapper and
+  # library; libusb only for the probe that compares its hotplug callback
+  # with udev's monitor (libcdm does not link it: docs/reliability.md)
+  umockdev libumockdev-dev libusb-1.0-0-dev
   # packaging tests (tests/packaging): cpack -G DEB computes Depends with
   # dpkg-shlibdeps (dpkg-dev) and file; nuget packs Cdm.nupkg; the wheel
   # test needs venv, unzip, and patchelf for auditwheel repair.

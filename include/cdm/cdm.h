@@ -657,6 +657,72 @@ CDM_API int cdm_simulate_jig_dataset(const char *out_csv, const char *options_js
 CDM_API int cdm_write_file_atomic(const char *path, const void *data, size_t len, const char *const *protect_paths,
                                   size_t n_protect);
 
+/* --------------------------------------- experimental: hot-plug (since 1.1)
+ * Arrivals and departures of masters (USB 1209:cd01 hidraw nodes, what
+ * cdm_enumerate lists), as events from udev's monitor: no polling. Linux
+ * only; where udev's netlink socket is refused (a sandbox) cdm_watch fails
+ * with CDM_ERR_UNSUPPORTED, and where no udevd runs (a bare container) no
+ * event ever comes. docs/reliability.md, "Hot-plug", says why udev and not
+ * libusb's hotplug callback. Experimental until it has run against a real
+ * master (it is tested on the emulated kernel device, docs/testing.md).
+ */
+
+/** cdm_watch_event.kind. */
+typedef enum cdm_watch_kind {
+    CDM_WATCH_ARRIVED = 1, /**< a master's node appeared (or was there at the start, CDM_WATCH_ENUMERATE) */
+    CDM_WATCH_LEFT = 2     /**< it went away (unplugged) */
+} cdm_watch_kind;
+
+/** cdm_watch flags. */
+enum cdm_watch_flag {
+    /** Report the masters already connected as arrivals first (as libusb's
+     *  LIBUSB_HOTPLUG_ENUMERATE), so that the callback alone keeps a list. */
+    CDM_WATCH_ENUMERATE = 1u << 0
+};
+
+/** One arrival or departure. Valid only during the callback. */
+typedef struct cdm_watch_event {
+    uint32_t struct_size;
+    uint32_t kind;                /**< cdm_watch_kind */
+    uint64_t host_time_ns;        /**< CLOCK_MONOTONIC when the watcher noticed it */
+    const cdm_device_info *info;  /**< the master, as cdm_enumerate gives it (uri "hid:/dev/hidrawN",
+                                   *   serial, and firmware and the rest when it answered its info
+                                   *   report); for CDM_WATCH_LEFT, what was known when it arrived.
+                                   *   Its struct_size is the library's: read only the fields your
+                                   *   header has. */
+} cdm_watch_event;
+
+/**
+ * Called on the watcher's own thread (one per cdm_watcher), one event at a
+ * time, in the order noticed; never after cdm_watch_free returned. It may
+ * call any cdm_* function (cdm_open of the arrived uri, for one) except
+ * cdm_watch_free on its own watcher, which would have to join the thread it
+ * runs on: that call is refused (logged at CDM_LOG_ERROR, the watcher keeps
+ * running). While it runs, further events wait in the kernel's socket
+ * buffer: keep it short.
+ */
+typedef void (*cdm_watch_fn)(void *user, const cdm_watch_event *event);
+
+typedef struct cdm_watcher cdm_watcher;
+
+/**
+ * Starts watching: `fn(user, event)` for every master that arrives or
+ * leaves from now on (and, with CDM_WATCH_ENUMERATE, for every one present
+ * first). Returns once subscribed: a master plugged in after cdm_watch
+ * returns is reported. CDM_ERR_INVALID_ARG for a NULL fn or out or an
+ * unknown flag; CDM_ERR_UNSUPPORTED where udev's monitor is refused
+ * (cdm_thread_error says why). An open device needs no watcher to
+ * reconnect: its reader wakes on the same events by itself. Any thread.
+ */
+CDM_API int cdm_watch(uint32_t flags, cdm_watch_fn fn, void *user, cdm_watcher **out);
+
+/**
+ * Stops the watcher and frees it; when it returns no callback is running
+ * and none will. NULL is fine. Any thread except the watcher's own (from
+ * its callback the call is refused, see cdm_watch_fn).
+ */
+CDM_API void cdm_watch_free(cdm_watcher *watcher);
+
 #endif /* CDM_EXPERIMENTAL */
 
 #ifdef __cplusplus

@@ -77,6 +77,59 @@ int cmd_list(bool json) {
     return kExitOk;
 }
 
+// `cdm list --watch`: one line per arrival or departure, from cdm_watch's
+// callback (the watcher's thread; stdout is written under a lock, and
+// flushed, so that a pipe sees each line as it happens).
+struct WatchOut {
+    std::mutex mu;
+    bool json = false;
+    uint64_t t0_ns = 0;
+    unsigned arrived = 0, left = 0;
+};
+
+void on_watch(void *user, const cdm_watch_event *e) {
+    auto *o = static_cast<WatchOut *>(user);
+    const cdm_device_info &i = *e->info;
+    const bool arrived = e->kind == CDM_WATCH_ARRIVED;
+    const double t = double(e->host_time_ns - std::min(e->host_time_ns, o->t0_ns)) * 1e-9;
+    std::lock_guard<std::mutex> lock(o->mu);
+    (arrived ? o->arrived : o->left)++;
+    if (o->json)
+        std::printf("%s\n", nlohmann::json{{"event", arrived ? "arrived" : "left"},
+                                           {"t_s", t},
+                                           {"uri", i.uri},
+                                           {"serial", i.serial},
+                                           {"firmware", i.firmware},
+                                           {"usb_id", usb_id(i)}}
+                                .dump()
+                                .c_str());
+    else
+        std::printf("%8.3f s  %-7s  %s  serial %s  firmware %s\n", t, arrived ? "arrived" : "left", i.uri, i.serial,
+                    i.firmware);
+    std::fflush(stdout);
+}
+
+int cmd_list_watch(bool json, double seconds) {
+    WatchOut out;
+    out.json = json;
+    out.t0_ns = now_ns();
+    std::signal(SIGINT, on_signal);
+    std::signal(SIGTERM, on_signal);
+    cdm_watcher *w = nullptr;
+    const int rc = cdm_watch(CDM_WATCH_ENUMERATE, on_watch, &out, &w);
+    if (rc != CDM_OK) return report_error("watch", rc);
+    if (!json)
+        std::fprintf(stderr, "watching for masters (USB 1209:cd01): the connected ones first, then arrivals and "
+                             "departures; %s\n",
+                     seconds > 0 ? "stops after --seconds" : "Ctrl-C stops");
+    const double t0 = now_s();
+    while (!g_interrupted && (seconds <= 0 || now_s() - t0 < seconds))
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    cdm_watch_free(w); // joins the watcher's thread: out is ours alone from here
+    if (!json) std::fprintf(stderr, "%u arrived, %u left\n", out.arrived, out.left);
+    return kExitOk;
+}
+
 nlohmann::json info_json(const cdm_device_info &i, long calib_bytes) {
     return {{"uri", i.uri},
             {"transport", i.transport},
@@ -377,8 +430,22 @@ const char *const kUriHelp = "device URI: sim:[?options], replay:FILE, hid:/dev/
 void add_device_commands(CLI::App &app) {
     auto *list = app.add_subcommand("list", "List the connected masters (USB 1209:cd01)");
     static bool l_json = false;
-    list->add_flag("--json", l_json, "print a JSON array of {uri, serial, firmware, usb_id}");
-    list->callback([] { select_command([] { return cmd_list(l_json); }); });
+    static bool l_watch = false;
+    static double l_seconds = 0;
+    list->add_flag("--json", l_json,
+                   "print a JSON array of {uri, serial, firmware, usb_id}; with --watch one JSON object per event "
+                   "and line, {event, t_s, uri, serial, firmware, usb_id}");
+    list->add_flag("--watch", l_watch,
+                   "print the connected masters, then every arrival and departure as it happens (udev's hot-plug "
+                   "events), until Ctrl-C");
+    list->add_option("--seconds", l_seconds, "with --watch: stop after this many seconds (0: until Ctrl-C)")
+        ->check(range(0, 1e9));
+    list->callback([] {
+        select_command([] {
+            if (l_seconds > 0 && !l_watch) throw UsageError("list: --seconds needs --watch");
+            return l_watch ? cmd_list_watch(l_json, l_seconds) : cmd_list(l_json);
+        });
+    });
 
     auto *info = app.add_subcommand("info", "Show what a device says about itself (feature report 0x02)");
     static std::string info_uri;

@@ -241,10 +241,7 @@ void cdm_device::run() {
     while (!stop_.load(std::memory_order_relaxed)) {
         try {
             if (state_flags_.load(std::memory_order_relaxed) & CDM_POSE_DISCONNECTED) {
-                if (!try_reconnect()) {
-                    for (int waited = 0; waited < kReconnectIntervalMs && !stop_.load(); waited += 10)
-                        std::this_thread::sleep_for(std::chrono::milliseconds(10));
-                }
+                if (!try_reconnect()) wait_for_arrival();
                 continue;
             }
             std::string err;
@@ -274,6 +271,17 @@ void cdm_device::run() {
             set_error(std::string("reader thread: internal error: ") + e.what());
         }
     }
+}
+
+// Until the next reconnection attempt: kReconnectIntervalMs at most (the
+// retry poll, kept for a device whose return no event announces: no udevd
+// in a container, a transport without events, an event lost to a full
+// socket), sooner when the transport reports an arrival (udev's hot-plug
+// event for hid:). In slices of kReaderPollMs so that cdm_close waits no
+// longer than it does while streaming.
+void cdm_device::wait_for_arrival() {
+    for (int waited = 0; waited < kReconnectIntervalMs && !stop_.load(); waited += kReaderPollMs)
+        if (transport_->wait_arrival(std::min(kReaderPollMs, kReconnectIntervalMs - waited))) return;
 }
 
 bool cdm_device::try_reconnect() {

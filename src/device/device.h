@@ -43,7 +43,8 @@ constexpr int kReaderPollMs = 50;
 // (an older sample must not replace a newer one) and counted in
 // cdm_stats.out_of_order. A larger backward step is a counter reset.
 constexpr uint32_t kReorderWindow = 64;
-// Retry interval while disconnected.
+// Retry interval while disconnected, when no hot-plug event comes sooner
+// (cdm_device::wait_for_arrival).
 constexpr int kReconnectIntervalMs = 250;
 
 uint64_t monotonic_ns();
@@ -107,6 +108,7 @@ private:
 
     void run();
     bool try_reconnect();
+    void wait_for_arrival();
     // host_ns: CLOCK_MONOTONIC when the transport's read returned it.
     void handle_report(const uint8_t *buf, size_t len, uint64_t host_ns);
     // false: discard (duplicate or late)

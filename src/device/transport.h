@@ -65,6 +65,13 @@ public:
     // ~250 ms: one attempt to reopen the same device (same serial number).
     virtual int reopen(std::string &err);
 
+    // OPTIONAL (default: sleeps timeout_ms, returns false). Called from the
+    // reader thread between reconnection attempts: waits at most timeout_ms
+    // for a sign that the device may be back (hid: udev's hot-plug event,
+    // device/hotplug.h); true if one came, and the reader tries reopen() at
+    // once instead of at the next retry tick.
+    virtual bool wait_arrival(int timeout_ms);
+
     // OPTIONAL (default: none). Something the caller should know although
     // the open succeeded (a recording cut short: its tail was dropped).
     // cdm_open puts it into cdm_device_error; truncated_bytes goes into

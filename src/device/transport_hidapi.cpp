@@ -7,14 +7,18 @@
 // ever changes the pointer.
 #include <hidapi.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cstring>
 #include <cwchar>
+#include <memory>
 #include <mutex>
 #include <set>
 
 #include "cdm/cdm.h"
 #include "device/device.h"
 #include "device/hidraw_check.h"
+#include "device/hotplug.h"
 #include "device/protocol.h"
 #include "device/transport.h"
 #include "device/transport_hidapi.h"
@@ -55,17 +59,27 @@ std::string hid_err(hid_device *d) {
 // (containers, emulators) hides the master from the former only. Neither
 // `cdm list` nor a reconnection by serial may miss what hidapi can see
 // (docs/testing.md).
+// hid_enumerate is serialised: hidapi 0.13 keeps its error text in a
+// process-wide variable, and enumeration now runs on the watcher's thread
+// too, beside the reader threads' reconnections and the callers' own.
+std::mutex g_enum_mu;
+
 template <class F> void for_each_master(F &&f) {
     std::set<std::string> seen;
-    for (int pass = 0; pass < 2; ++pass) {
-        hid_device_info *list = pass == 0 ? hid_enumerate(proto::kVendorId, proto::kProductId) : hid_enumerate(0, 0);
+    std::vector<hid_device_info *> lists;
+    {
+        std::lock_guard<std::mutex> lock(g_enum_mu);
+        lists.push_back(hid_enumerate(proto::kVendorId, proto::kProductId));
+        lists.push_back(hid_enumerate(0, 0));
+    }
+    for (hid_device_info *list : lists) {
         for (hid_device_info *d = list; d; d = d->next) {
             if (!d->path || d->vendor_id != proto::kVendorId || d->product_id != proto::kProductId) continue;
             if (!seen.insert(d->path).second) continue; // one entry per node (several usage pairs)
             f(*d);
         }
-        hid_free_enumeration(list);
     }
+    for (hid_device_info *list : lists) hid_free_enumeration(list);
 }
 
 // Path of the connected master with this serial number, or "".
@@ -108,10 +122,34 @@ public:
         // hidraw: -1 means the node went away (unplug) or a read error; both
         // leave the handle useless, so close it and let the reader reopen.
         err = "hid_read_timeout: " + hid_err(dev_);
-        std::lock_guard<std::mutex> lock(mu_);
-        hid_close(dev_);
-        dev_ = nullptr;
+        {
+            std::lock_guard<std::mutex> lock(mu_);
+            hid_close(dev_);
+            dev_ = nullptr;
+        }
+        // Subscribed now, before the reader's first reopen attempt: an
+        // arrival after that attempt is queued in the socket, not missed.
+        if (hotplug_events() && !mon_) mon_ = std::make_unique<UdevMonitor>();
         return kReadDisconnected;
+    }
+
+    bool wait_arrival(int timeout_ms) override {
+        if (!mon_ || !mon_->ok()) return Transport::wait_arrival(timeout_ms);
+        // Any hidraw or USB device "add": the master's hidraw "add" comes
+        // last, but a reopen costs only one enumeration and so nothing
+        // depends on the order (docs/reliability.md, "Hot-plug"). Removals
+        // (the unplug's own events, which udev delivers after the read has
+        // already failed) do not wake the reader.
+        const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+        for (;;) {
+            const auto left =
+                std::chrono::duration_cast<std::chrono::milliseconds>(end - std::chrono::steady_clock::now()).count();
+            std::vector<UdevEvent> events;
+            if (mon_->wait(int(std::max<long long>(0, left)), &events) == 0) return false;
+            for (const UdevEvent &e : events)
+                if (e.action == "add") return true;
+            if (left <= 0) return false;
+        }
     }
 
     int get_feature(uint8_t *buf, size_t len, std::string &err) override {
@@ -152,10 +190,13 @@ public:
         hid_device *d = nullptr;
         const int rc = checked_open(path, d, err);
         if (rc != CDM_OK) return rc;
-        std::lock_guard<std::mutex> lock(mu_);
-        if (dev_) hid_close(dev_);
-        dev_ = d;
-        path_ = path;
+        {
+            std::lock_guard<std::mutex> lock(mu_);
+            if (dev_) hid_close(dev_);
+            dev_ = d;
+            path_ = path;
+        }
+        mon_.reset(); // back: no more events wanted until the next unplug
         return CDM_OK;
     }
 
@@ -171,6 +212,7 @@ private:
     std::mutex mu_;
     hid_device *dev_;
     std::string path_, serial_;
+    std::unique_ptr<UdevMonitor> mon_; // while disconnected; reader thread only
 };
 
 int open_path(const std::string &path, const std::string &uri_text, TransportPtr &out, std::string &err) {
@@ -219,41 +261,57 @@ int open_hid(const Uri &u, TransportPtr &out, std::string &err) {
     return open_path(u.path, u.text, out, err);
 }
 
-void hid_list_masters(std::vector<cdm_device_info> &out, std::string &err) {
+void hid_list_master_nodes(std::vector<MasterNode> &out, std::string &err) {
     out.clear();
     if (ensure_hid_init(err) != CDM_OK) return;
-    for_each_master([&](const hid_device_info &dv) {
-        const hid_device_info *d = &dv;
-        const std::string serial = narrow(d->serial_number);
-        const std::string uri = std::string("hid:") + d->path;
-        cdm_device_info info{};
-        bool full = false;
-        hid_device *h = nullptr;
-        std::string why;
-        if (checked_open(d->path, h, why) == CDM_OK) {
-            uint8_t buf[proto::kDeviceInfoReportSize] = {proto::kDeviceInfoReportId};
-            const int n = hid_get_feature_report(h, buf, sizeof buf);
-            proto::DeviceInfoReport r;
-            if (n > 0 && proto::parse_device_info(buf, size_t(n), r, nullptr) == proto::Reject::None) {
-                device_info_from_report(r, "hid", uri, info);
-                full = true;
-            }
-            hid_close(h);
-        }
-        if (!full) {
-            // Busy or not answering: what enumeration knows (bcdDevice is
-            // the firmware's major.minor).
-            info.struct_size = sizeof info;
-            std::snprintf(info.uri, sizeof info.uri, "%s", uri.c_str());
-            std::snprintf(info.serial, sizeof info.serial, "%s", serial.c_str());
-            std::snprintf(info.firmware, sizeof info.firmware, "%x.%x", d->release_number >> 8,
-                          d->release_number & 0xFF);
-            std::snprintf(info.transport, sizeof info.transport, "hid");
-        }
-        info.vendor_id = d->vendor_id;
-        info.product_id = d->product_id;
-        out.push_back(info);
+    for_each_master([&](const hid_device_info &d) {
+        MasterNode n;
+        n.path = d.path;
+        n.serial = narrow(d.serial_number);
+        n.release = d.release_number;
+        out.push_back(std::move(n));
     });
+}
+
+void hid_master_info(const MasterNode &node, cdm_device_info &out) {
+    const std::string uri = "hid:" + node.path;
+    cdm_device_info info{};
+    bool full = false;
+    hid_device *h = nullptr;
+    std::string why;
+    if (checked_open(node.path, h, why) == CDM_OK) {
+        uint8_t buf[proto::kDeviceInfoReportSize] = {proto::kDeviceInfoReportId};
+        const int n = hid_get_feature_report(h, buf, sizeof buf);
+        proto::DeviceInfoReport r;
+        if (n > 0 && proto::parse_device_info(buf, size_t(n), r, nullptr) == proto::Reject::None) {
+            device_info_from_report(r, "hid", uri, info);
+            full = true;
+        }
+        hid_close(h);
+    }
+    if (!full) {
+        // Busy or not answering: what enumeration knows (bcdDevice is
+        // the firmware's major.minor).
+        info.struct_size = sizeof info;
+        std::snprintf(info.uri, sizeof info.uri, "%s", uri.c_str());
+        std::snprintf(info.serial, sizeof info.serial, "%s", node.serial.c_str());
+        std::snprintf(info.firmware, sizeof info.firmware, "%x.%x", node.release >> 8, node.release & 0xFF);
+        std::snprintf(info.transport, sizeof info.transport, "hid");
+    }
+    info.vendor_id = proto::kVendorId;
+    info.product_id = proto::kProductId;
+    out = info;
+}
+
+void hid_list_masters(std::vector<cdm_device_info> &out, std::string &err) {
+    out.clear();
+    std::vector<MasterNode> nodes;
+    hid_list_master_nodes(nodes, err);
+    for (const MasterNode &n : nodes) {
+        cdm_device_info info;
+        hid_master_info(n, info);
+        out.push_back(info);
+    }
 }
 
 } // namespace cdm

@@ -1,6 +1,7 @@
 // Enumeration of real masters through hidapi (VID/PID of protocol.h).
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -11,4 +12,16 @@ namespace cdm {
 // device-info feature report (else what enumeration alone knows). An empty
 // list is not an error; err says why hidapi could not enumerate, if so.
 void hid_list_masters(std::vector<cdm_device_info> &out, std::string &err);
+
+// A master's node as enumeration alone knows it (nothing opened).
+struct MasterNode {
+    std::string path;   // "/dev/hidrawN"
+    std::string serial; // from the USB string descriptor, "" if none
+    uint16_t release = 0; // bcdDevice: the firmware's major.minor
+};
+// Every connected master's node, each once (cheap: no open). err as above.
+void hid_list_master_nodes(std::vector<MasterNode> &out, std::string &err);
+// Its full info when it answers the device-info feature report, else what
+// enumeration knows (uri, serial, firmware major.minor, USB ids).
+void hid_master_info(const MasterNode &node, cdm_device_info &out);
 } // namespace cdm

@@ -1,5 +1,7 @@
 #include <cerrno>
+#include <chrono>
 #include <cstdlib>
+#include <thread>
 
 #include "cdm/cdm.h"
 #include "device/transport.h"
@@ -36,6 +38,11 @@ int Transport::send_feature(const uint8_t *, size_t, std::string &err) {
 int Transport::reopen(std::string &err) {
     err = std::string(name()) + " transport cannot reconnect";
     return CDM_ERR_UNSUPPORTED;
+}
+
+bool Transport::wait_arrival(int timeout_ms) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(timeout_ms));
+    return false;
 }
 
 int parse_uri(const std::string &text, Uri &out, std::string &err) {

@@ -2,6 +2,7 @@
 //   mono CdmTests.exe ROOT layout      struct layouts against tests/data/abi_layout.json
 //   mono CdmTests.exe ROOT constants   enums against include/cdm/cdm.h
 //   mono CdmTests.exe ROOT device      the simulated master through the binding
+//   mono CdmTests.exe ROOT watch       Cdm.Watcher on the emulated master (umockdev_csharp_watch)
 using System;
 using System.Collections.Generic;
 using System.IO;
@@ -46,6 +47,7 @@ static class CdmTests
                     Run("sample_callback", SampleCallback);
                     Run("events_and_log", EventsAndLog);
                     break;
+                case "watch": Run("watch_replug", WatchReplug); break; // under with_master --replug (tests/umockdev)
                 case "calibration":
                     Run("calibration_errors", CalibrationErrors);
                     Run("frames", FramesCarryRotations);
@@ -118,6 +120,48 @@ static class CdmTests
         Expect(Math.Abs(ros.X + 0.1) < 1e-12 && Math.Abs(ros.Y + 0.02) < 1e-12 && Math.Abs(ros.Z - 0.03) < 1e-12, "frames: ROS axes");
         Expect(Math.Abs(unity.X - 0.02) < 1e-12 && Math.Abs(unity.Y - 0.03) < 1e-12 && Math.Abs(unity.Z + 0.1) < 1e-12, "frames: Unity axes");
         Expect(qr[3] == 1 && qu[3] == 1, "frames: identity stays identity");
+    }
+
+    // ------------------------------------------------------------ hot-plug
+    // Run by `with_master --replug 2000,400` (tests/umockdev): the master
+    // there at the start arrives, leaves at the unplug, arrives at the
+    // replug; Dispose from the callback throws; nothing after Dispose.
+    static void WatchReplug()
+    {
+        var seen = new List<string>();
+        var gate = new object();
+        var three = new ManualResetEvent(false);
+        Watcher holder = null;
+        bool disposeRefused = false;
+        var w = Watcher.Start((kind, info) =>
+        {
+            Watcher h;
+            lock (gate)
+            {
+                seen.Add(kind + " " + info.Uri + " " + info.Serial);
+                h = holder;
+                if (seen.Count >= 3) three.Set();
+            }
+            if (kind == WatchEvent.Left && h != null)
+            {
+                try { h.Dispose(); }
+                catch (InvalidOperationException) { disposeRefused = true; }
+            }
+        }, true);
+        lock (gate) holder = w;
+        Expect(three.WaitOne(15000), "watch: three events within 15 s");
+        w.Dispose();
+        Expect(w.IsDisposed, "watch: disposed");
+        int n;
+        lock (gate) n = seen.Count;
+        Thread.Sleep(200);
+        lock (gate)
+        {
+            Expect(seen.Count == n, "watch: no callback after Dispose");
+            Expect(string.Join("; ", seen) == "Arrived hid:/dev/hidraw0 UMOCK0001; Left hid:/dev/hidraw0 UMOCK0001; Arrived hid:/dev/hidraw0 UMOCK0001",
+                   "watch: got " + string.Join("; ", seen));
+        }
+        Expect(disposeRefused, "watch: Dispose from the callback throws InvalidOperationException");
     }
 
     // ------------------------------------------------------------ layouts

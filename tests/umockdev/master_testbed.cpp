@@ -182,21 +182,42 @@ std::string MasterTestbed::Impl::tree_text(bool with_node) const {
 
 void MasterTestbed::Impl::add_tree() {
     GError *e = nullptr;
-    if (!umockdev_testbed_add_from_string(tb, tree_text(!attached).c_str(), &e)) {
-        std::string m = e ? e->message : "unknown";
-        g_clear_error(&e);
-        throw std::runtime_error("umockdev_testbed_add_from_string: " + m);
+    // One device at a time, parents first: umockdev sends each device's
+    // "add" uevent as it adds it, and the kernel announces the USB device
+    // first and the hidraw node last, once everything under it exists. The
+    // whole text at once would announce hidraw0 before its parents'
+    // attributes are there (umockdev's record format lists children
+    // first), an order no kernel produces.
+    // A replug: the node answers before the first uevent goes out, as a
+    // kernel's hidraw node does by the time udev announces it. umockdev
+    // serves ioctls while it adds devices (the handler's context runs
+    // during the add), so an "add" watcher that opens at once would
+    // otherwise meet ENODEV and wait for its next retry.
+    if (attached) {
+        write_readable_line();
+        plugged = true;
+    }
+    const std::string text = tree_text(!attached);
+    std::vector<std::string> blocks;
+    for (size_t at = 0; at < text.size();) {
+        size_t end = text.find("\n\n", at);
+        if (end == std::string::npos) end = text.size();
+        blocks.push_back(text.substr(at, end - at) + "\n");
+        at = end + 2;
+    }
+    for (auto it = blocks.rbegin(); it != blocks.rend(); ++it) {
+        if (!umockdev_testbed_add_from_string(tb, it->c_str(), &e)) {
+            std::string m = e ? e->message : "unknown";
+            g_clear_error(&e);
+            throw std::runtime_error("umockdev_testbed_add_from_string: " + m);
+        }
     }
     // The ioctl socket must be served by the handler thread's context: it
     // is the thread-default one while attaching.
     // Attached once for the testbed's life: umockdev's preload ends the
     // client process when an open fd's socket disappears, which a detach
     // on unplug would do to the driver's handle under test.
-    if (attached) {
-        write_readable_line();
-        plugged = true;
-        return;
-    }
+    if (attached) return;
     g_main_context_push_thread_default(ctx);
     const gboolean ok = umockdev_testbed_attach_ioctl(tb, "/dev/hidraw0", handler, &e);
     g_main_context_pop_thread_default(ctx);

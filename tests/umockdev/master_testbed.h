@@ -46,7 +46,8 @@ public:
     // device, children first), the sysfs tree and the node gone; reads
     // pending on an open node fail with ENODEV, as hidraw's do.
     void unplug();
-    // The kernel's plug: tree, node and "add" uevents back.
+    // The kernel's plug: tree, node and "add" uevents back, parents first
+    // (USB device ... hidraw last), as the kernel announces them.
     void plug();
     bool plugged() const;
 

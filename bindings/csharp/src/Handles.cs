@@ -48,4 +48,21 @@ namespace Cdm
             return true;
         }
     }
+
+    internal sealed class WatcherHandle : SafeHandle
+    {
+        // The delegate handed to cdm_watch: the watcher's thread calls it
+        // until cdm_watch_free returns, so it lives exactly as long as this handle.
+        internal WatchFn Callback;
+
+        public WatcherHandle() : base(IntPtr.Zero, true) { }
+        public override bool IsInvalid { get { return handle == IntPtr.Zero; } }
+
+        protected override bool ReleaseHandle()
+        {
+            NativeMethods.cdm_watch_free(handle); // joins the watcher's thread: no callback after this
+            Callback = null;
+            return true;
+        }
+    }
 }

@@ -143,8 +143,21 @@ namespace Cdm
         public IntPtr initial; // since 1.1
     }
 
+    /// <summary>cdm_watch_event (CDM_EXPERIMENTAL, since 1.1).</summary>
+    [CStruct("cdm_watch_event"), StructLayout(LayoutKind.Sequential)]
+    internal struct NativeWatchEvent
+    {
+        public uint struct_size;
+        public uint kind;
+        public ulong host_time_ns;
+        public IntPtr info; // const cdm_device_info *
+    }
+
     [UnmanagedFunctionPointer(CallingConvention.Cdecl)]
     internal delegate void SampleFn(IntPtr user, IntPtr sample);
+
+    [UnmanagedFunctionPointer(CallingConvention.Cdecl)]
+    internal delegate void WatchFn(IntPtr user, IntPtr ev);
 
     [UnmanagedFunctionPointer(CallingConvention.Cdecl)]
     internal delegate void EventFn(IntPtr user, IntPtr ev);
@@ -198,6 +211,10 @@ namespace Cdm
         internal static extern int cdm_set_calibration_nominal(DeviceHandle dev, IntPtr nullCal);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_device_calibration_read(DeviceHandle dev, [Out] byte[] buf, UIntPtr cap, out UIntPtr len);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_device_calibration_write(DeviceHandle dev, byte[] data, UIntPtr len);
+
+        // CDM_EXPERIMENTAL: hot-plug (since 1.1)
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_watch(uint flags, WatchFn fn, IntPtr user, out WatcherHandle watcher);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern void cdm_watch_free(IntPtr watcher);
 
         /// <summary>UTF-8 text at p (NULL gives "").</summary>
         internal static string Utf8(IntPtr p)

@@ -21,6 +21,7 @@ from .diagnosis import Diagnosis, diagnose, fit, load_diagnosis
 from .effects import effect_names, load_plugin, register_effect, unregister_effect
 from . import frames
 from . import log
+from .watch import Watcher, watch
 from .errors import (CdmError, CdmFileNotFoundError, CdmIOError, CdmMemoryError, CdmTimeoutError,
                      DisconnectedError, InvalidArgumentError, LibraryNotFoundError, NoDeviceError, ParseError)
 from . import constants as _constants
@@ -30,7 +31,7 @@ __all__ = ["open", "enumerate", "enumerate_devices", "Device", "DeviceInfo", "Po
            "effect_names", "load_plugin", "register_effect", "unregister_effect",
            "CdmError", "InvalidArgumentError", "ParseError", "NoDeviceError", "CdmIOError", "CdmFileNotFoundError",
            "CdmTimeoutError", "DisconnectedError", "CdmMemoryError", "LibraryNotFoundError",
-           "frames", "log", "version", "version_number", "library_path"] + list(_constants.__all__)
+           "Watcher", "watch", "frames", "log", "version", "version_number", "library_path"] + list(_constants.__all__)
 
 
 

@@ -153,8 +153,20 @@ class cdm_effect_def(_Sized):
 
 cdm_progress_fn = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_char_p, ctypes.c_double)
 
+class cdm_watch_event(_Sized):  # CDM_EXPERIMENTAL, since 1.1
+    _fields_ = [
+        ("struct_size", ctypes.c_uint32),
+        ("kind", ctypes.c_uint32),
+        ("host_time_ns", ctypes.c_uint64),
+        ("info", ctypes.POINTER(cdm_device_info)),
+    ]
+
+
+cdm_watch_fn = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(cdm_watch_event))
+
 STRUCTS = {cls.__name__: cls for cls in
-           (cdm_pose, cdm_raw, cdm_device_info, cdm_stats, cdm_sample, cdm_open_options, cdm_effect_def, cdm_event)}
+           (cdm_pose, cdm_raw, cdm_device_info, cdm_stats, cdm_sample, cdm_open_options, cdm_effect_def, cdm_event,
+            cdm_watch_event)}
 
 # Opaque handles travel as void pointers.
 _handle = ctypes.c_void_p
@@ -231,6 +243,9 @@ PROTOTYPES = {
     "cdm_simulate_jig_defaults": (_int, [_handle_p]),
     "cdm_simulate_jig_dataset": (_int, [_str, _str]),
     "cdm_write_file_atomic": (_int, [_str, ctypes.c_void_p, _size, ctypes.POINTER(ctypes.c_char_p), _size]),
+    # CDM_EXPERIMENTAL, hot-plug
+    "cdm_watch": (_int, [ctypes.c_uint32, cdm_watch_fn, ctypes.c_void_p, _handle_p]),
+    "cdm_watch_free": (None, [_handle]),
 }
 
 

@@ -70,10 +70,21 @@ class LogLevel(enum.IntEnum):
     CDM_LOG_ERROR = 3
 
 
-_ENUMS = (Error, PoseFlag, Button, EventKind, LogLevel)
+class WatchKind(enum.IntEnum):
+    """cdm_watch_kind (experimental, since 1.1): what cdm.watch reports."""
+    CDM_WATCH_ARRIVED = 1
+    CDM_WATCH_LEFT = 2
+
+
+class WatchFlag(enum.IntFlag):
+    """cdm_watch_flag (experimental, since 1.1)."""
+    CDM_WATCH_ENUMERATE = 1 << 0
+
+
+_ENUMS = (Error, PoseFlag, Button, EventKind, LogLevel, WatchKind, WatchFlag)
 
 # The header's names, flat, as module attributes (cdm.CDM_ERR_NO_DEVICE, ...).
 globals().update({str(m.name): int(m) for e in _ENUMS for m in e})
 
-__all__ = ["Error", "PoseFlag", "Button", "EventKind", "LogLevel", "CDM_ERROR_COUNT", "CDM_VERSION_MAJOR",
+__all__ = ["Error", "PoseFlag", "Button", "EventKind", "LogLevel", "WatchKind", "WatchFlag", "CDM_ERROR_COUNT", "CDM_VERSION_MAJOR",
            "CDM_VERSION_MINOR", "CDM_VERSION_PATCH", "CDM_VERSION_NUMBER"] + [str(m.name) for e in _ENUMS for m in e]

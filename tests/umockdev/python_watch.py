@@ -1,0 +1,34 @@
+"""cdm.watch on the emulated master (run by `with_master --replug 1500,400`
+under umockdev-wrapper): the master present at the start arrives, leaves at
+the unplug and arrives again at the replug, through the Python binding's
+callback on libcdm's watcher thread."""
+import sys
+import threading
+import time
+
+import cdm
+
+seen = []
+done = threading.Event()
+
+
+def told(kind, info):
+    seen.append((kind, info.uri, info.serial))
+    if len(seen) >= 3:
+        done.set()
+
+
+with cdm.watch(told) as w:
+    # Bounded wait for something to happen at all (a loaded machine); the
+    # replug comes at 1.2 s.
+    done.wait(10.0)
+assert w.closed
+n = len(seen)
+time.sleep(0.2)
+assert len(seen) == n, "callback after close: %r" % (seen,)
+want = [("arrived", "hid:/dev/hidraw0", "UMOCK0001"), ("left", "hid:/dev/hidraw0", "UMOCK0001"),
+        ("arrived", "hid:/dev/hidraw0", "UMOCK0001")]
+assert seen == want, seen
+print("python watch: %s" % ", ".join(k for k, _, _ in seen))
+print("1 passed, 0 failed")
+sys.exit(0)

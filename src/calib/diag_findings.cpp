@@ -119,17 +119,6 @@ PeriodPeak length_period(const LengthView &v) {
 
 namespace {
 
-std::string num(double v, int prec) {
-    char b[64];
-    std::snprintf(b, sizeof b, "%.*f", prec, v);
-    return b;
-}
-std::string sci(double v) {
-    char b[64];
-    std::snprintf(b, sizeof b, "%.1e", v);
-    return b;
-}
-
 // Weighted least squares y ~ X; returns the coefficients, their standard
 // errors from the residual scatter (s^2 (X'WX)^-1), and the residual dof.
 struct Ls {
@@ -233,8 +222,8 @@ json drift_finding(const std::vector<PreparedPos> &pos, const LengthView &lv) {
             {"test", "slope of the four cables' mean reading residual against time within each height (per-height "
                      "means removed), two-sided z-test; the slope across the whole session agrees within 3 "
                      "standard errors"},
-            {"text", "the readings drift by " + num(total, 3) + " mm over the session (" + num(bp, 3) +
-                         " mm/h, all four cables together, within every height and across heights; p = " + sci(p) +
+            {"text", "the readings drift by " + fmt_num(total, 3) + " mm over the session (" + fmt_num(bp, 3) +
+                         " mm/h, all four cables together, within every height and across heights; " + fmt_p(p) +
                          "): warm the device up before measuring, or re-measure a reference hole at intervals; "
                          "pot_drift models it"}};
 }
@@ -251,8 +240,8 @@ json residual_findings(const std::vector<PreparedPos> &pos, const LengthView &lv
                             {"amplitude_mm", pk.amplitude_mm}, {"p_value", pk.fap}, {"r2", nullptr},
                             {"test", "pooled Lomb-Scargle power of the four cables against Gamma(4,1), false-alarm "
                                      "probability over the independent frequencies searched"},
-                            {"text", "the cable-length residual repeats every " + num(pk.period_mm, 1) +
-                                         " mm of cable (amplitude " + num(pk.amplitude_mm, 3) +
+                            {"text", "the cable-length residual repeats every " + fmt_num(pk.period_mm, 1) +
+                                         " mm of cable (amplitude " + fmt_num(pk.amplitude_mm, 3) +
                                          " mm) in all four cables: something turns with the drum (an eccentric drum "
                                          "or shaft, a pot track ripple: drum_eccentricity), or the reading is off "
                                          "in a band of cable length (a worn track); plot the length residual "
@@ -303,9 +292,9 @@ json residual_findings(const std::vector<PreparedPos> &pos, const LengthView &lv
                               {"kind", "trend"}, {"axis", kAxis[a]}, {"period_mm", nullptr},
                               {"amplitude_mm", t.range}, {"p_value", padj}, {"r2", t.r2},
                               {"test", "F-test of a weighted quadratic against a constant, Bonferroni over " +
-                                           num(n_tests, 0) + " variable-axis pairs"},
+                                           fmt_num(n_tests, 0) + " variable-axis pairs"},
                               {"text", std::string(kAxis[a]) + " residual varies with " + var.name + " by " +
-                                           num(t.range, 3) + " mm (R^2 " + num(t.r2, 2) + ")"}});
+                                           fmt_num(t.range, 3) + " mm (R^2 " + fmt_num(t.r2, 2) + ")"}});
         }
     std::sort(tr.begin(), tr.end(), [](const json &a, const json &b) { return a["r2"] > b["r2"]; });
     for (size_t k = 0; k < std::min<size_t>(6, tr.size()); ++k) findings.push_back(tr[k]);

@@ -22,22 +22,6 @@ namespace {
 
 const char *kAxis[3] = {"x", "y", "z"};
 
-std::string num(double v, int prec, bool sign = false) {
-    char b[64];
-    std::snprintf(b, sizeof b, sign ? "%+.*f" : "%.*f", prec, v);
-    return b;
-}
-std::string pstr(double p) {
-    char b[64];
-    if (p >= 0.001)
-        std::snprintf(b, sizeof b, "p = %.3f", p);
-    else if (p > 0)
-        std::snprintf(b, sizeof b, "p = %.1e", p);
-    else
-        std::snprintf(b, sizeof b, "p < 1e-300");
-    return b;
-}
-
 // Weighted per-height mean residual and its standard error, per axis.
 struct HeightMean {
     double sw = 0, swr = 0;
@@ -139,12 +123,12 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
     out["fixture"] = fx;
     if (fx_axis >= 0 && fx["taken_as_jig"].get<bool>()) {
         std::string per;
-        for (auto &v : fx["offsets_mm"][kAxis[fx_axis]]) per += (per.empty() ? "" : ", ") + num(v.get<double>(), 3, true);
-        out["text"].push_back("each fixture height has its own offset, up to " + num(fx_worst, 3) + " mm in " +
+        for (auto &v : fx["offsets_mm"][kAxis[fx_axis]]) per += (per.empty() ? "" : ", ") + fmt_num(v.get<double>(), 3, true);
+        out["text"].push_back("each fixture height has its own offset, up to " + fmt_num(fx_worst, 3) + " mm in " +
                               kAxis[fx_axis] + " (per height: " + per + " mm; " +
-                              pstr(fx["p_value"][kAxis[fx_axis]].get<double>()) +
+                              fmt_p(fx["p_value"][kAxis[fx_axis]].get<double>()) +
                               "): the height fixture's spacers, the jig's error, taken out of the fit and the "
-                              "tests (up to " + num(kFixtureMaxMm, 2) + " mm per height)");
+                              "tests (up to " + fmt_num(kFixtureMaxMm, 2) + " mm per height)");
     }
 
     // --- the holes: one-way analysis of variance of the residual (the
@@ -252,7 +236,7 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
                           {"r2", nullptr},
                           {"test", ho["test"]},
                           {"text", "the " + ax + " residual repeats at the same hole at every height and is smooth "
-                                   "over the plate (about " + num(dev_amp, 3) + " mm): a device effect that does not "
+                                   "over the plate (about " + fmt_num(dev_amp, 3) + " mm): a device effect that does not "
                                    "change with height, not the plate's holes (a plate's hole errors are independent "
                                    "from hole to hole)"}};
     } else if (!plate_axes.empty()) {
@@ -270,10 +254,10 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
             }
         std::string what, tests;
         for (int a : plate_axes) {
-            what += (what.empty() ? "" : " and ") + num(ho["std_mm"][kAxis[a]].get<double>(), 3) + " mm in " + kAxis[a];
+            what += (what.empty() ? "" : " and ") + fmt_num(ho["std_mm"][kAxis[a]].get<double>(), 3) + " mm in " + kAxis[a];
             tests += (tests.empty() ? "" : "; ") + std::string(kAxis[a]) + " F = " +
-                     num(ho["F"][kAxis[a]].get<double>(), 2) + ", " + pstr(ho["p_value"][kAxis[a]].get<double>()) +
-                     ", Moran z = " + num(ho["smooth_z"][kAxis[a]].get<double>(), 1);
+                     fmt_num(ho["F"][kAxis[a]].get<double>(), 2) + ", " + fmt_p(ho["p_value"][kAxis[a]].get<double>()) +
+                     ", Moran z = " + fmt_num(ho["smooth_z"][kAxis[a]].get<double>(), 1);
         }
         out["text"].push_back("the residual repeats at the same hole at every height: the plate's holes are off by "
                               "about " + what + " (analysis of variance by hole: " + tests +

@@ -3,6 +3,8 @@
 // cases (no degrees of freedom, a non-positive statistic) into p = 1.
 #include "calib/diag_stats.h"
 
+#include <cstdio>
+
 #include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/fisher_f.hpp>
 #include <boost/math/distributions/normal.hpp>
@@ -30,6 +32,23 @@ double f_sf(double F, double d1, double d2) {
     if (!(F > 0) || !(d1 > 0) || !(d2 > 0)) return 1.0;
     if (!std::isfinite(F)) return 0.0;
     return boost::math::cdf(boost::math::complement(boost::math::fisher_f_distribution<double>(d1, d2), F));
+}
+
+std::string fmt_num(double v, int prec, bool sign) {
+    char b[64];
+    std::snprintf(b, sizeof b, sign ? "%+.*f" : "%.*f", prec, v);
+    return b;
+}
+
+std::string fmt_p(double p) {
+    char b[64];
+    if (p >= 0.001)
+        std::snprintf(b, sizeof b, "p = %.3f", p);
+    else if (p > 0)
+        std::snprintf(b, sizeof b, "p = %.1e", p);
+    else
+        std::snprintf(b, sizeof b, "p < 1e-300");
+    return b;
 }
 
 } // namespace diag

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string>
 
 #include <nlohmann/json.hpp>
 
@@ -15,6 +16,11 @@ double normal_sf(double z);             // P(Z > z), Z standard normal
 double chi2_sf(double x, double dof);   // P(X > x), X ~ chi-square(dof)
 double chi2_isf(double p, double dof);  // x with P(X > x) = p
 double f_sf(double F, double d1, double d2); // P(X > F), X ~ F(d1, d2)
+
+// Numbers in the diagnosis' words: fixed decimals (sign: a leading + for
+// positive values), and a p-value ("p = 0.042", "p = 3.2e-05", "p < 1e-300").
+std::string fmt_num(double v, int prec, bool sign = false);
+std::string fmt_p(double p);
 
 // Weighted running moments of one error component.
 struct Acc {

@@ -11,23 +11,6 @@ namespace diag {
 
 using nlohmann::json;
 
-std::string fmt_num(double v, int prec) {
-    char b[64];
-    std::snprintf(b, sizeof b, "%.*f", prec, v);
-    return b;
-}
-
-std::string fmt_p(double p) {
-    char b[64];
-    if (p >= 0.001)
-        std::snprintf(b, sizeof b, "p = %.3f", p);
-    else if (p > 0)
-        std::snprintf(b, sizeof b, "p = %.1e", p);
-    else
-        std::snprintf(b, sizeof b, "p < 1e-300");
-    return b;
-}
-
 Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candidate> *cands, const json *findings,
                       const V3 &noise) {
     Judgement J;

@@ -33,8 +33,6 @@ struct Judgement {
 Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candidate> *cands,
                       const nlohmann::json *findings, const V3 &noise);
 
-std::string fmt_num(double v, int prec);
-std::string fmt_p(double p); // "p = 3.2e-05", exact tails down to the smallest double
 
 } // namespace diag
 } // namespace cdm

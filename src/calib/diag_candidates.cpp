@@ -2,8 +2,11 @@
 #include "calib/diag_candidates.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <exception>
+#include <thread>
 
 #include "calib/diag_findings.h"
 #include "calib/diag_stats.h"
@@ -21,6 +24,62 @@ std::string fmt(double v, int prec = 3) {
     return b;
 }
 } // namespace
+
+bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err) {
+    auto has_user = [](const Model &m) {
+        for (size_t k = 0; k < m.effect_count(); ++k)
+            if (m.effect_desc(k).stage == Stage::User) return true;
+        return false;
+    };
+    // Jobs with a user effect: on the calling thread, before the others.
+    std::vector<size_t> serial, shared;
+    for (size_t k = 0; k < jobs.size(); ++k) (has_user(jobs[k].m) ? serial : shared).push_back(k);
+    std::atomic<bool> cancelled{false};
+    auto run = [&](FitJob &j, bool main) {
+        FitOptions f = ctx.fo;
+        if (main)
+            f.progress = [&](double fr) {
+                if (ctx.report(j.stage, fr)) return !cancelled.load();
+                cancelled = true;
+                return false;
+            };
+        else
+            f.progress = [&](double) { return !cancelled.load(); };
+        j.ok = fit_model(j.m, ctx.pos, f, j.rep);
+        if (!j.ok) cancelled = true; // the batch fails: stop the others early
+    };
+    for (size_t k : serial) {
+        run(jobs[k], true);
+        if (!jobs[k].ok) break;
+    }
+    if (!cancelled) {
+        std::atomic<size_t> next{0};
+        std::exception_ptr failure;
+        std::atomic<bool> failed{false};
+        auto work = [&](bool main) {
+            for (size_t i; !cancelled && (i = next++) < shared.size();) {
+                try {
+                    run(jobs[shared[i]], main);
+                } catch (...) {
+                    if (!failed.exchange(true)) failure = std::current_exception();
+                    cancelled = true;
+                }
+            }
+        };
+        const size_t nt = std::min<size_t>(size_t(std::max(1, ctx.threads)), shared.size());
+        std::vector<std::thread> pool;
+        for (size_t t = 1; t < nt; ++t) pool.emplace_back(work, false);
+        work(true);
+        for (auto &t : pool) t.join();
+        if (failure) std::rethrow_exception(failure);
+    }
+    for (auto &j : jobs)
+        if (!j.ok) {
+            err = j.rep.message.empty() ? "fit cancelled" : j.rep.message;
+            return false;
+        }
+    return true;
+}
 
 std::vector<std::string> reading_effects(const Model &m) {
     std::vector<std::string> v;
@@ -90,8 +149,25 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
     const size_t P = ctx.pos.size();
     auto list = candidate_effects();
     const size_t n_base = reading_effects(base).size();
+    // Every candidate from every start, fitted as one batch (independent
+    // fits: on ctx.threads threads); then judged in the catalogue's order.
+    std::vector<FitJob> jobs;
+    std::vector<std::pair<size_t, size_t>> span(list.size(), {0, 0}); // jobs of list[i]
+    for (size_t i = 0; i < list.size(); ++i) {
+        const auto &d = list[i];
+        span[i].first = jobs.size();
+        if (!base.has_effect(d->name))
+            for (const ParamValues &start : effect_starts(base, d->name, ctx.pos)) {
+                Model m = model_with(base, reading_effects(base), d->name, start);
+                if (!m.has_effect(d->name)) break;
+                jobs.emplace_back(std::move(m), stage + " " + d->name);
+            }
+        span[i].second = jobs.size();
+    }
+    if (!fit_all(ctx, jobs, err)) return false;
     size_t done = 0;
-    for (auto &d : list) {
+    for (size_t i = 0; i < list.size(); ++i) {
+        const auto &d = list[i];
         ++done;
         if (base.has_effect(d->name)) continue;
         Candidate c(base.geometry());
@@ -99,14 +175,9 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         // An effect entering non-linearly is fitted from each data-seeded
         // start; the best fit counts.
         bool have = false;
-        for (const ParamValues &start : effect_starts(base, d->name, ctx.pos)) {
-            Model m = model_with(base, reading_effects(base), d->name, start);
-            if (!m.has_effect(d->name)) break;
-            FitReport r;
-            if (!ctx.fit(m, stage + " " + d->name, r)) {
-                err = r.message.empty() ? "fit cancelled" : r.message;
-                return false;
-            }
+        for (size_t q = span[i].first; q < span[i].second; ++q) {
+            const Model &m = jobs[q].m;
+            const FitReport &r = jobs[q].rep;
             if (!period_shown(m, d->name, ctx.pos)) continue;
             if (!have || r.chi2 < c.rep.chi2) {
                 c.m = m;

@@ -130,6 +130,19 @@ bool ReadingEvaluator::eval(const Eigen::VectorXd &full, const double ref[3], do
     if (J) J->setZero(4, I.n);
     const int nloc = 3 + I.lay.cable.nslots;
     Eigen::Matrix<double, 4, 3> dP;
+    if (!J && !dydP && !I.lay.has_user) {
+        // Values only (a trial step of the fit, a chi-square): the same
+        // arithmetic as the values of the differentiated kernel.
+        Sample<double> s;
+        for (int k = 0; k < 3; ++k) s.P[k] = P[k];
+        s.t_s = t_s;
+        double q[kMaxCableSlots > 0 ? kMaxCableSlots : 1];
+        for (int i = 0; i < 4; ++i) {
+            for (int sl = 0; sl < I.lay.cable.nslots; ++sl) q[sl] = full(I.col[size_t(i)][size_t(sl)]);
+            y(i) = cable_reading<double>(I.m.geometry(), i, s, I.lay.cable, q);
+        }
+        return true;
+    }
     Eigen::Matrix<double, 4, kMaxCableSlots> dq;
     if (nloc <= 4)
         cable_jacobians<4>(I.m, I.lay, I.col, full, P, t_s, y, dP, dq);

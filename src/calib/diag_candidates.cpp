@@ -25,7 +25,44 @@ std::string fmt(double v, int prec = 3) {
 }
 } // namespace
 
+namespace {
+std::string fit_key(const DiagContext &ctx, const Model &m) {
+    std::string k;
+    auto bytes = [&](const void *p, size_t n) { k.append(static_cast<const char *>(p), n); };
+    for (size_t e = 0; e < m.effect_count(); ++e) {
+        k += m.effect_name(e);
+        k += '\0';
+        const auto &v = m.effect_params(e);
+        bytes(v.data(), v.size() * sizeof(double));
+        k += '\1';
+    }
+    bytes(ctx.fo.jig_sigma.data(), 3 * sizeof(double));
+    bytes(&ctx.fo.max_evals, sizeof ctx.fo.max_evals);
+    k.append(ctx.fo.use.begin(), ctx.fo.use.end());
+    return k;
+}
+} // namespace
+
 bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err) {
+    // Fits done before (bit-identical start and noise model): their result.
+    std::vector<std::string> keys(jobs.size());
+    std::vector<char> cached(jobs.size(), 0);
+    if (ctx.cache) {
+        std::lock_guard<std::mutex> lk(ctx.cache->mu);
+        for (size_t k = 0; k < jobs.size(); ++k) {
+            keys[k] = fit_key(ctx, jobs[k].m);
+            auto it = ctx.cache->done.find(keys[k]);
+            if (it == ctx.cache->done.end()) continue;
+            std::string e2;
+            bool ok = true;
+            for (size_t e = 0; e < jobs[k].m.effect_count() && ok; ++e)
+                ok = jobs[k].m.set_effect_params(e, it->second.first[e], e2);
+            if (!ok) continue; // fitted below as usual
+            jobs[k].rep = it->second.second;
+            jobs[k].ok = true;
+            cached[k] = 1;
+        }
+    }
     auto has_user = [](const Model &m) {
         for (size_t k = 0; k < m.effect_count(); ++k)
             if (m.effect_desc(k).stage == Stage::User) return true;
@@ -33,7 +70,8 @@ bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err
     };
     // Jobs with a user effect: on the calling thread, before the others.
     std::vector<size_t> serial, shared;
-    for (size_t k = 0; k < jobs.size(); ++k) (has_user(jobs[k].m) ? serial : shared).push_back(k);
+    for (size_t k = 0; k < jobs.size(); ++k)
+        if (!cached[k]) (has_user(jobs[k].m) ? serial : shared).push_back(k);
     std::atomic<bool> cancelled{false};
     auto run = [&](FitJob &j, bool main) {
         FitOptions f = ctx.fo;
@@ -78,6 +116,15 @@ bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err
             err = j.rep.message.empty() ? "fit cancelled" : j.rep.message;
             return false;
         }
+    if (ctx.cache) {
+        std::lock_guard<std::mutex> lk(ctx.cache->mu);
+        for (size_t k = 0; k < jobs.size(); ++k) {
+            if (cached[k]) continue;
+            std::vector<std::vector<double>> v;
+            for (size_t e = 0; e < jobs[k].m.effect_count(); ++e) v.push_back(jobs[k].m.effect_params(e));
+            ctx.cache->done.emplace(keys[k], std::make_pair(std::move(v), jobs[k].rep));
+        }
+    }
     return true;
 }
 

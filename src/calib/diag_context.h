@@ -5,6 +5,9 @@
 
 #include <cmath>
 #include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -16,6 +19,16 @@
 
 namespace cdm {
 namespace diag {
+
+// Fits already done, by everything that determines their result (the
+// effects and their starting values, bit for bit, and the noise model): a
+// fit is deterministic, so one asked for again (the search and its
+// alternatives reach the same set from the same start; a noise-model round
+// repeats a step) is taken from here, with the same numbers.
+struct FitCache {
+    std::mutex mu;
+    std::map<std::string, std::pair<std::vector<std::vector<double>>, FitReport>> done;
+};
 
 struct DiagContext {
     const Dataset &data;
@@ -31,6 +44,9 @@ struct DiagContext {
     // Fits that do not depend on each other (a search step's candidates,
     // removals, swaps) run on this many threads (fit_all); 1: in turn.
     int threads = 1;
+    // Shared by the copies of a context (the search's re-estimated noise
+    // model is part of each key).
+    std::shared_ptr<FitCache> cache = std::make_shared<FitCache>();
 
     bool report(const std::string &stage, double f) const { return !progress || progress(stage, f); }
     // Fits m's reading-space effects from their current values.

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs what a fresh Debian 12 machine lacks to build, test and tour cdm.
-# Debian packages for the C/C++ side and Mono; numpy, matplotlib, mujoco and
+# Debian packages for the C/C++ side and Mono; numpy, scipy, matplotlib, mujoco and
 # pytest from PyPI into the python3 on PATH (Debian's own python3-* packages
 # when that python is the system one, which refuses pip installs).
 set -euo pipefail
@@ -36,7 +36,7 @@ fi
 
 PY=${PYTHON:-python3}
 need_py=()
-for m in numpy matplotlib pytest mujoco mypy; do
+for m in numpy scipy matplotlib pytest mujoco mypy; do
   "$PY" -c "import $m" 2>/dev/null || need_py+=("$m")
 done
 # cyclonedds: the DDS bridge's subscribers (tests/dds, examples/ros2). Its
@@ -54,7 +54,7 @@ if [ ${#need_py[@]} -gt 0 ]; then
   if ! "$PY" -m pip install -q "${need_py[@]}" 2>/tmp/cdm-pip.log; then
     if grep -q externally-managed /tmp/cdm-pip.log; then
       # Debian's system python: its own packages, mujoco and mcap from PyPI beside them.
-      DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-numpy python3-matplotlib python3-pytest python3-mypy
+      DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-numpy python3-scipy python3-matplotlib python3-pytest python3-mypy
       "$PY" -m pip install -q --break-system-packages mujoco mcap "cyclonedds==11.0.1"
     else
       cat /tmp/cdm-pip.log >&2

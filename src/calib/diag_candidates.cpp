@@ -2,8 +2,11 @@
 #include "calib/diag_candidates.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <exception>
+#include <thread>
 
 #include "calib/diag_findings.h"
 #include "calib/diag_stats.h"
@@ -21,6 +24,109 @@ std::string fmt(double v, int prec = 3) {
     return b;
 }
 } // namespace
+
+namespace {
+std::string fit_key(const DiagContext &ctx, const Model &m) {
+    std::string k;
+    auto bytes = [&](const void *p, size_t n) { k.append(static_cast<const char *>(p), n); };
+    for (size_t e = 0; e < m.effect_count(); ++e) {
+        k += m.effect_name(e);
+        k += '\0';
+        const auto &v = m.effect_params(e);
+        bytes(v.data(), v.size() * sizeof(double));
+        k += '\1';
+    }
+    bytes(ctx.fo.jig_sigma.data(), 3 * sizeof(double));
+    bytes(&ctx.fo.max_evals, sizeof ctx.fo.max_evals);
+    k.append(ctx.fo.use.begin(), ctx.fo.use.end());
+    return k;
+}
+} // namespace
+
+bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err) {
+    // Fits done before (bit-identical start and noise model): their result.
+    std::vector<std::string> keys(jobs.size());
+    std::vector<char> cached(jobs.size(), 0);
+    if (ctx.cache) {
+        std::lock_guard<std::mutex> lk(ctx.cache->mu);
+        for (size_t k = 0; k < jobs.size(); ++k) {
+            keys[k] = fit_key(ctx, jobs[k].m);
+            auto it = ctx.cache->done.find(keys[k]);
+            if (it == ctx.cache->done.end()) continue;
+            std::string e2;
+            bool ok = true;
+            for (size_t e = 0; e < jobs[k].m.effect_count() && ok; ++e)
+                ok = jobs[k].m.set_effect_params(e, it->second.first[e], e2);
+            if (!ok) continue; // fitted below as usual
+            jobs[k].rep = it->second.second;
+            jobs[k].ok = true;
+            cached[k] = 1;
+        }
+    }
+    auto has_user = [](const Model &m) {
+        for (size_t k = 0; k < m.effect_count(); ++k)
+            if (m.effect_desc(k).stage == Stage::User) return true;
+        return false;
+    };
+    // Jobs with a user effect: on the calling thread, before the others.
+    std::vector<size_t> serial, shared;
+    for (size_t k = 0; k < jobs.size(); ++k)
+        if (!cached[k]) (has_user(jobs[k].m) ? serial : shared).push_back(k);
+    std::atomic<bool> cancelled{false};
+    auto run = [&](FitJob &j, bool main) {
+        FitOptions f = ctx.fo;
+        if (main)
+            f.progress = [&](double fr) {
+                if (ctx.report(j.stage, fr)) return !cancelled.load();
+                cancelled = true;
+                return false;
+            };
+        else
+            f.progress = [&](double) { return !cancelled.load(); };
+        j.ok = fit_model(j.m, ctx.pos, f, j.rep);
+        if (!j.ok) cancelled = true; // the batch fails: stop the others early
+    };
+    for (size_t k : serial) {
+        run(jobs[k], true);
+        if (!jobs[k].ok) break;
+    }
+    if (!cancelled) {
+        std::atomic<size_t> next{0};
+        std::exception_ptr failure;
+        std::atomic<bool> failed{false};
+        auto work = [&](bool main) {
+            for (size_t i; !cancelled && (i = next++) < shared.size();) {
+                try {
+                    run(jobs[shared[i]], main);
+                } catch (...) {
+                    if (!failed.exchange(true)) failure = std::current_exception();
+                    cancelled = true;
+                }
+            }
+        };
+        const size_t nt = std::min<size_t>(size_t(std::max(1, ctx.threads)), shared.size());
+        std::vector<std::thread> pool;
+        for (size_t t = 1; t < nt; ++t) pool.emplace_back(work, false);
+        work(true);
+        for (auto &t : pool) t.join();
+        if (failure) std::rethrow_exception(failure);
+    }
+    for (auto &j : jobs)
+        if (!j.ok) {
+            err = j.rep.message.empty() ? "fit cancelled" : j.rep.message;
+            return false;
+        }
+    if (ctx.cache) {
+        std::lock_guard<std::mutex> lk(ctx.cache->mu);
+        for (size_t k = 0; k < jobs.size(); ++k) {
+            if (cached[k]) continue;
+            std::vector<std::vector<double>> v;
+            for (size_t e = 0; e < jobs[k].m.effect_count(); ++e) v.push_back(jobs[k].m.effect_params(e));
+            ctx.cache->done.emplace(keys[k], std::make_pair(std::move(v), jobs[k].rep));
+        }
+    }
+    return true;
+}
 
 std::vector<std::string> reading_effects(const Model &m) {
     std::vector<std::string> v;
@@ -90,8 +196,25 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
     const size_t P = ctx.pos.size();
     auto list = candidate_effects();
     const size_t n_base = reading_effects(base).size();
+    // Every candidate from every start, fitted as one batch (independent
+    // fits: on ctx.threads threads); then judged in the catalogue's order.
+    std::vector<FitJob> jobs;
+    std::vector<std::pair<size_t, size_t>> span(list.size(), {0, 0}); // jobs of list[i]
+    for (size_t i = 0; i < list.size(); ++i) {
+        const auto &d = list[i];
+        span[i].first = jobs.size();
+        if (!base.has_effect(d->name))
+            for (const ParamValues &start : effect_starts(base, d->name, ctx.pos)) {
+                Model m = model_with(base, reading_effects(base), d->name, start);
+                if (!m.has_effect(d->name)) break;
+                jobs.emplace_back(std::move(m), stage + " " + d->name);
+            }
+        span[i].second = jobs.size();
+    }
+    if (!fit_all(ctx, jobs, err)) return false;
     size_t done = 0;
-    for (auto &d : list) {
+    for (size_t i = 0; i < list.size(); ++i) {
+        const auto &d = list[i];
         ++done;
         if (base.has_effect(d->name)) continue;
         Candidate c(base.geometry());
@@ -99,14 +222,9 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         // An effect entering non-linearly is fitted from each data-seeded
         // start; the best fit counts.
         bool have = false;
-        for (const ParamValues &start : effect_starts(base, d->name, ctx.pos)) {
-            Model m = model_with(base, reading_effects(base), d->name, start);
-            if (!m.has_effect(d->name)) break;
-            FitReport r;
-            if (!ctx.fit(m, stage + " " + d->name, r)) {
-                err = r.message.empty() ? "fit cancelled" : r.message;
-                return false;
-            }
+        for (size_t q = span[i].first; q < span[i].second; ++q) {
+            const Model &m = jobs[q].m;
+            const FitReport &r = jobs[q].rep;
             if (!period_shown(m, d->name, ctx.pos)) continue;
             if (!have || r.chi2 < c.rep.chi2) {
                 c.m = m;

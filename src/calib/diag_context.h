@@ -5,6 +5,9 @@
 
 #include <cmath>
 #include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -17,6 +20,16 @@
 namespace cdm {
 namespace diag {
 
+// Fits already done, by everything that determines their result (the
+// effects and their starting values, bit for bit, and the noise model): a
+// fit is deterministic, so one asked for again (the search and its
+// alternatives reach the same set from the same start; a noise-model round
+// repeats a step) is taken from here, with the same numbers.
+struct FitCache {
+    std::mutex mu;
+    std::map<std::string, std::pair<std::vector<std::vector<double>>, FitReport>> done;
+};
+
 struct DiagContext {
     const Dataset &data;
     const DeviceGeometry &g;
@@ -28,6 +41,12 @@ struct DiagContext {
     FitOptions fo;       // the fit's noise model; every comparison uses it
     double n_obs;        // readings: 4 per position
     std::function<bool(const std::string &, double)> progress;
+    // Fits that do not depend on each other (a search step's candidates,
+    // removals, swaps) run on this many threads (fit_all); 1: in turn.
+    int threads = 1;
+    // Shared by the copies of a context (the search's re-estimated noise
+    // model is part of each key).
+    std::shared_ptr<FitCache> cache = std::make_shared<FitCache>();
 
     bool report(const std::string &stage, double f) const { return !progress || progress(stage, f); }
     // Fits m's reading-space effects from their current values.
@@ -46,6 +65,24 @@ struct DiagContext {
         return j;
     }
 };
+
+// One fit of a batch: the model is fitted in place from its current values.
+struct FitJob {
+    FitJob(Model m_, std::string stage_) : m(std::move(m_)), stage(std::move(stage_)) {}
+    Model m;
+    std::string stage;
+    FitReport rep;
+    bool ok = false;
+};
+
+// Fits every job, on ctx.threads threads, each job exactly as ctx.fit would
+// (the same start, the same noise model: the results do not depend on the
+// number of threads or on which thread took a job). Only the calling
+// thread reports progress; the others stop when it is cancelled. Models
+// with a user effect are fitted in turn on the calling thread (a user's
+// callback need not be reentrant). False + err (the first failed job's
+// message, in job order) when a fit fails or is cancelled.
+bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err);
 
 // A copy of `from` keeping only its reading-space effects named in `keep`
 // (with their fitted values), plus `add` (if not empty) at `add_init`.

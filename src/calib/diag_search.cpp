@@ -59,23 +59,30 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
         Model rm_model{ctx.g};
         FitReport rm_rep;
         const auto names = reading_effects(cur);
-        for (size_t k = 0; k < names.size(); ++k) {
-            std::vector<std::string> keep = names;
-            keep.erase(keep.begin() + long(k));
-            if (seen.count(sorted(keep))) continue;
-            Model m = model_with(cur, keep, "");
-            FitReport r;
-            if (!ctx.fit(m, "search step " + std::to_string(step) + " without " + names[k], r)) {
-                err = r.message.empty() ? "fit cancelled" : r.message;
-                return false;
+        {
+            std::vector<FitJob> jobs;
+            std::vector<std::vector<std::string>> keeps;
+            std::vector<size_t> which;
+            for (size_t k = 0; k < names.size(); ++k) {
+                std::vector<std::string> keep = names;
+                keep.erase(keep.begin() + long(k));
+                if (seen.count(sorted(keep))) continue;
+                jobs.emplace_back(model_with(cur, keep, ""),
+                                  "search step " + std::to_string(step) + " without " + names[k]);
+                keeps.push_back(keep);
+                which.push_back(k);
             }
-            const double d = ctx.bic(r.chi2, r.n_free) - ctx.bic(cur_chi2, cur_free);
-            out.visited.push_back({keep, ctx.bic(r.chi2, r.n_free)});
-            if (d < best_rm) {
-                best_rm = d;
-                rm_name = names[k];
-                rm_model = m;
-                rm_rep = r;
+            if (!fit_all(ctx, jobs, err)) return false;
+            for (size_t q = 0; q < jobs.size(); ++q) {
+                const FitReport &r = jobs[q].rep;
+                const double d = ctx.bic(r.chi2, r.n_free) - ctx.bic(cur_chi2, cur_free);
+                out.visited.push_back({keeps[q], ctx.bic(r.chi2, r.n_free)});
+                if (d < best_rm) {
+                    best_rm = d;
+                    rm_name = names[which[q]];
+                    rm_model = jobs[q].m;
+                    rm_rep = r;
+                }
             }
         }
         SearchStep st;
@@ -104,33 +111,48 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
             std::string sw_out, sw_in;
             Model sw_model{ctx.g};
             FitReport sw_rep;
+            // The starts depend on cur and the effect only, not on what
+            // is swapped out.
+            const auto cands_all = candidate_effects();
+            std::vector<std::vector<ParamValues>> starts(cands_all.size());
+            for (size_t i = 0; i < cands_all.size(); ++i)
+                if (!cur.has_effect(cands_all[i]->name)) starts[i] = effect_starts(cur, cands_all[i]->name, ctx.pos);
+            std::vector<FitJob> jobs;
+            struct Swap {
+                size_t k;
+                std::string in;
+                std::vector<std::string> set;
+            };
+            std::vector<Swap> sw;
             for (size_t k = 0; k < names.size(); ++k)
-                for (auto &d : candidate_effects()) {
+                for (size_t i = 0; i < cands_all.size(); ++i) {
+                    const auto &d = cands_all[i];
                     if (cur.has_effect(d->name)) continue;
                     std::vector<std::string> keep = names;
                     keep.erase(keep.begin() + long(k));
                     auto s2 = keep;
                     s2.push_back(d->name);
                     if (seen.count(sorted(s2))) continue;
-                    for (const ParamValues &start : effect_starts(cur, d->name, ctx.pos)) {
-                        Model m = model_with(cur, keep, d->name, start);
-                        FitReport r;
-                        if (!ctx.fit(m, "search step " + std::to_string(step) + " swaps", r)) {
-                            err = r.message.empty() ? "fit cancelled" : r.message;
-                            return false;
-                        }
-                        if (!period_shown(m, d->name, ctx.pos)) continue;
-                        const double dd = ctx.bic(r.chi2, r.n_free) - ctx.bic(cur_chi2, cur_free);
-                        out.visited.push_back({s2, ctx.bic(r.chi2, r.n_free)});
-                        if (dd < best_sw) {
-                            best_sw = dd;
-                            sw_out = names[k];
-                            sw_in = d->name;
-                            sw_model = m;
-                            sw_rep = r;
-                        }
+                    for (const ParamValues &start : starts[i]) {
+                        jobs.emplace_back(model_with(cur, keep, d->name, start),
+                                          "search step " + std::to_string(step) + " swaps");
+                        sw.push_back({k, d->name, s2});
                     }
                 }
+            if (!fit_all(ctx, jobs, err)) return false;
+            for (size_t q = 0; q < jobs.size(); ++q) {
+                const FitReport &r = jobs[q].rep;
+                if (!period_shown(jobs[q].m, sw[q].in, ctx.pos)) continue;
+                const double dd = ctx.bic(r.chi2, r.n_free) - ctx.bic(cur_chi2, cur_free);
+                out.visited.push_back({sw[q].set, ctx.bic(r.chi2, r.n_free)});
+                if (dd < best_sw) {
+                    best_sw = dd;
+                    sw_out = names[sw[q].k];
+                    sw_in = sw[q].in;
+                    sw_model = jobs[q].m;
+                    sw_rep = r;
+                }
+            }
             if (sw_in.empty()) break; // no move lowers the criterion: cands are the candidates on top of cur
             st.added = sw_in;
             st.removed = sw_out;
@@ -171,7 +193,13 @@ bool search_alternatives(const DiagContext &ctx, const SearchResult &r,
         listed.insert(s);
         alts.push_back({v.first, v.second - r.bic});
     }
-    // One-effect swaps.
+    // One-effect swaps, fitted as one batch.
+    std::vector<FitJob> jobs;
+    struct Alt {
+        std::vector<std::string> set, key;
+        size_t first, last;
+    };
+    std::vector<Alt> todo;
     for (const auto &out_name : r.effects)
         for (auto &d : candidate_effects()) {
             if (r.model.has_effect(d->name)) continue;
@@ -184,23 +212,25 @@ bool search_alternatives(const DiagContext &ctx, const SearchResult &r,
             if (listed.count(s)) continue;
             if (std::any_of(r.visited.begin(), r.visited.end(), [&](auto &v) { return sorted(v.first) == s; }))
                 continue; // fitted by the search: judged above
-            double best = INFINITY;
-            for (const ParamValues &st : effect_starts(r.model, d->name, ctx.pos)) {
-                Model m = model_with(r.model, keep, d->name, st);
-                FitReport fr;
-                if (!ctx.fit(m, "alternatives", fr)) {
-                    err = fr.message.empty() ? "fit cancelled" : fr.message;
-                    return false;
-                }
-                if (period_shown(m, d->name, ctx.pos)) best = std::min(best, ctx.bic(fr.chi2, fr.n_free) - r.bic);
-            }
-            if (best < 10) {
-                listed.insert(s);
-                std::vector<std::string> v = keep;
-                v.push_back(d->name);
-                alts.push_back({v, best});
-            }
+            Alt a{keep, s, jobs.size(), 0};
+            a.set.push_back(d->name);
+            for (const ParamValues &st : effect_starts(r.model, d->name, ctx.pos))
+                jobs.emplace_back(model_with(r.model, keep, d->name, st), "alternatives");
+            a.last = jobs.size();
+            todo.push_back(std::move(a));
         }
+    if (!fit_all(ctx, jobs, err)) return false;
+    for (auto &a : todo) {
+        double best = INFINITY;
+        const std::string &in = a.set.back();
+        for (size_t q = a.first; q < a.last; ++q)
+            if (period_shown(jobs[q].m, in, ctx.pos))
+                best = std::min(best, ctx.bic(jobs[q].rep.chi2, jobs[q].rep.n_free) - r.bic);
+        if (best < 10) {
+            listed.insert(a.key);
+            alts.push_back({a.set, best});
+        }
+    }
     std::sort(alts.begin(), alts.end(), [](auto &a, auto &b) { return a.second < b.second; });
     return true;
 }

@@ -9,6 +9,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <thread>
+
+#include <sched.h>
 
 #include "calib/diag_candidates.h"
 #include "calib/diag_context.h"
@@ -30,6 +33,16 @@ namespace {
 using nlohmann::json;
 using namespace diag;
 const char *kAxis[3] = {"x", "y", "z"};
+
+// The cores this process may run on (its affinity mask: taskset, cgroup
+// cpusets), at most 8.
+int usable_cores() {
+    cpu_set_t set;
+    int n = 0;
+    if (sched_getaffinity(0, sizeof set, &set) == 0) n = CPU_COUNT(&set);
+    if (n <= 0) n = int(std::thread::hardware_concurrency());
+    return std::clamp(n, 1, 8);
+}
 
 json vec3(const V3 &v) { return json::array({v(0), v(1), v(2)}); }
 
@@ -123,6 +136,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     const bool repeats = std::any_of(pos.begin(), pos.end(), [](const PreparedPos &p) { return p.n > 1; });
     DiagContext ctx{data, g, pos, cf.grid, jig, user_jig, repeats ? 0.05 : INFINITY, cf.fit_options,
                     4.0 * double(P), opt.progress};
+    ctx.threads = opt.threads > 0 ? opt.threads : usable_cores();
     int model_free = rep.n_free;
     for (size_t k = 0; k < model.effect_count(); ++k)
         if (model.effect_desc(k).stage == Stage::Position) model_free -= int(model.effect_desc(k).params.size());

@@ -23,6 +23,9 @@ struct DiagnoseOptions {
     bool validation = true;
     bool per_position = true;
     std::function<bool(const std::string &stage, double fraction)> progress;
+    // Threads for the search's independent fits (0: the machine's cores, at
+    // most 8). The result does not depend on it.
+    int threads = 0;
 };
 
 // On success fills `out` (the diagnosis JSON) and `fitted` (the model with

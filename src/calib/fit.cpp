@@ -369,6 +369,23 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Hfree);
         Eigen::VectorXd lam = es.eigenvalues().cwiseMax(1e-12 * es.eigenvalues().maxCoeff());
         Whitened W{&pb, full, pb.Q * es.eigenvectors() * lam.cwiseSqrt().cwiseInverse().asDiagonal(), INFINITY, full};
+        {
+            // Already at the minimum? In the whitened coordinates the
+            // Gauss-Newton Hessian is the identity, so a Gauss-Newton step
+            // would lower the objective by |g|^2 / 2. When that is below
+            // SLSQP's own relative tolerance (1e-12), a pass can only
+            // confirm the point (it used to, with 15-20 evaluations of
+            // round-off-level changes after every converged pass: a quarter
+            // of a search's evaluations), so the fit stops here. A point on a bound has a gradient and is
+            // polished by SLSQP as before.
+            Eigen::VectorXd pg;
+            const double f0 = 0.5 * (res.squaredNorm() + pb.prior(full, &pg));
+            const Eigen::VectorXd gz = W.T.transpose() * (-J.transpose() * res + 0.5 * pg);
+            if (std::isfinite(f0) && 0.5 * gz.squaredNorm() <= 1e-12 * std::fabs(f0)) {
+                rep.converged = true;
+                break;
+            }
+        }
         nlopt_opt o = nlopt_create(NLOPT_LD_SLSQP, unsigned(nfree));
         nlopt_set_min_objective(o, objective, &W);
         BoundData B{&W, {}, {}, {}};

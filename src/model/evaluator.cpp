@@ -11,7 +11,6 @@ namespace {
 // Derivative vectors: at most 3 position + every cable parameter; fixed
 // maximum size, so no heap allocation per evaluation.
 constexpr int kMaxLocal = 3 + kMaxCableSlots;
-using ADC = Eigen::AutoDiffScalar<Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxLocal, 1>>;
 constexpr int kMaxJig = 16; // Jig-stage parameters of all built-ins together
 using ADJ = Eigen::AutoDiffScalar<Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxJig, 1>>;
 } // namespace
@@ -92,6 +91,35 @@ Eigen::VectorXd ReadingEvaluator::current() const {
     return v;
 }
 
+namespace {
+// The cable kernel with derivatives of a fixed length N >= 3 + the model's
+// cable slots (the rest stay zero): Eigen then keeps each derivative vector
+// in registers and on the stack, where a dynamically sized one (even with a
+// fixed maximum) copies through memcpy on every temporary and loops over a
+// run-time length. The values and derivatives are those of the dynamic form
+// (the padding entries only ever hold zeros).
+template <int N>
+void cable_jacobians(const Model &m, const ModelLayout &lay, const std::array<std::array<int, kMaxCableSlots>, 4> &col,
+                     const Eigen::VectorXd &full, const double P[3], double t_s, Eigen::Vector4d &y,
+                     Eigen::Matrix<double, 4, 3> &dP, Eigen::Matrix<double, 4, kMaxCableSlots> &dq) {
+    using AD = Eigen::AutoDiffScalar<Eigen::Matrix<double, N, 1>>;
+    static_assert(N >= 3, "position derivatives need 3 entries");
+    Sample<AD> s;
+    for (int k = 0; k < 3; ++k) s.P[k] = AD(P[k], N, k);
+    s.t_s = t_s;
+    AD q[kMaxCableSlots > 0 ? kMaxCableSlots : 1];
+    const int ns = lay.cable.nslots;
+    for (int i = 0; i < 4; ++i) {
+        for (int sl = 0; sl < ns; ++sl) q[sl] = AD(full(col[size_t(i)][size_t(sl)]), N, 3 + sl);
+        const AD r = cable_reading<AD>(m.geometry(), i, s, lay.cable, q);
+        y(i) = r.value();
+        const auto &d = r.derivatives();
+        dP.row(i) = d.template head<3>().transpose();
+        for (int sl = 0; sl < ns; ++sl) dq(i, sl) = d(3 + sl);
+    }
+}
+} // namespace
+
 bool ReadingEvaluator::eval(const Eigen::VectorXd &full, const double ref[3], double t_s, Eigen::Vector4d &y,
                             Eigen::Matrix<double, 4, Eigen::Dynamic> *J, Eigen::Matrix<double, 4, 3> *dydP,
                             std::string *err) const {
@@ -101,23 +129,39 @@ bool ReadingEvaluator::eval(const Eigen::VectorXd &full, const double ref[3], do
     I.jig_position(full, ref, P, dPdj);
     if (J) J->setZero(4, I.n);
     const int nloc = 3 + I.lay.cable.nslots;
-    Sample<ADC> s;
-    for (int k = 0; k < 3; ++k) s.P[k] = ADC(P[k], nloc, k);
-    s.t_s = t_s;
     Eigen::Matrix<double, 4, 3> dP;
-    ADC q[kMaxCableSlots > 0 ? kMaxCableSlots : 1];
-    for (int i = 0; i < 4; ++i) {
-        for (int sl = 0; sl < I.lay.cable.nslots; ++sl) q[sl] = ADC(full(I.col[size_t(i)][size_t(sl)]), nloc, 3 + sl);
-        const ADC r = cable_reading<ADC>(I.m.geometry(), i, s, I.lay.cable, q);
-        y(i) = r.value();
-        const auto &d = r.derivatives();
-        dP.row(i) = d.head<3>().transpose();
-        if (!J) continue;
-        for (auto [e, first] : I.jig) {
-            const int np = int(I.desc[size_t(e)]->params.size());
-            J->block(i, I.off[size_t(e)], 1, np) += d.head<3>().transpose() * dPdj.middleCols(first, np);
+    if (!J && !dydP && !I.lay.has_user) {
+        // Values only (a trial step of the fit, a chi-square): the same
+        // arithmetic as the values of the differentiated kernel.
+        Sample<double> s;
+        for (int k = 0; k < 3; ++k) s.P[k] = P[k];
+        s.t_s = t_s;
+        double q[kMaxCableSlots > 0 ? kMaxCableSlots : 1];
+        for (int i = 0; i < 4; ++i) {
+            for (int sl = 0; sl < I.lay.cable.nslots; ++sl) q[sl] = full(I.col[size_t(i)][size_t(sl)]);
+            y(i) = cable_reading<double>(I.m.geometry(), i, s, I.lay.cable, q);
         }
-        for (int sl = 0; sl < I.lay.cable.nslots; ++sl) (*J)(i, I.col[size_t(i)][size_t(sl)]) += d(3 + sl);
+        return true;
+    }
+    Eigen::Matrix<double, 4, kMaxCableSlots> dq;
+    if (nloc <= 4)
+        cable_jacobians<4>(I.m, I.lay, I.col, full, P, t_s, y, dP, dq);
+    else if (nloc <= 8)
+        cable_jacobians<8>(I.m, I.lay, I.col, full, P, t_s, y, dP, dq);
+    else if (nloc <= 12)
+        cable_jacobians<12>(I.m, I.lay, I.col, full, P, t_s, y, dP, dq);
+    else if (nloc <= 16)
+        cable_jacobians<16>(I.m, I.lay, I.col, full, P, t_s, y, dP, dq);
+    else
+        cable_jacobians<kMaxLocal>(I.m, I.lay, I.col, full, P, t_s, y, dP, dq);
+    if (J) {
+        for (int i = 0; i < 4; ++i) {
+            for (auto [e, first] : I.jig) {
+                const int np = int(I.desc[size_t(e)]->params.size());
+                J->block(i, I.off[size_t(e)], 1, np) += dP.row(i) * dPdj.middleCols(first, np);
+            }
+            for (int sl = 0; sl < I.lay.cable.nslots; ++sl) (*J)(i, I.col[size_t(i)][size_t(sl)]) += dq(i, sl);
+        }
     }
     if (I.lay.has_user && !I.user_chain(full, P, t_s, dPdj, y, J, dP, err)) return false;
     if (dydP) *dydP = dP;

@@ -1,0 +1,67 @@
+// The search fits a step's candidates, removals and swaps on several
+// threads (diag::fit_all): the diagnosis must not depend on how many. Each
+// fit is deterministic and independent of the others, so the JSON must be
+// identical, to the last bit, with 1, 2 and 3 threads (only the timings
+// differ). Half-resolution jig as in test_diagnose.cpp; the hidden effects
+// make the search take several steps, swaps and alternatives.
+#include <setjmp.h>
+#include <cstdarg>
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "calib/diagnose.h"
+#include "calib/simulate.h"
+
+extern "C" {
+#include <cmocka.h>
+}
+
+using namespace cdm;
+
+static nlohmann::json diagnose_with(const Dataset &d, int threads) {
+    DiagnoseOptions o;
+    o.threads = threads;
+    nlohmann::json out;
+    Model fitted{DeviceGeometry{}};
+    std::string err;
+    if (!diagnose(d, DeviceGeometry{}, o, out, fitted, err)) fail_msg("diagnose failed: %s", err.c_str());
+    out.erase("seconds");
+    out["fit"].erase("seconds");
+    return out;
+}
+
+static void same_result_on_any_thread_count(void **) {
+    const std::vector<std::vector<std::string>> hidden{{"cable_gain", "exit_pulley"}, {"drum_eccentricity"}};
+    uint64_t seed = 40;
+    for (auto &effects : hidden) {
+        Model truth{DeviceGeometry{}};
+        std::string err;
+        for (auto &e : effects) assert_true(truth.add_effect_random(e, ++seed, err));
+        JigSimOptions so;
+        so.n = 13;
+        so.pitch_mm = 10;
+        so.samples = 40;
+        so.seed = ++seed;
+        Dataset d;
+        assert_true(simulate_jig(truth, so, d, err));
+        const auto one = diagnose_with(d, 1);
+        // the search ran and moved (else this test would show nothing)
+        assert_false(one["recommended"]["path"].empty());
+        for (int t : {2, 3}) {
+            const auto many = diagnose_with(d, t);
+            if (many != one)
+                fail_msg("hidden %s: %d threads give another diagnosis than 1 (recommended %s vs %s)",
+                         effects[0].c_str(), t, many["recommended"]["effects"].dump().c_str(),
+                         one["recommended"]["effects"].dump().c_str());
+        }
+    }
+}
+
+int main(void) {
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(same_result_on_any_thread_count),
+    };
+    return cmocka_run_group_tests(tests, nullptr, nullptr);
+}

@@ -1087,6 +1087,14 @@ def _finding_target_from_name(var):
     return None, None
 
 
+def _dots(ax, x, y, s, color, alpha, label=None):
+    """A plain scatter of equal dots (s: area in points², as scatter's) drawn as line
+    markers: one marker image stamped at every point, several times faster than a
+    scatter collection for the thousands of positions of a jig."""
+    ax.plot(x, y, "o", ls="none", ms=math.sqrt(s), mew=0, color=color, alpha=alpha,
+            label=label)
+
+
 def _binned(ax, x, y, color="k", bins=24, label="binned mean", width=None):
     """Mean of y in bins of x (per value when x takes few values)."""
     ok = np.isfinite(x) & np.isfinite(y)
@@ -1185,8 +1193,7 @@ def section_variables(diag, page, P):
             fig, axs = plt.subplots(2, 2, figsize=(10, 7.5), constrained_layout=True)
             for i, ax in enumerate(axs.ravel()):
                 x, y = P.lengths[:, i], P.length_residual[:, i]
-                ax.scatter(x, y, s=6, alpha=0.35, color=pal(i), edgecolors="none",
-                           label="positions")
+                _dots(ax, x, y, 6, pal(i), 0.35, label="positions")
                 # bins narrow enough to show a periodicity the diagnosis found here
                 per = [p for c, p in periods if c in (i + 1, None)]
                 _binned(ax, x, y, width=min(per) / 5 if per else None)
@@ -1222,20 +1229,24 @@ def section_variables(diag, page, P):
     else:
         page.note("\"positions.cable_angle_deg\" is missing: no residual-versus-angle plot.")
     def draw():
-        fig, axs = plt.subplots(3, len(cols), figsize=(4.2 * len(cols), 9.5),
-                                squeeze=False, sharey="row", constrained_layout=True)
+        W, H = 4.2 * len(cols), 9.5
+        fig, axs = plt.subplots(3, len(cols), figsize=(W, H), squeeze=False, sharey="row")
+        # Margins in inches (tick labels, axis labels, titles), not constrained
+        # layout: it measured the tick labels of these twelve panels twice.
+        fig.subplots_adjust(left=0.75 / W, right=1 - 0.15 / W, bottom=0.6 / H,
+                            top=1 - 0.75 / H, wspace=0.12, hspace=0.32)
         for k in range(3):
             for j, (kind, xv, xl) in enumerate(cols):
                 ax = axs[k, j]
                 r = res[:, k]
                 if xv.ndim == 2:  # one series per cable
                     for i in range(4):
-                        ax.scatter(xv[:, i], r, s=4, alpha=0.25, color=pal(i), edgecolors="none")
+                        _dots(ax, xv[:, i], r, 4, pal(i), 0.25)
                         _binned(ax, xv[:, i], r, color=pal(i), label=f"cable {i + 1}")
                     if k == 0:
                         ax.legend(fontsize=7, loc="lower right")
                 else:
-                    ax.scatter(xv, r, s=5, alpha=0.35, color="C0", edgecolors="none")
+                    _dots(ax, xv, r, 5, "C0", 0.35)
                     _binned(ax, xv, r)
                 ax.axhline(0, color="0.6", lw=0.8)
                 ax.set_xlabel(xl, fontsize=8.5)

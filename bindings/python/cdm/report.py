@@ -20,6 +20,11 @@ DIR receives PNG figures and ``index.html`` (relative image paths, inline CSS,
 no JavaScript, no external resources). Everything is written to a temporary
 directory inside DIR first and moved into place only when complete.
 
+The figures are drawn in forked worker processes, one per processor this
+process may use (CDM_REPORT_JOBS=N sets how many; 1 draws in this process, as
+happens anyway where fork is missing or the caller runs other threads). A figure
+that cannot be drawn becomes a note in its place.
+
 Exit codes: 0 report written; 2 an input file is missing, does not parse or is
 not a diagnosis (the message names the file); 1 the report could not be written.
 

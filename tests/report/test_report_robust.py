@@ -3,6 +3,8 @@ import json
 import math
 import re
 
+import pytest
+
 from conftest import check_page, check_png, run_report
 import _synth
 
@@ -200,3 +202,46 @@ def test_outlier_does_not_flatten_the_colour_scale(tmp_path):
     d = _synth.make_diag(n=9, heights=(40, 60))
     d["positions"]["residual_mm"][7] = [50.0, -50.0, 50.0]
     _run(tmp_path, d)
+
+
+def _imported():
+    """cdm.report imported as the package module, so that it may draw in worker processes."""
+    import sys
+    from conftest import PYROOT
+    if str(PYROOT) not in sys.path:
+        sys.path.insert(0, str(PYROOT))
+    import cdm.report
+    return cdm.report
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_a_failing_figure_is_a_note(tmp_path, monkeypatch, capsys, jobs):
+    """A figure whose drawing raises (in this process or in a worker) leaves a note in its
+    place; the other figures and the page are written."""
+    m = _imported()
+    monkeypatch.setenv("CDM_REPORT_JOBS", jobs)
+    assert m._workers(14) == int(jobs)  # "2": really drawn in worker processes
+
+    def broken(*a, **k):
+        raise RuntimeError("drawing failed on purpose")
+    monkeypatch.setattr(m, "_dots", broken)  # used by the two residual-versus-variable figures
+    out = tmp_path / "r"
+    m.write_report([_synth.make_diag(n=5, heights=(40, 60))], str(out))
+    html = check_page(out)
+    for name in ("vs_cable_length.png", "vs_variables.png"):
+        assert f"The figure {name} could not be drawn (RuntimeError: drawing failed on purpose)" in html
+        assert not (out / name).exists()
+    assert (out / "residual_map_h40.png").exists() and (out / "residual_cut.png").exists()
+    assert "drawing failed on purpose" in capsys.readouterr().err
+
+
+def test_page_is_the_same_drawn_in_one_or_two_processes(tmp_path, monkeypatch):
+    m = _imported()
+    d = _synth.make_diag(n=5, heights=(40, 60))
+    pages = []
+    for jobs in ("1", "2"):
+        monkeypatch.setenv("CDM_REPORT_JOBS", jobs)
+        out = tmp_path / jobs
+        m.write_report([_synth.nominal_run(n=5, heights=(40, 60)), d], str(out))
+        pages.append((check_page(out), sorted(p.name for p in out.glob("*.png"))))
+    assert pages[0] == pages[1]

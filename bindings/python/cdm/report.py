@@ -20,6 +20,11 @@ DIR receives PNG figures and ``index.html`` (relative image paths, inline CSS,
 no JavaScript, no external resources). Everything is written to a temporary
 directory inside DIR first and moved into place only when complete.
 
+The figures are drawn in forked worker processes, one per processor this
+process may use (CDM_REPORT_JOBS=N sets how many; 1 draws in this process, as
+happens anyway where fork is missing or the caller runs other threads). A figure
+that cannot be drawn becomes a note in its place.
+
 Exit codes: 0 report written; 2 an input file is missing, does not parse or is
 not a diagnosis (the message names the file); 1 the report could not be written.
 
@@ -36,12 +41,15 @@ if __name__ == "__main__" and not __package__:
     sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != _here]
 
 import argparse
+import concurrent.futures
 import html
 import json
 import math
+import multiprocessing
 import re
 import shutil
 import tempfile
+import threading
 
 import numpy as np
 import matplotlib
@@ -58,7 +66,7 @@ DPI = 100
 # Every figure this module writes starts with one of these; stale ones from an
 # earlier report in the same DIR are removed when a new report is moved in.
 FIGURE_PREFIXES = ("error_summary", "residual_map_", "residual_cut", "candidates",
-                   "fingerprint_", "vs_cable_length", "vs_variables", "comparison")
+                   "fingerprint_", "vs_cable_length", "vs_variables", "comparison", "search_path")
 
 
 class DiagnosisError(Exception):
@@ -162,16 +170,37 @@ def _e(s):
     return html.escape(str(s), quote=True)
 
 
+class _Figure:
+    """One figure of the page: ``draw()`` returns a matplotlib Figure.
+
+    Sections describe their figures instead of drawing them, so that the
+    drawing (nearly all of the report's time) can be spread over processes;
+    the page keeps the figure's place, filled in once it is drawn or failed.
+    ``weight`` is a rough cost (panels), to start the heavy ones first.
+    """
+
+    def __init__(self, name, draw, alt, caption, weight=1):
+        self.name, self.draw, self.alt, self.caption = name, draw, alt, caption
+        self.weight = weight
+        self.error = None  # why it could not be drawn, or None
+
+
 class Page:
     """Collects HTML sections and notes about what was missing."""
 
     def __init__(self):
-        self.parts = []
+        self.parts = []  # HTML strings and _Figure places, in page order
         self.notes = []
         self.toc = []  # section titles (already escaped HTML), in order
+        self.figures = []
 
     def note(self, text):
         self.notes.append(text)
+
+    def figure(self, name, draw, alt, caption, weight=1):
+        f = _Figure(name, draw, alt, caption, weight)
+        self.figures.append(f)
+        self.parts.append(f)
 
     def add(self, s):
         # Section headings get an anchor for the table of contents.
@@ -330,15 +359,135 @@ def _symnorm(*arrays):
     return norm
 
 
-def _colorbar(fig, mappable, axs, norm, label):
-    fig.colorbar(mappable, ax=axs, label=label, shrink=0.9,
+def _colorbar(fig, mappable, cax, norm, label):
+    fig.colorbar(mappable, cax=cax, label=label,
                  extend="both" if getattr(norm, "clipped", False) else "neither")
 
 
-def _save(fig, tmp, name):
-    fig.savefig(os.path.join(tmp, name), dpi=DPI)
-    plt.close(fig)
-    return name
+def _map_grid(figsize, nrows, groups):
+    """A figure of map panels: nrows x sum(groups) axes sharing y and z, and in each
+    row a colour-bar axes after each group of maps. Returns (fig, maps, cbars).
+
+    The layout is fixed here in inches rather than by matplotlib's constrained
+    layout, which measured every tick label of these many panels twice per
+    figure and so doubled their drawing time. Labels are kept on the outer
+    panels only (left column, bottom row), as label_outer() does.
+    """
+    W, H = figsize
+    left, right, bottom, top = 0.75, 0.1, 0.55, 0.55  # tick labels + axis label; suptitle
+    title, vgap, gap = 0.3, 0.12, 0.15  # panel title above each row; between maps
+    cb_pad, cb_w, cb_text = 0.12, 0.18, 0.85  # colour bar, its tick labels and label
+    nmaps = sum(groups)
+    mw = (W - left - right - len(groups) * (cb_pad + cb_w + cb_text)
+          - (nmaps - len(groups)) * gap) / nmaps
+    rh = (H - top - bottom - nrows * title - (nrows - 1) * vgap) / nrows
+    fig = plt.figure(figsize=figsize)
+    maps = np.empty((nrows, nmaps), dtype=object)
+    cbars = np.empty((nrows, len(groups)), dtype=object)
+    first = None
+    for k in range(nrows):
+        y0 = H - top - (k + 1) * (title + rh) - k * vgap
+        x, j = left, 0
+        for g, n in enumerate(groups):
+            for i in range(n):
+                ax = fig.add_axes((x / W, y0 / H, mw / W, rh / H), sharex=first, sharey=first)
+                first = first or ax
+                maps[k, j] = ax
+                if k < nrows - 1:
+                    ax.tick_params(labelbottom=False)
+                if j > 0:
+                    ax.tick_params(labelleft=False)
+                j += 1
+                x += mw + (gap if i < n - 1 else 0.0)
+            cbars[k, g] = fig.add_axes(((x + cb_pad) / W, (y0 + 0.05 * rh) / H,
+                                        cb_w / W, 0.9 * rh / H))
+            x += cb_pad + cb_w + cb_text
+    return fig, maps, cbars
+
+
+def _outer_labels(maps):
+    """Axis labels on the left column and the bottom row only."""
+    nrows, ncols = maps.shape
+    for k in range(nrows):
+        for j in range(ncols):
+            if k < nrows - 1:
+                maps[k, j].set_xlabel("")
+            if j > 0:
+                maps[k, j].set_ylabel("")
+
+
+def _draw_one(f, tmp):
+    """Draw one figure into tmp; None, or why it could not be drawn."""
+    try:
+        fig = f.draw()
+        try:
+            fig.savefig(os.path.join(tmp, f.name), dpi=DPI)
+        finally:
+            plt.close(fig)
+    except Exception as e:  # one broken figure must not lose the rest of the report
+        plt.close("all")
+        return f"{type(e).__name__}: {e}"
+    return None
+
+
+# The figures a pool's worker processes draw: set before the pool forks them, so
+# that the workers inherit the drawing closures instead of receiving them pickled.
+_PENDING = None
+
+
+def _draw_pending(i):
+    figures, tmp = _PENDING
+    return _draw_one(figures[i], tmp)
+
+
+def _workers(n):
+    """How many processes to draw n figures with (1: in this process).
+
+    CDM_REPORT_JOBS sets it (1 draws everything in this process). Worker
+    processes are forked, so only where fork exists, and only when this process
+    runs no other thread (a fork copies no thread but may copy a held lock).
+    """
+    env = os.environ.get("CDM_REPORT_JOBS", "").strip()
+    if env:
+        try:
+            want = max(1, int(env))
+        except ValueError:
+            raise DiagnosisError(f"CDM_REPORT_JOBS={env!r}: not a whole number of processes") from None
+    else:
+        try:
+            want = len(os.sched_getaffinity(0))
+        except (AttributeError, OSError):
+            want = os.cpu_count() or 1
+    if ("fork" not in multiprocessing.get_all_start_methods()
+            or threading.active_count() > 1
+            # run under another name (e.g. loaded from a file): a worker could not find _draw_pending
+            or getattr(sys.modules.get(__name__), "_draw_pending", None) is not _draw_pending):
+        return 1
+    return max(1, min(want, n))
+
+
+def _draw_all(figures, tmp):
+    """Draw every figure into tmp, in worker processes when that helps; sets .error."""
+    global _PENDING
+    n = _workers(len(figures))
+    if n <= 1:
+        for f in figures:
+            f.error = _draw_one(f, tmp)
+        return
+    # Heaviest first, so that no long figure starts last and leaves a core idle.
+    order = sorted(range(len(figures)), key=lambda i: -figures[i].weight)
+    _PENDING = (figures, tmp)
+    try:
+        with concurrent.futures.ProcessPoolExecutor(
+                n, mp_context=multiprocessing.get_context("fork")) as ex:
+            futures = [(i, ex.submit(_draw_pending, i)) for i in order]
+            for i, fut in futures:
+                try:
+                    figures[i].error = fut.result()
+                except Exception as e:  # e.g. a worker killed: its figures are lost, not the page
+                    figures[i].error = f"the drawing process failed ({type(e).__name__}: {e})"
+    finally:
+        _PENDING = None
 
 
 # --------------------------------------------------------------------- sections
@@ -360,7 +509,7 @@ def _stat_cells(block):
     return cells
 
 
-def section_summary(diag, page, tmp, figs):
+def section_summary(diag, page):
     page.add("<h2>1. Summary</h2>")
     verdict = diag.get("verdict")
     explained = diag.get("explained")
@@ -505,25 +654,26 @@ def section_summary(diag, page, tmp, figs):
     blocks = [(name, _dict(diag, key)) for key, name in STAT_ROWS]
     blocks = [(n, b) for n, b in blocks if b is not None]
     if blocks:
-        fig, ax = plt.subplots(figsize=(7.5, 3.6), constrained_layout=True)
-        w = 0.8 / len(blocks)
-        for i, (name, b) in enumerate(blocks):
-            vals = [_num((_dict(b, a) or {}).get("rms")) for a in AXES]
-            ax.bar(np.arange(3) + (i - (len(blocks) - 1) / 2) * w, vals, w, label=name)
-        ax.set_xticks(range(3), [f"{a} error" for a in AXES])
-        ax.set_ylabel("RMS (mm)")
-        ax.set_title("Position error RMS per axis")
-        ax.legend(fontsize=8)
-        ax.grid(axis="y", alpha=0.3)
-        name = _save(fig, tmp, "error_summary.png")
-        figs.append(name)
-        page.add(_img(name, "RMS error per axis", "RMS of the position error per axis for "
-                      "the nominal model, the seed's ellipsoid, the current model and the "
-                      "noise floor. The current model is done when its bars reach the "
-                      "noise floor's."))
+        def draw():
+            fig, ax = plt.subplots(figsize=(7.5, 3.6), constrained_layout=True)
+            w = 0.8 / len(blocks)
+            for i, (name, b) in enumerate(blocks):
+                vals = [_num((_dict(b, a) or {}).get("rms")) for a in AXES]
+                ax.bar(np.arange(3) + (i - (len(blocks) - 1) / 2) * w, vals, w, label=name)
+            ax.set_xticks(range(3), [f"{a} error" for a in AXES])
+            ax.set_ylabel("RMS (mm)")
+            ax.set_title("Position error RMS per axis")
+            ax.legend(fontsize=8)
+            ax.grid(axis="y", alpha=0.3)
+            return fig
+        page.figure("error_summary.png", draw, "RMS error per axis",
+                    "RMS of the position error per axis for "
+                    "the nominal model, the seed's ellipsoid, the current model and the "
+                    "noise floor. The current model is done when its bars reach the "
+                    "noise floor's.")
 
 
-def section_maps(diag, page, tmp, figs, P):
+def section_maps(diag, page, P):
     page.add("<h2>2. Residual maps per height</h2>")
     if not P.ok or (P.residual is None and P.nominal is None):
         page.add("<p>Not available (see the notes).</p>")
@@ -554,49 +704,48 @@ def section_maps(diag, page, tmp, figs, P):
             if nk.vmax < norms[k].vmax / 3:
                 zoom[k] = nk
     ncol = len(cols) + (1 if any(zoom) else 0)
+    groups = [len(cols)] + ([1] if ncol > len(cols) else [])
     for h, idx in zip(P.heights, P.height_index):
-        y, z = P.ref[idx, 1], P.ref[idx, 2]
-        fig, axs = plt.subplots(3, ncol, figsize=(4.0 * ncol + 1.6 * (ncol - len(cols) + 1), 11),
-                                squeeze=False, sharex=True, sharey=True,
-                                constrained_layout=True)
-        for k in range(3):
-            m = None
-            for j, (arr, title, current) in enumerate(cols):
-                ax = axs[k, j]
-                fail = P.failing[idx] if current else None
-                m = _map(ax, y, z, arr[idx, k], norms[k], fail)
-                ax.set_title(f"{AXES[k]} residual, {title}", fontsize=9)
-            _colorbar(fig, m, axs[k, :len(cols)], norms[k], f"{AXES[k]} residual (mm)")
-            if ncol > len(cols):
-                ax = axs[k, -1]
-                if zoom[k] is None:
-                    ax.set_axis_off()
-                    ax.text(0.5, 0.5, "current residual:\nsee the shared scale", ha="center",
-                            va="center", transform=ax.transAxes, fontsize=9, color="0.4")
-                    continue
-                m = _map(ax, y, z, cur[idx, k], zoom[k], P.failing[idx])
-                ax.set_title(f"{AXES[k]} residual, current, own scale", fontsize=9)
-                _colorbar(fig, m, axs[k, -1], zoom[k], f"{AXES[k]} residual (mm)")
-        for ax in axs.ravel():
-            ax.label_outer()
-        nf = int(P.failing[idx].sum())
-        fig.suptitle(f"Residual (estimate - reference) at height x = {h:g} mm"
-                     + (f"; {nf} failing positions marked ×" if nf else ""))
-        name = _save(fig, tmp, f"residual_map_h{h:g}.png".replace("-", "m"))
-        figs.append(name)
-        page.add(_img(name, f"residual maps at {h:g} mm",
-                      f"Height {h:g} mm: residual per jig position in the cable plane "
-                      f"(y right, z up), rows x, y, z; {_e(how)}"
-                      + (", and the current residual again on its own colour scale"
-                         if ncol > len(cols) else "")
-                      + ". One symmetric colour scale per axis for all "
-                      f"heights (arrows on a colour bar: a few outliers beyond it are "
-                      f"drawn at its ends); black crosses mark positions whose mean residual "
-                      f"is beyond what noise and jig tolerance explain."))
+        def draw(h=h, idx=idx):
+            y, z = P.ref[idx, 1], P.ref[idx, 2]
+            fig, axs, cbs = _map_grid((4.0 * ncol + 1.6 * (ncol - len(cols) + 1), 11), 3, groups)
+            for k in range(3):
+                m = None
+                for j, (arr, title, current) in enumerate(cols):
+                    ax = axs[k, j]
+                    fail = P.failing[idx] if current else None
+                    m = _map(ax, y, z, arr[idx, k], norms[k], fail)
+                    ax.set_title(f"{AXES[k]} residual, {title}", fontsize=9)
+                _colorbar(fig, m, cbs[k, 0], norms[k], f"{AXES[k]} residual (mm)")
+                if ncol > len(cols):
+                    ax = axs[k, -1]
+                    if zoom[k] is None:
+                        ax.set_axis_off()
+                        cbs[k, 1].remove()
+                        ax.text(0.5, 0.5, "current residual:\nsee the shared scale", ha="center",
+                                va="center", transform=ax.transAxes, fontsize=9, color="0.4")
+                        continue
+                    m = _map(ax, y, z, cur[idx, k], zoom[k], P.failing[idx])
+                    ax.set_title(f"{AXES[k]} residual, current, own scale", fontsize=9)
+                    _colorbar(fig, m, cbs[k, 1], zoom[k], f"{AXES[k]} residual (mm)")
+            _outer_labels(axs)
+            nf = int(P.failing[idx].sum())
+            fig.suptitle(f"Residual (estimate - reference) at height x = {h:g} mm"
+                         + (f"; {nf} failing positions marked ×" if nf else ""))
+            return fig
+        page.figure(f"residual_map_h{h:g}.png".replace("-", "m"), draw, f"residual maps at {h:g} mm",
+                    f"Height {h:g} mm: residual per jig position in the cable plane "
+                    f"(y right, z up), rows x, y, z; {_e(how)}"
+                    + (", and the current residual again on its own colour scale"
+                       if ncol > len(cols) else "")
+                    + ". One symmetric colour scale per axis for all "
+                    f"heights (arrows on a colour bar: a few outliers beyond it are "
+                    f"drawn at its ends); black crosses mark positions whose mean residual "
+                    f"is beyond what noise and jig tolerance explain.", weight=3 * ncol)
     if len(P.heights) == 1:
         page.note("Only one height in the data: the x error cannot be separated from a "
                   "height-dependent effect.")
-    section_cut(page, tmp, figs, P, *cut)
+    section_cut(page, P, *cut)
 
 
 def _cut(P, idx, along):
@@ -613,53 +762,54 @@ def _cut(P, idx, along):
     return sel, c
 
 
-def section_cut(page, tmp, figs, P, solid, solid_name, dashed, dashed_name):
-    fig, axs = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
-    cmap = plt.get_cmap("viridis")
-    drawn = False
-    for a, (along, ax) in enumerate(zip((1, 2), axs)):
-        for i, (h, idx) in enumerate(zip(P.heights, P.height_index)):
-            r = _cut(P, idx, along)
-            if r is None:
-                continue
-            sel, c = r
-            col = cmap(i / max(1, len(P.heights) - 1))
-            s = P.ref[sel, along]
-            if dashed is not None:
-                ax.plot(s, dashed[sel, 0], "--", color=col, marker=".", ms=3, lw=1)
-            if solid is not None:
-                ax.plot(s, solid[sel, 0], "-", color=col, marker="o", ms=3, lw=1.5,
-                        label=f"x = {h:g} mm")
-            drawn = True
-        other = "z" if along == 1 else "y"
-        ax.axhline(0, color="0.6", lw=0.8)
-        ax.set_xlabel(f"{'y' if along == 1 else 'z'} (mm), at {other} nearest 0")
-        ax.set_ylabel("x residual (mm)")
-        ax.set_title(f"x residual along {'y' if along == 1 else 'z'}")
-        ax.grid(alpha=0.3)
-    if solid is not None:
-        axs[0].legend(fontsize=8, title=f"solid: {solid_name}"
-                      + (f"\ndashed: {dashed_name}" if dashed is not None else ""),
-                      title_fontsize=8)
-    if not drawn:
-        plt.close(fig)
+def section_cut(page, P, solid, solid_name, dashed, dashed_name):
+    # The grid lines first: whether there is a cut decides between figure and note.
+    cuts = {(along, i): _cut(P, idx, along)
+            for along in (1, 2) for i, idx in enumerate(P.height_index)}
+    if all(r is None for r in cuts.values()):
         page.note("No grid line through the centre: cut view skipped.")
         return
-    name = _save(fig, tmp, "residual_cut.png")
-    figs.append(name)
+
+    def draw():
+        fig, axs = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+        cmap = plt.get_cmap("viridis")
+        for a, (along, ax) in enumerate(zip((1, 2), axs)):
+            for i, h in enumerate(P.heights):
+                r = cuts[(along, i)]
+                if r is None:
+                    continue
+                sel, c = r
+                col = cmap(i / max(1, len(P.heights) - 1))
+                s = P.ref[sel, along]
+                if dashed is not None:
+                    ax.plot(s, dashed[sel, 0], "--", color=col, marker=".", ms=3, lw=1)
+                if solid is not None:
+                    ax.plot(s, solid[sel, 0], "-", color=col, marker="o", ms=3, lw=1.5,
+                            label=f"x = {h:g} mm")
+            other = "z" if along == 1 else "y"
+            ax.axhline(0, color="0.6", lw=0.8)
+            ax.set_xlabel(f"{'y' if along == 1 else 'z'} (mm), at {other} nearest 0")
+            ax.set_ylabel("x residual (mm)")
+            ax.set_title(f"x residual along {'y' if along == 1 else 'z'}")
+            ax.grid(alpha=0.3)
+        if solid is not None:
+            axs[0].legend(fontsize=8, title=f"solid: {solid_name}"
+                          + (f"\ndashed: {dashed_name}" if dashed is not None else ""),
+                          title_fontsize=8)
+        return fig
     also = f", dashed {_e(dashed_name)}" if dashed is not None else ""
-    page.add(_img(name, "x residual cut",
-                  f"The seed's cut view: x residual along the grid line through the centre, "
-                  f"one colour per height; solid {_e(solid_name)}{also}. A barrel "
-                  f"distortion is an arch (x falls short toward the edges) with the same "
-                  f"curvature at every height."))
+    page.figure("residual_cut.png", draw, "x residual cut",
+                f"The seed's cut view: x residual along the grid line through the centre, "
+                f"one colour per height; solid {_e(solid_name)}{also}. A barrel "
+                f"distortion is an arch (x falls short toward the edges) with the same "
+                f"curvature at every height.", weight=2)
 
 
 def _fmt_list(v):
     return ", ".join(str(x) for x in v) if isinstance(v, list) and v else ""
 
 
-def section_candidates(diag, page, tmp, figs):
+def section_candidates(diag, page):
     page.add("<h2>3. Which effect is missing: candidate ranking</h2>")
     cands = _list(diag, "candidates")
     if cands is None:
@@ -700,48 +850,49 @@ def section_candidates(diag, page, tmp, figs):
             after_x = np.array([_num((_dict(_dict(c, "error_mm_after") or {}, "x") or {}).get("rms"))
                                 for c in cands])
             show_after = np.isfinite(after_x).any() and np.nanmin(after_x) > 0
-            fig, axs = plt.subplots(1, 2 if show_after else 1, figsize=(13 if show_after else 8.5,
-                                    0.45 * len(cands) + 1.6), constrained_layout=True, squeeze=False)
-            ax = axs[0][0]
-            yy = np.arange(len(cands))
-            if show_after:
-                ax2 = axs[0][1]
-                ax2.barh(yy, np.where(np.isfinite(after_x), after_x, np.nan), color=colours)
-                ax2.set_xscale("log")
-                ax2.set_yticks(yy, [""] * len(cands))
-                ax2.invert_yaxis()
-                cur = _num((_dict(_dict(diag, "error_mm") or {}, "x") or {}).get("rms"))
-                floor = _num((_dict(_dict(diag, "noise_floor_mm") or {}, "x") or {}).get("rms"))
-                if np.isfinite(cur) and cur > 0:
-                    ax2.axvline(cur, color="tab:red", lw=1.2, label=f"current model {cur:.3f} mm")
-                if np.isfinite(floor) and floor > 0:
-                    ax2.axvline(floor, color="k", ls="--", lw=1.2, label=f"noise floor {floor:.3f} mm")
-                ax2.set_xlabel("x RMS error with the effect added (mm, log)")
-                ax2.set_title("What each candidate leaves")
-                ax2.legend(loc="lower right", fontsize=8)
-                ax2.grid(axis="x", alpha=0.3, which="both")
-            ax.barh(yy, np.nan_to_num(vals), color=colours)
-            ax.set_yticks(yy, names)
-            ax.invert_yaxis()
-            ax.axvline(0, color="k", lw=0.8)
-            ax.set_xlabel(label)
-            ax.set_title("Candidate effects, best first")
-            span = np.nanmax(np.abs(vals)) if np.isfinite(vals).any() else 1.0
-            for i, c in enumerate(cands):
-                t = _fmt_list(c.get("confused_with"))
-                txt = ("n/a" if not np.isfinite(vals[i]) else "") + \
-                      (f"  ≈ {t}" if t else "")
-                if txt:
-                    x0 = vals[i] if np.isfinite(vals[i]) and vals[i] > 0 else 0.0
-                    ax.text(x0 + 0.01 * span, i, txt, va="center", fontsize=8, color="0.15")
-            ax.grid(axis="x", alpha=0.3)
-            name = _save(fig, tmp, "candidates.png")
-            figs.append(name)
-            page.add(_img(name, "candidate ranking",
-                          f"Each catalogued effect not in the model, fitted on top of it, "
-                          f"ranked by {label}. Bars of one colour (and '≈' names) are "
-                          f"effects the data cannot tell apart. Right: the x RMS error "
-                          f"left with each one added; the right effect reaches the noise floor."))
+            def draw():
+                fig, axs = plt.subplots(1, 2 if show_after else 1, figsize=(13 if show_after else 8.5,
+                                        0.45 * len(cands) + 1.6), constrained_layout=True, squeeze=False)
+                ax = axs[0][0]
+                yy = np.arange(len(cands))
+                if show_after:
+                    ax2 = axs[0][1]
+                    ax2.barh(yy, np.where(np.isfinite(after_x), after_x, np.nan), color=colours)
+                    ax2.set_xscale("log")
+                    ax2.set_yticks(yy, [""] * len(cands))
+                    ax2.invert_yaxis()
+                    cur = _num((_dict(_dict(diag, "error_mm") or {}, "x") or {}).get("rms"))
+                    floor = _num((_dict(_dict(diag, "noise_floor_mm") or {}, "x") or {}).get("rms"))
+                    if np.isfinite(cur) and cur > 0:
+                        ax2.axvline(cur, color="tab:red", lw=1.2, label=f"current model {cur:.3f} mm")
+                    if np.isfinite(floor) and floor > 0:
+                        ax2.axvline(floor, color="k", ls="--", lw=1.2, label=f"noise floor {floor:.3f} mm")
+                    ax2.set_xlabel("x RMS error with the effect added (mm, log)")
+                    ax2.set_title("What each candidate leaves")
+                    ax2.legend(loc="lower right", fontsize=8)
+                    ax2.grid(axis="x", alpha=0.3, which="both")
+                ax.barh(yy, np.nan_to_num(vals), color=colours)
+                ax.set_yticks(yy, names)
+                ax.invert_yaxis()
+                ax.axvline(0, color="k", lw=0.8)
+                ax.set_xlabel(label)
+                ax.set_title("Candidate effects, best first")
+                span = np.nanmax(np.abs(vals)) if np.isfinite(vals).any() else 1.0
+                for i, c in enumerate(cands):
+                    t = _fmt_list(c.get("confused_with"))
+                    txt = ("n/a" if not np.isfinite(vals[i]) else "") + \
+                          (f"  ≈ {t}" if t else "")
+                    if txt:
+                        x0 = vals[i] if np.isfinite(vals[i]) and vals[i] > 0 else 0.0
+                        ax.text(x0 + 0.01 * span, i, txt, va="center", fontsize=8, color="0.15")
+                ax.grid(axis="x", alpha=0.3)
+                return fig
+            page.figure("candidates.png", draw, "candidate ranking",
+                        f"Each catalogued effect not in the model, fitted on top of it, "
+                        f"ranked by {label}. Bars of one colour (and '≈' names) are "
+                        f"effects the data cannot tell apart. Right: the x RMS error "
+                        f"left with each one added; the right effect reaches the noise floor.",
+                        weight=2)
         rows = []
         for c in cands:
             after = _dict(c, "error_mm_after") or {}
@@ -766,7 +917,7 @@ def section_candidates(diag, page, tmp, figs):
         page.add("</ul>")
 
 
-def section_search(diag, page, tmp, figs):
+def section_search(diag, page):
     page.add("<h2>3b. The model search: where following the ranking leads</h2>")
     rec = _dict(diag, "recommended")
     if rec is None:
@@ -800,18 +951,19 @@ def section_search(diag, page, tmp, figs):
                 ("+" + str(st.get("added")) if not st.get("removed") else
                  "−" + str(st.get("removed")) if not st.get("added") else
                  str(st.get("removed")) + "→" + str(st.get("added"))) for st in path]
-            fig, ax = plt.subplots(figsize=(8.5, 3.2), constrained_layout=True)
-            ax.plot(np.arange(len(ys)), ys, "o-", color="tab:blue")
-            ax.set_yscale("log")
-            ax.set_xticks(np.arange(len(ys)), labels, rotation=25, ha="right", fontsize=8)
-            if np.isfinite(nfx) and nfx > 0:
-                ax.axhline(nfx, color="0.4", ls="--", lw=1, label=f"noise floor {nfx:.3f} mm")
-                ax.legend(fontsize=8)
-            ax.set_ylabel("x RMS (mm)")
-            ax.set_title("x error along the search path")
-            figs.append(_save(fig, tmp, "search_path.png"))
-            page.add(_img("search_path.png", "x error along the search path",
-                          "Each step of the search and the x error it leaves (log scale)."))
+            def draw():
+                fig, ax = plt.subplots(figsize=(8.5, 3.2), constrained_layout=True)
+                ax.plot(np.arange(len(ys)), ys, "o-", color="tab:blue")
+                ax.set_yscale("log")
+                ax.set_xticks(np.arange(len(ys)), labels, rotation=25, ha="right", fontsize=8)
+                if np.isfinite(nfx) and nfx > 0:
+                    ax.axhline(nfx, color="0.4", ls="--", lw=1, label=f"noise floor {nfx:.3f} mm")
+                    ax.legend(fontsize=8)
+                ax.set_ylabel("x RMS (mm)")
+                ax.set_title("x error along the search path")
+                return fig
+            page.figure("search_path.png", draw, "x error along the search path",
+                        "Each step of the search and the x error it leaves (log scale).")
     else:
         page.add("<p>The search made no move: no addition, removal or swap lowers the criterion.</p>")
     alts = [a for a in (_list(rec, "alternatives") or []) if isinstance(a, list)]
@@ -842,7 +994,7 @@ def _corr(a, b):
     return float((a * b).sum() / d) if d > 0 else math.nan
 
 
-def section_fingerprints(diag, page, tmp, figs, P):
+def section_fingerprints(diag, page, P):
     page.add("<h2>4. Fingerprints of the top candidates</h2>")
     fps = _dict(diag, "fingerprints")
     if fps is None:
@@ -872,37 +1024,35 @@ def section_fingerprints(diag, page, tmp, figs, P):
         cx = _corr(fp[:, 0], P.residual[:, 0])
         c3 = _corr(fp.ravel(), P.residual.ravel())
         cj = cand_by.get(eff, {}).get("residual_correlation")
-        nr = _symnorm(P.residual[:, 0])
-        nf = _symnorm(fp[:, 0])
-        fig, axs = plt.subplots(2, len(hsel), figsize=(3.3 * len(hsel) + 1.3, 6.8),
-                                squeeze=False, sharex=True, sharey=True,
-                                constrained_layout=True)
-        for j, hi in enumerate(hsel):
-            idx = P.height_index[hi]
-            y, z = P.ref[idx, 1], P.ref[idx, 2]
-            m0 = _map(axs[0, j], y, z, fp[idx, 0], nf)
-            axs[0, j].set_title(f"fingerprint x, {P.heights[hi]:g} mm", fontsize=9)
-            m1 = _map(axs[1, j], y, z, P.residual[idx, 0], nr)
-            axs[1, j].set_title(f"current residual x, {P.heights[hi]:g} mm", fontsize=9)
-        _colorbar(fig, m0, axs[0, :], nf, "x shift by the effect (mm)")
-        _colorbar(fig, m1, axs[1, :], nr, "x residual (mm)")
-        for ax in axs.ravel():
-            ax.label_outer()
         title = f"{eff}: corr(x) = {fmt_g(cx, 3)}, corr(x,y,z) = {fmt_g(c3, 3)}"
         if _finite(cj):
             title += f", reported correlation = {fmt_g(cj, 3)}"
-        fig.suptitle(title)
+
+        def draw(fp=fp, title=title):
+            nr = _symnorm(P.residual[:, 0])
+            nf = _symnorm(fp[:, 0])
+            fig, axs, cbs = _map_grid((3.3 * len(hsel) + 1.3, 6.8), 2, [len(hsel)])
+            for j, hi in enumerate(hsel):
+                idx = P.height_index[hi]
+                y, z = P.ref[idx, 1], P.ref[idx, 2]
+                m0 = _map(axs[0, j], y, z, fp[idx, 0], nf)
+                axs[0, j].set_title(f"fingerprint x, {P.heights[hi]:g} mm", fontsize=9)
+                m1 = _map(axs[1, j], y, z, P.residual[idx, 0], nr)
+                axs[1, j].set_title(f"current residual x, {P.heights[hi]:g} mm", fontsize=9)
+            _colorbar(fig, m0, cbs[0, 0], nf, "x shift by the effect (mm)")
+            _colorbar(fig, m1, cbs[1, 0], nr, "x residual (mm)")
+            _outer_labels(axs)
+            fig.suptitle(title)
+            return fig
         safe = re.sub(r"[^A-Za-z0-9_.-]", "_", eff)
-        name = _save(fig, tmp, f"fingerprint_{n}_{safe}.png")
-        figs.append(name)
-        page.add(_img(name, f"fingerprint of {eff}",
-                      f"<b>{_e(eff)}</b>: top row, how the effect at its fitted size moves "
-                      f"the x estimate; bottom row, the current x residual (own colour "
-                      f"scales). The right effect has the same pattern (correlation near "
-                      f"±1 and similar size). Correlation over all positions: x "
-                      f"{fmt_g(cx, 3)}, all axes {fmt_g(c3, 3)}"
-                      + (f"; reported by the diagnosis {fmt_g(cj, 3)}" if _finite(cj) else "")
-                      + "."))
+        page.figure(f"fingerprint_{n}_{safe}.png", draw, f"fingerprint of {eff}",
+                    f"<b>{_e(eff)}</b>: top row, how the effect at its fitted size moves "
+                    f"the x estimate; bottom row, the current x residual (own colour "
+                    f"scales). The right effect has the same pattern (correlation near "
+                    f"±1 and similar size). Correlation over all positions: x "
+                    f"{fmt_g(cx, 3)}, all axes {fmt_g(c3, 3)}"
+                    + (f"; reported by the diagnosis {fmt_g(cj, 3)}" if _finite(cj) else "")
+                    + ".", weight=2 * len(hsel))
     if n == 0:
         page.add("<p>No usable fingerprints.</p>")
 
@@ -940,6 +1090,14 @@ def _finding_target_from_name(var):
     if "len" in v or re.fullmatch(r"l[1-4]", v) or "cable" in v:
         return "length", cable
     return None, None
+
+
+def _dots(ax, x, y, s, color, alpha, label=None):
+    """A plain scatter of equal dots (s: area in points², as scatter's) drawn as line
+    markers: one marker image stamped at every point, several times faster than a
+    scatter collection for the thousands of positions of a jig."""
+    ax.plot(x, y, "o", ls="none", ms=math.sqrt(s), mew=0, color=color, alpha=alpha,
+            label=label)
 
 
 def _binned(ax, x, y, color="k", bins=24, label="binned mean", width=None):
@@ -1010,7 +1168,7 @@ def _route_findings(findings):
     return pos_notes, len_notes, periods
 
 
-def section_variables(diag, page, tmp, figs, P):
+def section_variables(diag, page, P):
     page.add("<h2>5. Residual versus physical variables</h2>")
     us = _dict(diag, "unexplained_structure")
     findings = []
@@ -1036,29 +1194,28 @@ def section_variables(diag, page, tmp, figs, P):
 
     # Length residual per cable vs that cable's length.
     if P.lengths is not None and P.length_residual is not None:
-        fig, axs = plt.subplots(2, 2, figsize=(10, 7.5), constrained_layout=True)
-        for i, ax in enumerate(axs.ravel()):
-            x, y = P.lengths[:, i], P.length_residual[:, i]
-            ax.scatter(x, y, s=6, alpha=0.35, color=pal(i), edgecolors="none",
-                       label="positions")
-            # bins narrow enough to show a periodicity the diagnosis found here
-            per = [p for c, p in periods if c in (i + 1, None)]
-            _binned(ax, x, y, width=min(per) / 5 if per else None)
-            ax.axhline(0, color="0.6", lw=0.8)
-            ax.set_xlabel(f"cable {i + 1} mean measured length (mm)")
-            ax.set_ylabel(f"cable {i + 1} length residual (mm)")
-            ax.set_title(f"Cable {i + 1}: measured - predicted reading")
-            ax.grid(alpha=0.3)
-            _annot(ax, len_notes.get(i + 1, []) + (len_notes.get(None, []) if i == 0 else []))
-        axs[0, 0].legend(fontsize=8, loc="lower right")
-        name = _save(fig, tmp, "vs_cable_length.png")
-        figs.append(name)
-        page.add(_img(name, "length residual versus cable length",
-                      "Each cable's reading residual (mean measured minus what the model "
-                      "predicts at the reference position) against that cable's length, "
-                      "with the binned mean. A slope is a gain error, a curve a "
-                      "non-linearity, a ripple a periodic effect of the drum or pulley; "
-                      "red boxes are the diagnosis's own findings."))
+        def draw():
+            fig, axs = plt.subplots(2, 2, figsize=(10, 7.5), constrained_layout=True)
+            for i, ax in enumerate(axs.ravel()):
+                x, y = P.lengths[:, i], P.length_residual[:, i]
+                _dots(ax, x, y, 6, pal(i), 0.35, label="positions")
+                # bins narrow enough to show a periodicity the diagnosis found here
+                per = [p for c, p in periods if c in (i + 1, None)]
+                _binned(ax, x, y, width=min(per) / 5 if per else None)
+                ax.axhline(0, color="0.6", lw=0.8)
+                ax.set_xlabel(f"cable {i + 1} mean measured length (mm)")
+                ax.set_ylabel(f"cable {i + 1} length residual (mm)")
+                ax.set_title(f"Cable {i + 1}: measured - predicted reading")
+                ax.grid(alpha=0.3)
+                _annot(ax, len_notes.get(i + 1, []) + (len_notes.get(None, []) if i == 0 else []))
+            axs[0, 0].legend(fontsize=8, loc="lower right")
+            return fig
+        page.figure("vs_cable_length.png", draw, "length residual versus cable length",
+                    "Each cable's reading residual (mean measured minus what the model "
+                    "predicts at the reference position) against that cable's length, "
+                    "with the binned mean. A slope is a gain error, a curve a "
+                    "non-linearity, a ripple a periodic effect of the drum or pulley; "
+                    "red boxes are the diagnosis's own findings.", weight=4)
     else:
         page.note("\"positions.lengths_mm\" or \"positions.length_residual_mm\" is missing: "
                   "no length-residual plot.")
@@ -1076,42 +1233,46 @@ def section_variables(diag, page, tmp, figs, P):
         cols.append(("angle", P.angle, "cable angle out of the cable plane (deg)"))
     else:
         page.note("\"positions.cable_angle_deg\" is missing: no residual-versus-angle plot.")
-    fig, axs = plt.subplots(3, len(cols), figsize=(4.2 * len(cols), 9.5),
-                            squeeze=False, sharey="row", constrained_layout=True)
-    for k in range(3):
-        for j, (kind, xv, xl) in enumerate(cols):
-            ax = axs[k, j]
-            r = res[:, k]
-            if xv.ndim == 2:  # one series per cable
-                for i in range(4):
-                    ax.scatter(xv[:, i], r, s=4, alpha=0.25, color=pal(i), edgecolors="none")
-                    _binned(ax, xv[:, i], r, color=pal(i), label=f"cable {i + 1}")
+    def draw():
+        W, H = 4.2 * len(cols), 9.5
+        fig, axs = plt.subplots(3, len(cols), figsize=(W, H), squeeze=False, sharey="row")
+        # Margins in inches (tick labels, axis labels, titles), not constrained
+        # layout: it measured the tick labels of these twelve panels twice.
+        fig.subplots_adjust(left=0.75 / W, right=1 - 0.15 / W, bottom=0.6 / H,
+                            top=1 - 0.75 / H, wspace=0.12, hspace=0.32)
+        for k in range(3):
+            for j, (kind, xv, xl) in enumerate(cols):
+                ax = axs[k, j]
+                r = res[:, k]
+                if xv.ndim == 2:  # one series per cable
+                    for i in range(4):
+                        _dots(ax, xv[:, i], r, 4, pal(i), 0.25)
+                        _binned(ax, xv[:, i], r, color=pal(i), label=f"cable {i + 1}")
+                    if k == 0:
+                        ax.legend(fontsize=7, loc="lower right")
+                else:
+                    _dots(ax, xv, r, 5, "C0", 0.35)
+                    _binned(ax, xv, r)
+                ax.axhline(0, color="0.6", lw=0.8)
+                ax.set_xlabel(xl, fontsize=8.5)
+                if j == 0:
+                    ax.set_ylabel(f"{AXES[k]} residual (mm)")
+                ax.grid(alpha=0.3)
                 if k == 0:
-                    ax.legend(fontsize=7, loc="lower right")
-            else:
-                ax.scatter(xv, r, s=5, alpha=0.35, color="C0", edgecolors="none")
-                _binned(ax, xv, r)
-            ax.axhline(0, color="0.6", lw=0.8)
-            ax.set_xlabel(xl, fontsize=8.5)
-            if j == 0:
-                ax.set_ylabel(f"{AXES[k]} residual (mm)")
-            ax.grid(alpha=0.3)
-            if k == 0:
-                ax.set_title(f"vs {xl.split(' (')[0]}", fontsize=10)
-            _annot(ax, pos_notes.get((kind, k), []))
-    fig.suptitle(f"Position residual ({which}) versus physical variables")
-    name = _save(fig, tmp, "vs_variables.png")
-    figs.append(name)
-    page.add(_img(name, "residual versus variables",
-                  f"Per-position residual of the {which} (rows x, y, z) against the height, "
-                  f"the distance from the centre, each cable's length and each cable's angle "
-                  f"out of the cable plane (one colour per cable), with binned means; red "
-                  f"boxes are the diagnosis's trend findings. Flat lines at zero mean "
-                  f"nothing is left; a trend or bump says which variable the missing effect "
-                  f"depends on."))
+                    ax.set_title(f"vs {xl.split(' (')[0]}", fontsize=10)
+                _annot(ax, pos_notes.get((kind, k), []))
+        fig.suptitle(f"Position residual ({which}) versus physical variables")
+        return fig
+    page.figure("vs_variables.png", draw, "residual versus variables",
+                f"Per-position residual of the {which} (rows x, y, z) against the height, "
+                f"the distance from the centre, each cable's length and each cable's angle "
+                f"out of the cable plane (one colour per cable), with binned means; red "
+                f"boxes are the diagnosis's trend findings. Flat lines at zero mean "
+                f"nothing is left; a trend or bump says which variable the missing effect "
+                f"depends on.", weight=3 * len(cols))
 
 
-def section_comparison(runs, page, tmp, figs):
+def section_comparison(runs, page):
     """runs: [(path, diag)], earliest first, the report's run last."""
     page.add("<h2>6. Error fell? Runs compared</h2>")
     labels = [_label(d) for _, d in runs]
@@ -1130,37 +1291,37 @@ def section_comparison(runs, page, tmp, figs):
                      "yes" if ex is True else "no" if ex is False else "n/a"])
     page.add(_table(["model", "file", "x RMS (mm)", "y RMS (mm)", "z RMS (mm)", "chi²/dof",
                      "explained"], rows, "stats"))
-    fig, ax = plt.subplots(figsize=(max(7.0, 1.2 * len(runs) + 5), 4.4), constrained_layout=True)
-    w = 0.8 / len(runs)
-    cmap = plt.get_cmap("viridis")
-    for i in range(len(runs)):
-        xs = np.arange(3) + (i - (len(runs) - 1) / 2) * w
-        lab = labels[i] if len(labels[i]) <= 40 else labels[i][:37] + "..."
-        bars = ax.bar(xs, np.nan_to_num(rms[i]), w, label=lab,
-                      color=cmap(i / max(1, len(runs) - 1)))
-        for b, v in zip(bars, rms[i]):
-            ax.text(b.get_x() + b.get_width() / 2, b.get_height(),
-                    fmt_g(v, 3) if np.isfinite(v) else "n/a",
-                    ha="center", va="bottom", fontsize=7)
-    nf = _dict(runs[-1][1], "noise_floor_mm")
-    if nf is not None:
-        for k, a in enumerate(AXES):
-            v = _num((_dict(nf, a) or {}).get("rms"))
-            if np.isfinite(v):
-                ax.hlines(v, k - 0.45, k + 0.45, colors="k", linestyles="--", lw=1,
-                          label="noise floor" if k == 0 else None)
-    ax.set_xticks(range(3), [f"{a} error" for a in AXES])
-    ax.set_ylabel("RMS position error (mm)")
-    ax.set_title("Position error RMS per run")
-    ax.legend(fontsize=8)
-    ax.grid(axis="y", alpha=0.3)
-    name = _save(fig, tmp, "comparison.png")
-    figs.append(name)
-    page.add(_img(name, "error per run", "RMS position error per axis for each run, "
-                  "labelled by the effects in its model, earliest first; the dashed line is "
-                  "the noise floor of the report's run. Adding the right effect makes the "
-                  "bars fall to the floor; an effect that only fits noise barely moves them "
-                  "(check the validation table)."))
+    def draw():
+        fig, ax = plt.subplots(figsize=(max(7.0, 1.2 * len(runs) + 5), 4.4), constrained_layout=True)
+        w = 0.8 / len(runs)
+        cmap = plt.get_cmap("viridis")
+        for i in range(len(runs)):
+            xs = np.arange(3) + (i - (len(runs) - 1) / 2) * w
+            lab = labels[i] if len(labels[i]) <= 40 else labels[i][:37] + "..."
+            bars = ax.bar(xs, np.nan_to_num(rms[i]), w, label=lab,
+                          color=cmap(i / max(1, len(runs) - 1)))
+            for b, v in zip(bars, rms[i]):
+                ax.text(b.get_x() + b.get_width() / 2, b.get_height(),
+                        fmt_g(v, 3) if np.isfinite(v) else "n/a",
+                        ha="center", va="bottom", fontsize=7)
+        nf = _dict(runs[-1][1], "noise_floor_mm")
+        if nf is not None:
+            for k, a in enumerate(AXES):
+                v = _num((_dict(nf, a) or {}).get("rms"))
+                if np.isfinite(v):
+                    ax.hlines(v, k - 0.45, k + 0.45, colors="k", linestyles="--", lw=1,
+                              label="noise floor" if k == 0 else None)
+        ax.set_xticks(range(3), [f"{a} error" for a in AXES])
+        ax.set_ylabel("RMS position error (mm)")
+        ax.set_title("Position error RMS per run")
+        ax.legend(fontsize=8)
+        ax.grid(axis="y", alpha=0.3)
+        return fig
+    page.figure("comparison.png", draw, "error per run", "RMS position error per axis for each run, "
+                "labelled by the effects in its model, earliest first; the dashed line is "
+                "the noise floor of the report's run. Adding the right effect makes the "
+                "bars fall to the floor; an effect that only fits noise barely moves them "
+                "(check the validation table).")
 
 
 CSS = """
@@ -1184,16 +1345,15 @@ def _render(runs, tmp):
     """Draw everything for runs[-1] (+ comparison) into tmp; return (html, figs)."""
     path, diag = runs[-1]
     page = Page()
-    figs = []
     P = Positions(diag, page)
-    sections = [lambda: section_summary(diag, page, tmp, figs),
-                lambda: section_maps(diag, page, tmp, figs, P),
-                lambda: section_candidates(diag, page, tmp, figs),
-                lambda: section_search(diag, page, tmp, figs),
-                lambda: section_fingerprints(diag, page, tmp, figs, P),
-                lambda: section_variables(diag, page, tmp, figs, P)]
+    sections = [lambda: section_summary(diag, page),
+                lambda: section_maps(diag, page, P),
+                lambda: section_candidates(diag, page),
+                lambda: section_search(diag, page),
+                lambda: section_fingerprints(diag, page, P),
+                lambda: section_variables(diag, page, P)]
     if len(runs) > 1:
-        sections.append(lambda: section_comparison(runs, page, tmp, figs))
+        sections.append(lambda: section_comparison(runs, page))
     for s in sections:
         try:
             s()
@@ -1202,6 +1362,19 @@ def _render(runs, tmp):
             msg = f"A section could not be drawn ({type(e).__name__}: {e})."
             page.note(msg)
             page.add(f"<p class=\"bad\">{_e(msg)}</p>")
+            print(f"cdm.report: warning: {path}: {msg}", file=sys.stderr)
+    _draw_all(page.figures, tmp)
+    figs = []
+    for i, part in enumerate(page.parts):
+        if not isinstance(part, _Figure):
+            continue
+        if part.error is None:
+            figs.append(part.name)
+            page.parts[i] = _img(part.name, part.alt, part.caption)
+        else:
+            msg = f"The figure {part.name} could not be drawn ({part.error})."
+            page.note(msg)
+            page.parts[i] = f"<p class=\"bad\">{_e(msg)}</p>"
             print(f"cdm.report: warning: {path}: {msg}", file=sys.stderr)
     title = f"cdm calibration diagnosis: {_label(diag)}"
     notes = ""

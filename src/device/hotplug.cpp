@@ -90,6 +90,11 @@ int MasterWatcher::start(bool enumerate, Callback cb, std::unique_ptr<MasterWatc
         err = std::string("eventfd: ") + std::strerror(errno);
         return CDM_ERR_IO;
     }
+    // Without CDM_WATCH_ENUMERATE the masters present now are learnt here,
+    // before cdm_watch returns: a master plugged in right after the call is
+    // then a change, never taken for one that was already there (which a
+    // first silent scan on the thread, racing the caller, could do).
+    if (!enumerate) w->rescan(false);
     MasterWatcher *self = w.get();
     self->thread_ = std::thread([self, enumerate] { self->run(enumerate); });
     out = std::move(w);
@@ -119,7 +124,7 @@ void MasterWatcher::run(bool enumerate) {
 }
 
 void MasterWatcher::loop(bool enumerate) {
-    rescan(enumerate);
+    if (enumerate) rescan(true); // the masters already there, told on this thread
     for (;;) {
         pollfd p[2] = {{stop_fd_, POLLIN, 0}, {mon_->fd(), POLLIN, 0}};
         const int r = ::poll(p, 2, -1);

@@ -25,9 +25,10 @@ step "2. A jig session (the seed's 25x25 plate, 5 heights, 100 samples) recorded
 
 step "3. Diagnose the nominal model: where it fails, which effect is missing"
 "$CDM" calib diagnose "$OUT/jig.csv" --device "$DEVICE" --json "$OUT/nominal.json" --report "$OUT/report-nominal"
-TOP=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['candidates'][0]['effect'])" "$OUT/nominal.json")
+# The model search's recommendation (the effects it lands on, comma-separated).
+TOP=$(python3 -c "import json,sys; print(','.join(json.load(open(sys.argv[1]))['recommended']['effects']))" "$OUT/nominal.json")
 
-step "4. Add the top-ranked effect ($TOP) and watch the error fall"
+step "4. Add the recommended effects ($TOP) and watch the error fall"
 "$CDM" calib diagnose "$OUT/jig.csv" --device "$DEVICE" --effects "$TOP" --json "$OUT/model.json" \
   --before "$OUT/nominal.json" --report "$OUT/report"
 

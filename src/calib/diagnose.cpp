@@ -7,6 +7,7 @@
 #include "calib/diagnose.h"
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <thread>
@@ -330,7 +331,11 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     // device's, and the tests above have taken them out.
     if (!jig_report["text"].empty()) {
         verdict += " The jig as it is:";
-        for (auto &t : jig_report["text"]) verdict += " " + t.get<std::string>() + ".";
+        for (auto &t : jig_report["text"]) {
+            std::string sentence = t.get<std::string>();
+            if (!sentence.empty()) sentence[0] = char(std::toupper(static_cast<unsigned char>(sentence[0])));
+            verdict += " " + sentence + ".";
+        }
     }
     if (!findings.empty()) {
         unexplained_summary += "; found: ";

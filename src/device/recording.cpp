@@ -13,6 +13,7 @@
 #include "device/protocol.h"
 #include "device/recording_mcap.h"
 #include "device/replay_format.h"
+#include "io/file.h"
 
 namespace cdm::recording {
 
@@ -86,15 +87,11 @@ public:
     int close(std::string &err) override {
         if (fd_ < 0) return CDM_OK;
         int rc = flush(err);
-        if (::fsync(fd_) != 0 && rc == CDM_OK) {
-            err = path_ + ": fsync: " + std::strerror(errno);
+        std::string close_err;
+        if (!io::sync_close(fd_, path_, close_err) && rc == CDM_OK) {
+            err = close_err;
             rc = CDM_ERR_IO;
         }
-        if (::close(fd_) != 0 && rc == CDM_OK) {
-            err = path_ + ": close: " + std::strerror(errno);
-            rc = CDM_ERR_IO;
-        }
-        fd_ = -1;
         return rc;
     }
     uint64_t reports() const override { return rows_; }
@@ -105,17 +102,10 @@ private:
             err = fail_;
             return CDM_ERR_IO;
         }
-        size_t done = 0;
-        while (done < buf_.size()) {
-            const ssize_t w = ::write(fd_, buf_.data() + done, buf_.size() - done);
-            if (w < 0 && errno == EINTR) continue;
-            if (w <= 0) {
-                fail_ = path_ + ": write error after " + std::to_string(rows_) + " rows: " +
-                        std::strerror(w < 0 ? errno : ENOSPC);
-                err = fail_;
-                return CDM_ERR_IO;
-            }
-            done += size_t(w);
+        if (const int e = io::write_fully(fd_, buf_.data(), buf_.size())) {
+            fail_ = path_ + ": write error after " + std::to_string(rows_) + " rows: " + std::strerror(e);
+            err = fail_;
+            return CDM_ERR_IO;
         }
         buf_.clear();
         return CDM_OK;

@@ -10,6 +10,7 @@
 
 #include "cdm/cdm.h"
 #include "device/protocol.h"
+#include "io/file.h"
 #include "device/recording_mcap.h"
 
 namespace cdm::replay {
@@ -131,22 +132,15 @@ int Writer::write_all(const uint8_t *p, size_t n, std::string &err) {
         err = fail_text_;
         return CDM_ERR_IO;
     }
-    size_t done = 0;
-    while (done < n) {
-        const ssize_t w = ::write(fd_, p + done, n - done);
-        if (w < 0 && errno == EINTR) continue;
-        if (w <= 0) {
-            const int e = w < 0 ? errno : ENOSPC;
-            // Keep the file a valid recording: drop the partial record.
-            const bool cut = ::ftruncate(fd_, off_t(bytes_)) == 0 && ::lseek(fd_, off_t(bytes_), SEEK_SET) >= 0;
-            failed_ = true;
-            fail_text_ = path_ + ": write error after " + std::to_string(records_) + " records (" +
-                         std::to_string(bytes_) + " bytes kept" + (cut ? "" : ", last record may be partial") +
-                         "): " + std::strerror(e);
-            err = fail_text_;
-            return CDM_ERR_IO;
-        }
-        done += size_t(w);
+    if (const int e = io::write_fully(fd_, p, n)) {
+        // Keep the file a valid recording: drop the partial record.
+        const bool cut = ::ftruncate(fd_, off_t(bytes_)) == 0 && ::lseek(fd_, off_t(bytes_), SEEK_SET) >= 0;
+        failed_ = true;
+        fail_text_ = path_ + ": write error after " + std::to_string(records_) + " records (" +
+                     std::to_string(bytes_) + " bytes kept" + (cut ? "" : ", last record may be partial") +
+                     "): " + std::strerror(e);
+        err = fail_text_;
+        return CDM_ERR_IO;
     }
     bytes_ += n;
     return CDM_OK;
@@ -198,15 +192,11 @@ int Writer::close(std::string &err) {
     if (fd_ < 0) return CDM_OK;
     int rc = failed_ ? CDM_ERR_IO : CDM_OK;
     if (failed_) err = fail_text_;
-    if (::fsync(fd_) != 0 && rc == CDM_OK) {
-        err = path_ + ": fsync: " + std::strerror(errno);
+    std::string close_err;
+    if (!io::sync_close(fd_, path_, close_err) && rc == CDM_OK) {
+        err = close_err;
         rc = CDM_ERR_IO;
     }
-    if (::close(fd_) != 0 && rc == CDM_OK) {
-        err = path_ + ": close: " + std::strerror(errno);
-        rc = CDM_ERR_IO;
-    }
-    fd_ = -1;
     return rc;
 }
 

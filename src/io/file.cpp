@@ -238,4 +238,30 @@ bool write_file_atomic(const std::string &path, const std::string &bytes, const 
     return f.open(path, protect, err) && f.write(bytes, err) && f.commit(err);
 }
 
+int write_fully(int fd, const void *data, size_t n) {
+    const char *p = static_cast<const char *>(data);
+    size_t done = 0;
+    while (done < n) {
+        const ssize_t w = ::write(fd, p + done, n - done);
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) return w < 0 ? errno : ENOSPC;
+        done += size_t(w);
+    }
+    return 0;
+}
+
+bool sync_close(int &fd, const std::string &path, std::string &err) {
+    bool ok = true;
+    if (::fsync(fd) != 0) {
+        err = path + ": fsync: " + std::strerror(errno);
+        ok = false;
+    }
+    if (::close(fd) != 0 && ok) {
+        err = path + ": close: " + std::strerror(errno);
+        ok = false;
+    }
+    fd = -1;
+    return ok;
+}
+
 } // namespace cdm::io

@@ -72,6 +72,14 @@ bool file_id(const std::string &path, FileId &out);
 bool write_file_atomic(const std::string &path, const std::string &bytes,
                        const std::vector<std::string> &protect_paths, std::string &err);
 
+// For the recorders' append-only files (the replay format, MCAP, the pose
+// CSV), which keep whole records on a failure. write_fully: all n bytes at
+// fd's position, retrying EINTR; 0, or the errno (a write that makes no
+// progress is ENOSPC). sync_close: fsync, then close fd and set it to -1;
+// false + err ("PATH: fsync: ...") on the first that fails.
+int write_fully(int fd, const void *data, size_t n);
+bool sync_close(int &fd, const std::string &path, std::string &err);
+
 // The same, streaming: open() creates the temporary, write() appends,
 // commit() fsyncs and renames; destruction without commit() removes the
 // temporary. For writers that produce their output piece by piece.

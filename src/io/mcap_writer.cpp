@@ -1,6 +1,8 @@
 // See mcap.h: the writer (chunked, indexed, CRC-checked; docs/recording.md).
 #include "io/mcap.h"
 
+#include "io/file.h"
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -82,23 +84,16 @@ bool Writer::emit(const std::string &bytes, std::string &err) {
         err = fail_text_;
         return false;
     }
-    size_t done = 0;
-    while (done < bytes.size()) {
-        const ssize_t w = ::write(fd_, bytes.data() + done, bytes.size() - done);
-        if (w < 0 && errno == EINTR) continue;
-        if (w <= 0) {
-            const int e = w < 0 ? errno : ENOSPC;
-            // Drop the partial piece: the file stays a run of whole records,
-            // which the reader plays (it reports the missing footer).
-            const bool cut = ::ftruncate(fd_, off_t(offset_)) == 0 && ::lseek(fd_, off_t(offset_), SEEK_SET) >= 0;
-            failed_ = true;
-            fail_text_ = path_ + ": write error after " + std::to_string(message_count_) + " messages (" +
-                         std::to_string(offset_) + " bytes kept" + (cut ? "" : ", the last chunk may be partial") +
-                         "): " + std::strerror(e);
-            err = fail_text_;
-            return false;
-        }
-        done += size_t(w);
+    if (const int e = io::write_fully(fd_, bytes.data(), bytes.size())) {
+        // Drop the partial piece: the file stays a run of whole records,
+        // which the reader plays (it reports the missing footer).
+        const bool cut = ::ftruncate(fd_, off_t(offset_)) == 0 && ::lseek(fd_, off_t(offset_), SEEK_SET) >= 0;
+        failed_ = true;
+        fail_text_ = path_ + ": write error after " + std::to_string(message_count_) + " messages (" +
+                     std::to_string(offset_) + " bytes kept" + (cut ? "" : ", the last chunk may be partial") +
+                     "): " + std::strerror(e);
+        err = fail_text_;
+        return false;
     }
     offset_ += bytes.size();
     return true;
@@ -329,15 +324,11 @@ bool Writer::close(std::string &err) {
     } else if (err.empty()) {
         err = fail_text_;
     }
-    if (::fsync(fd_) != 0 && ok) {
-        err = path_ + ": fsync: " + std::strerror(errno);
+    std::string close_err;
+    if (!io::sync_close(fd_, path_, close_err) && ok) {
+        err = close_err;
         ok = false;
     }
-    if (::close(fd_) != 0 && ok) {
-        err = path_ + ": close: " + std::strerror(errno);
-        ok = false;
-    }
-    fd_ = -1;
     return ok;
 }
 

@@ -37,6 +37,15 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
     Eval cur_E = evaluate(cur, ctx.pos);
     std::set<std::vector<std::string>> seen{sorted(reading_effects(cur))};
     out.visited.push_back({reading_effects(cur), ctx.bic(cur_chi2, cur_free)});
+    // The search moves to model m, fitted as r (E: its evaluation, or
+    // evaluated here when the move's fit did not make one).
+    auto move_to = [&](const Model &m, const FitReport &r, const Eval *E) {
+        cur = m;
+        cur_rep = r;
+        cur_free = r.n_free;
+        cur_chi2 = r.chi2;
+        cur_E = E ? *E : evaluate(cur, ctx.pos);
+    };
     std::vector<Candidate> cands;
     for (int step = 1; step <= 12; ++step) {
         if (!score_candidates(ctx, cur, cur_free, cur_chi2, cur_E, "search step " + std::to_string(step), cands, err))
@@ -90,19 +99,11 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
         if (add && add->bic <= best_rm) {
             st.added = add->name;
             st.bic_change = add->bic;
-            cur = add->m;
-            cur_rep = add->rep;
-            cur_free = add->rep.n_free;
-            cur_chi2 = add->rep.chi2;
-            cur_E = add->E;
+            move_to(add->m, add->rep, &add->E);
         } else if (!rm_name.empty()) {
             st.removed = rm_name;
             st.bic_change = best_rm;
-            cur = rm_model;
-            cur_rep = rm_rep;
-            cur_free = rm_rep.n_free;
-            cur_chi2 = rm_rep.chi2;
-            cur_E = evaluate(cur, ctx.pos);
+            move_to(rm_model, rm_rep, nullptr);
         } else {
             // Stuck on additions and removals: a one-effect swap can still
             // lower the criterion (greedy forward steps can take a flexible
@@ -157,11 +158,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
             st.added = sw_in;
             st.removed = sw_out;
             st.bic_change = best_sw;
-            cur = sw_model;
-            cur_rep = sw_rep;
-            cur_free = sw_rep.n_free;
-            cur_chi2 = sw_rep.chi2;
-            cur_E = evaluate(cur, ctx.pos);
+            move_to(sw_model, sw_rep, nullptr);
         }
         st.x_rms_mm = x_rms(cur_E);
         seen.insert(sorted(reading_effects(cur)));

@@ -88,7 +88,8 @@ double model_chi2(const Model &m, const std::vector<PreparedPos> &pos, const Fit
 // The fit's weighted residuals sqrt(w) * (mean - y) at the model's current
 // parameters, and their Jacobian with respect to every fitted parameter
 // (columns: the effects in model order, each effect's parameters in order,
-// Position-stage effects left out) — what the NLopt objective uses. False +
+// Position-stage effects left out; then, with FitOptions::fixture, one per
+// fixture height) — what the NLopt objective uses. False +
 // err naming the effect when a user effect's apply fails.
 bool fit_residual_jacobian(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt,
                            Eigen::VectorXd &res, Eigen::MatrixXd &J, std::string &err);

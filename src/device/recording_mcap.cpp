@@ -74,6 +74,17 @@ void xyz(std::string &s, const double *v, double scale) {
     num(s, v[2] * scale);
     s += "}";
 }
+// A cdm quaternion (w, x, y, z) as a JSON object with its keys in `order`
+// ("xyzw" for Foxglove and ROS, "wxyz" for cdm's own state channel).
+void quat(std::string &s, const double q[4], const char *order) {
+    s += "{";
+    for (const char *k = order; *k; ++k) {
+        if (k != order) s += ",";
+        s += std::string("\"") + *k + "\":";
+        num(s, q[*k == 'w' ? 0 : *k - 'x' + 1]);
+    }
+    s += "}";
+}
 
 std::string hex(const uint8_t *p, size_t n) {
     static const char d[] = "0123456789abcdef";
@@ -174,15 +185,9 @@ std::string pose_json(uint64_t host_ns, const cdm_pose &p) {
     s += "\",\"pose\":{\"position\":";
     xyz(s, p.position, 1e-3);
     // cdm_pose is w,x,y,z; Foxglove (and ROS) x,y,z,w.
-    s += ",\"orientation\":{\"x\":";
-    num(s, p.orientation[1]);
-    s += ",\"y\":";
-    num(s, p.orientation[2]);
-    s += ",\"z\":";
-    num(s, p.orientation[3]);
-    s += ",\"w\":";
-    num(s, p.orientation[0]);
-    s += "}}}";
+    s += ",\"orientation\":";
+    quat(s, p.orientation, "xyzw");
+    s += "}}";
     return s;
 }
 
@@ -192,15 +197,9 @@ std::string state_json(uint64_t host_ns, const cdm_pose &p) {
     s += ",\"sequence\":" + std::to_string(p.sequence) + ",\"device_time_us\":" + std::to_string(p.device_time_us) +
          ",\"position_mm\":";
     xyz(s, p.position, 1.0);
-    s += ",\"orientation\":{\"w\":";
-    num(s, p.orientation[0]);
-    s += ",\"x\":";
-    num(s, p.orientation[1]);
-    s += ",\"y\":";
-    num(s, p.orientation[2]);
-    s += ",\"z\":";
-    num(s, p.orientation[3]);
-    s += "},\"grip_rad\":";
+    s += ",\"orientation\":";
+    quat(s, p.orientation, "wxyz");
+    s += ",\"grip_rad\":";
     num(s, p.grip);
     s += ",\"buttons\":" + std::to_string(p.buttons) + ",\"flags\":" + std::to_string(p.flags) + ",\"velocity_mm_s\":";
     // velocity is since 1.1: a struct from an older caller has none.

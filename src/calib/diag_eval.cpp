@@ -52,12 +52,11 @@ Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos) {
         auto J = reading_jacobian(m, p, pos[j].t_s);
         Eigen::Matrix3d H = J.transpose() * J;
         E.Jp[j] = H.inverse() * J.transpose();
-        // Covariance of the mean readings: the samples' (cross-cable terms
-        // included) over n, plus on the diagonal what prepare() added for
-        // quantisation and single samples.
-        Eigen::Matrix4d Cl = pos[j].cov / pos[j].n;
-        for (int c = 0; c < 4; ++c) Cl(c, c) = std::max(Cl(c, c), pos[j].var_mean(c));
-        Eigen::Matrix3d C = E.Jp[j] * Cl * E.Jp[j].transpose();
+        // Covariance of the mean readings (cross-cable terms included), as
+        // prepare() shrank it toward the pooled one and added quantisation.
+        // Not the larger of it and the position's own: with few samples that
+        // maximum is biased up, and weights from it inflate the chi-square.
+        const Eigen::Matrix3d C = E.Jp[j] * pos[j].cov_mean * E.Jp[j].transpose();
         for (int a = 0; a < 3; ++a) E.var_mean[j](a) = std::max(C(a, a), 1e-10);
         E.ok[j] = 1;
         const double n = pos[j].n;

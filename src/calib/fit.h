@@ -24,6 +24,9 @@ struct PreparedPos {
     Eigen::Vector4d mean;
     Eigen::Vector4d var_mean; // variance of the mean reading from the repeatability alone
     Eigen::Matrix4d cov;      // sample covariance of the readings
+    // Covariance of the mean readings the statistics use: the sample one
+    // shrunk toward the pooled (prepare()), over n; its diagonal is var_mean.
+    Eigen::Matrix4d cov_mean = Eigen::Matrix4d::Zero();
     int n = 0;
     double t_s = 0; // acquisition time of the position (s), for effects that drift in time
 };

@@ -19,10 +19,10 @@ using DPdj = Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxJig>; // d P / d
 // (parameters, position, readings) with at most one entry moved. k = 0: the
 // value; then + and - a step on each incoming reading (4), each position
 // coordinate (3) and each parameter, so the difference for entry j is
-// (out[1 + 2j] - out[2 + 2j]) / (2 h). Steps: 1e-5 mm on a reading, 1e-4 mm
-// on the position, 1e-6 of a parameter's typical size in thousandths (at
-// least 1e-6): well above the round-off of a reading near 100-300 mm
-// (~3e-14), well below the scale on which an effect bends.
+// (out[1 + 2j] - out[2 + 2j]) / (2 h). Steps (those the per-position path
+// has always used): 1e-5 mm on a reading, 1e-4 mm on the position, the
+// larger of 1e-6 and 1e-3 of a parameter's typical size: well above the
+// round-off of a reading near 100-300 mm (~3e-14 mm).
 enum class Moved { None, Reading, Position, Param };
 struct UserStep {
     Moved what;

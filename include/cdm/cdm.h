@@ -438,6 +438,16 @@ CDM_API int cdm_device_calibration_write(cdm_device *dev, const char *data, size
 typedef int (*cdm_effect_apply_fn)(void *user, const double *params, const double position_mm[3],
                                    double readings_mm[4]);
 
+/**
+ * since 1.1: the same effect on n positions at once. positions_mm is n x 3
+ * and readings_mm n x 4, row-major (position i's readings at
+ * readings_mm[4 * i .. 4 * i + 3]), changed in place. Row i must come out as
+ * `apply` would make it for position i alone (the rows are independent).
+ * Non-zero fails the evaluation, as from `apply`.
+ */
+typedef int (*cdm_effect_apply_batch_fn)(void *user, const double *params, size_t n, const double *positions_mm,
+                                         double *readings_mm);
+
 typedef struct cdm_effect_def {
     uint32_t struct_size;
     uint32_t n_params;
@@ -455,6 +465,15 @@ typedef struct cdm_effect_def {
      *  a time constant) is fitted from here; one named "period" is started
      *  by the diagnosis from the cable-length periodogram instead. */
     const double *initial;
+    /** since 1.1: the effect on all positions at once, or NULL. At least one
+     *  of apply and apply_batch is given. Evaluations over many positions
+     *  (the fit and its chi-squares, the diagnosis' candidate fits) call
+     *  apply_batch, once per central-difference step over every position,
+     *  when it is given, else apply per position; evaluations at one position
+     *  (cdm_get_pose, a position solve, cdm_calibration_lengths) call apply,
+     *  or apply_batch with n = 1 when only it is given. For an effect written
+     *  in an interpreted language the batch form saves a call per position. */
+    cdm_effect_apply_batch_fn apply_batch;
 } cdm_effect_def;
 
 /**

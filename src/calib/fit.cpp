@@ -36,62 +36,6 @@
 
 namespace cdm {
 
-std::vector<PreparedPos> prepare(const Dataset &d) {
-    // The readings' resolution per cable: the smallest step between distinct
-    // values (the ADC count through the nominal scale; the CSV's last digit
-    // for unquantised data), found as the dataset was read.
-    const double *q = d.resolution;
-    // Pooled within-position covariance, for positions measured once and
-    // as the target each position's own is shrunk toward (below).
-    Eigen::Matrix4d pooled = Eigen::Matrix4d::Zero();
-    double dof = 0;
-    for (auto &p : d.pos)
-        if (p.n > 1) {
-            for (int c = 0; c < 4; ++c)
-                for (int k = 0; k < 4; ++k) pooled(c, k) += p.cov[c][k] * (p.n - 1);
-            dof += p.n - 1;
-        }
-    if (dof > 0) pooled /= dof;
-    std::vector<PreparedPos> v;
-    v.reserve(d.pos.size());
-    for (auto &p : d.pos) {
-        PreparedPos pp;
-        pp.ref = Eigen::Vector3d(p.ref[0], p.ref[1], p.ref[2]);
-        for (int c = 0; c < 4; ++c) {
-            pp.mean(c) = p.mean[c];
-            for (int k = 0; k < 4; ++k) pp.cov(c, k) = p.cov[c][k];
-        }
-        // A position's own covariance from few samples is itself noisy,
-        // and weights 1/s^2 from it inflate every chi-square by
-        // E[sigma^2/s^2] = nu/(nu - 2) (9/7 from 10 samples). The pots'
-        // noise is the pot's, much the same over the workspace, so each
-        // position's covariance (variances and cross-cable terms alike) is
-        // shrunk toward the pooled one, as if the pooled estimate were
-        // worth kPriorDof samples' worth of degrees of freedom: 10 samples
-        // then weigh in with 59 dof (bias 3.5 %), 100 with 149 (1.4 %), and
-        // a position that really is noisier still shows it. A convex
-        // combination of two covariance matrices stays one.
-        constexpr double kPriorDof = 50;
-        const Eigen::Matrix4d shrunk =
-            p.n > 1 ? Eigen::Matrix4d(((p.n - 1) * pp.cov + kPriorDof * pooled) / (p.n - 1 + kPriorDof)) : pooled;
-        pp.cov_mean = shrunk / p.n;
-        for (int c = 0; c < 4; ++c) {
-            const double var = shrunk(c, c);
-            // Noise that spans several ADC steps dithers the quantisation
-            // away in the mean; noise below half a step does not, and the
-            // mean keeps the rounding error of variance q^2/12.
-            const double q12 = q[c] * q[c] / 12;
-            pp.var_mean(c) = var / p.n + (var < 3 * q12 ? q12 : 0.0);
-            pp.var_mean(c) = std::max(pp.var_mean(c), 1e-10);
-            pp.cov_mean(c, c) = pp.var_mean(c);
-        }
-        pp.n = p.n;
-        pp.t_s = p.t_s; // lets time-dependent effects (drift) see acquisition order
-        v.push_back(pp);
-    }
-    return v;
-}
-
 namespace {
 
 struct Problem {
@@ -109,6 +53,8 @@ struct Problem {
     int evals = 0;
     bool cancelled = false;
     std::string failure;              // a user effect's apply failed: its message
+    ReadingEvaluator::Batch batch;    // every used position's readings, when a user effect works on arrays
+    std::vector<double> refs, ts;     // their reference positions and times (eval_rows)
 
     Problem(Model &m_, const std::vector<PreparedPos> &p_, const FitOptions &o_)
         : m(m_), pos(p_), opt(o_), ev(m_) {
@@ -192,23 +138,50 @@ struct Problem {
 
     // Predicted readings and d(readings)/d(effect params) at position j
     // (its fixture height's offset applied to the reference).
+    void reference(size_t j, double ref[3]) const {
+        const PreparedPos &pp = pos[j];
+        ref[0] = pp.ref(0) + (F > 0 ? fx(opt.fixture[j]) : 0.0);
+        ref[1] = pp.ref(1);
+        ref[2] = pp.ref(2);
+    }
     bool eval_position(size_t j, Eigen::Vector4d &y, Eigen::Matrix<double, 4, Eigen::Dynamic> *J,
                        Eigen::Matrix<double, 4, 3> *dydP) {
-        const PreparedPos &pp = pos[j];
-        const double ref[3] = {pp.ref(0) + (F > 0 ? fx(opt.fixture[j]) : 0.0), pp.ref(1), pp.ref(2)};
+        double ref[3];
+        reference(j, ref);
         std::string err;
-        if (ev.eval(cur, ref, pp.t_s, y, J, dydP, &err)) return true;
+        if (ev.eval(cur, ref, pos[j].t_s, y, J, dydP, &err)) return true;
+        if (failure.empty()) failure = err;
+        return false;
+    }
+    // Every used position at once into `batch`, when a user effect works on
+    // arrays: its apply_batch is then called once per central-difference
+    // step, not once per position and step (a Python effect: numpy over
+    // all positions instead of a call into the interpreter for each).
+    bool eval_rows(bool want_J, bool want_dydP) {
+        refs.resize(3 * rows.size());
+        ts.resize(rows.size());
+        for (size_t r = 0; r < rows.size(); ++r) {
+            reference(size_t(rows[r]), &refs[3 * r]);
+            ts[r] = pos[size_t(rows[r])].t_s;
+        }
+        std::string err;
+        if (ev.eval_batch(cur, rows.size(), refs.data(), ts.data(), want_J, want_dydP, batch, &err)) return true;
         if (failure.empty()) failure = err;
         return false;
     }
 
     void compute_weights() {
         w.resize(4 * int(rows.size()));
+        const bool batched = ev.has_batch();
+        const bool batch_ok = batched && eval_rows(false, true);
         for (size_t r = 0; r < rows.size(); ++r) {
             const auto &pp = pos[rows[r]];
             Eigen::Vector4d y;
             Eigen::Matrix<double, 4, 3> dP;
-            if (!eval_position(size_t(rows[r]), y, nullptr, &dP)) dP.setZero();
+            if (batched)
+                dP = batch_ok ? batch.dydP[r] : Eigen::Matrix<double, 4, 3>::Zero();
+            else if (!eval_position(size_t(rows[r]), y, nullptr, &dP))
+                dP.setZero();
             for (int c = 0; c < 4; ++c) {
                 double jig = 0;
                 for (int a = 0; a < 3; ++a) jig += dP(c, a) * dP(c, a) * opt.jig_sigma(a) * opt.jig_sigma(a);
@@ -226,11 +199,19 @@ struct Problem {
         if (J) J->setZero();
         Eigen::Matrix<double, 4, Eigen::Dynamic> Jp(4, ev.size());
         Eigen::Matrix<double, 4, 3> dP;
+        const bool batched = ev.has_batch();
+        if (batched && !eval_rows(J != nullptr, J && F > 0)) return false;
         for (size_t r = 0; r < rows.size(); ++r) {
             const size_t j = size_t(rows[r]);
             const auto &pp = pos[j];
             Eigen::Vector4d y;
-            if (!eval_position(j, y, J ? &Jp : nullptr, J && F > 0 ? &dP : nullptr)) return false;
+            if (batched) {
+                y = batch.y[r];
+                if (J) Jp = batch.J[r];
+                if (J && F > 0) dP = batch.dydP[r];
+            } else if (!eval_position(j, y, J ? &Jp : nullptr, J && F > 0 ? &dP : nullptr)) {
+                return false;
+            }
             for (int c = 0; c < 4; ++c) {
                 const double sw = std::sqrt(w(4 * r + c));
                 res(4 * r + c) = sw * (pp.mean(c) - y(c));

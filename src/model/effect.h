@@ -33,15 +33,27 @@ struct ParamDesc {
     bool signed_random = true;
 };
 
+// The most parameters a user effect may have (cdm_effect_register refuses
+// more): the evaluator's per-call buffers are sized by it.
+constexpr int kMaxUserParams = 64;
+
 struct EffectDesc {
     std::string name;
     std::string doc;       // the physics in one paragraph, with the typical magnitude
     Stage stage;
     int builtin_id;        // index in CDM_BUILTIN_EFFECTS (effects/list.h), or -1 for a user effect
     std::vector<ParamDesc> params;
-    // user effects only
+    // user effects only: at least one of apply and apply_batch (cdm.h says
+    // which is called when)
     cdm_effect_apply_fn apply = nullptr;
+    cdm_effect_apply_batch_fn apply_batch = nullptr;
     void *user = nullptr;
+    // At one position: apply, or apply_batch on one row when the effect has
+    // only that (no allocation either way: the haptic path calls this).
+    int apply_one(const double *params, const double position_mm[3], double readings_mm[4]) const {
+        return apply ? apply(user, params, position_mm, readings_mm)
+                     : apply_batch(user, params, 1, position_mm, readings_mm);
+    }
 };
 
 using EffectDescPtr = std::shared_ptr<const EffectDesc>;

@@ -13,6 +13,33 @@ namespace {
 constexpr int kMaxLocal = 3 + kMaxCableSlots;
 constexpr int kMaxJig = 16; // Jig-stage parameters of all built-ins together
 using ADJ = Eigen::AutoDiffScalar<Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxJig, 1>>;
+using DPdj = Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxJig>; // d P / d (jig parameters)
+
+// Central differences through a user effect: call k's input is the state
+// (parameters, position, readings) with at most one entry moved. k = 0: the
+// value; then + and - a step on each incoming reading (4), each position
+// coordinate (3) and each parameter, so the difference for entry j is
+// (out[1 + 2j] - out[2 + 2j]) / (2 h). Steps (those the per-position path
+// has always used): 1e-5 mm on a reading, 1e-4 mm on the position, the
+// larger of 1e-6 and 1e-3 of a parameter's typical size: well above the
+// round-off of a reading near 100-300 mm (~3e-14 mm).
+enum class Moved { None, Reading, Position, Param };
+struct UserStep {
+    Moved what;
+    int idx;
+    double h; // signed
+};
+constexpr double kReadingStep = 1e-5, kPositionStep = 1e-4;
+double param_step(const EffectDesc &d, int k) { return 1e-6 * std::max(1.0, d.params[size_t(k)].scale * 1e3); }
+int user_calls(const EffectDesc &d, bool deriv) { return deriv ? 15 + 2 * int(d.params.size()) : 1; }
+UserStep user_step(const EffectDesc &d, int k) {
+    if (k == 0) return {Moved::None, 0, 0.0};
+    const int j = (k - 1) / 2;
+    const double sign = (k - 1) % 2 == 0 ? 1.0 : -1.0;
+    if (j < 4) return {Moved::Reading, j, sign * kReadingStep};
+    if (j < 7) return {Moved::Position, j - 4, sign * kPositionStep};
+    return {Moved::Param, j - 7, sign * param_step(d, j - 7)};
+}
 } // namespace
 
 struct ReadingEvaluator::Impl {
@@ -51,7 +78,7 @@ struct ReadingEvaluator::Impl {
 
     // P = jig map of ref, with dP/d(jig parameters) in dPdj (3 x njig).
     void jig_position(const Eigen::VectorXd &full, const double ref[3], double P[3],
-                      Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxJig> &dPdj) const {
+                      DPdj &dPdj) const {
         ADJ store[kMaxJig];
         EffectParams<ADJ> p{};
         for (auto [e, first] : jig) {
@@ -72,9 +99,20 @@ struct ReadingEvaluator::Impl {
         }
     }
 
-    bool user_chain(const Eigen::VectorXd &full, const double P[3], double t_s, const Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxJig> &dPdj,
-                    Eigen::Vector4d &y, Eigen::Matrix<double, 4, Eigen::Dynamic> *J, Eigen::Matrix<double, 4, 3> &dP,
-                    std::string *err) const;
+    // The built-in effects' part of eval: the device-frame position P (and
+    // dPdj), the readings y, and when `values_only` is false J (if given)
+    // and dP.
+    void builtin(const Eigen::VectorXd &full, const double ref[3], double t_s, double P[3], DPdj &dPdj,
+                 Eigen::Vector4d &y, Eigen::Matrix<double, 4, Eigen::Dynamic> *J, Eigen::Matrix<double, 4, 3> &dP,
+                 bool values_only) const;
+    // User effect e at one position: the outputs of its user_calls calls
+    // (apply, or apply_batch on one row). False on a non-zero return.
+    bool user_one(size_t e, const Eigen::VectorXd &full, const double P[3], const Eigen::Vector4d &y, bool deriv,
+                  Eigen::Vector4d *out, std::string *err) const;
+    // Chains user effect e's central differences (out: its calls' outputs)
+    // onto y, J and dP.
+    void chain(size_t e, const Eigen::Vector4d *out, const DPdj &dPdj, Eigen::Vector4d &y,
+               Eigen::Matrix<double, 4, Eigen::Dynamic> *J, Eigen::Matrix<double, 4, 3> &dP) const;
 };
 
 ReadingEvaluator::ReadingEvaluator(const Model &m) : impl_(new Impl(m)) {}
@@ -120,17 +158,12 @@ void cable_jacobians(const Model &m, const ModelLayout &lay, const std::array<st
 }
 } // namespace
 
-bool ReadingEvaluator::eval(const Eigen::VectorXd &full, const double ref[3], double t_s, Eigen::Vector4d &y,
-                            Eigen::Matrix<double, 4, Eigen::Dynamic> *J, Eigen::Matrix<double, 4, 3> *dydP,
-                            std::string *err) const {
-    const Impl &I = *impl_;
-    double P[3];
-    Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxJig> dPdj;
-    I.jig_position(full, ref, P, dPdj);
-    if (J) J->setZero(4, I.n);
-    const int nloc = 3 + I.lay.cable.nslots;
-    Eigen::Matrix<double, 4, 3> dP;
-    if (!J && !dydP && !I.lay.has_user) {
+void ReadingEvaluator::Impl::builtin(const Eigen::VectorXd &full, const double ref[3], double t_s, double P[3],
+                                     DPdj &dPdj, Eigen::Vector4d &y, Eigen::Matrix<double, 4, Eigen::Dynamic> *J,
+                                     Eigen::Matrix<double, 4, 3> &dP, bool values_only) const {
+    jig_position(full, ref, P, dPdj);
+    if (J) J->setZero(4, n);
+    if (values_only) {
         // Values only (a trial step of the fit, a chi-square): the same
         // arithmetic as the values of the differentiated kernel.
         Sample<double> s;
@@ -138,92 +171,157 @@ bool ReadingEvaluator::eval(const Eigen::VectorXd &full, const double ref[3], do
         s.t_s = t_s;
         double q[kMaxCableSlots > 0 ? kMaxCableSlots : 1];
         for (int i = 0; i < 4; ++i) {
-            for (int sl = 0; sl < I.lay.cable.nslots; ++sl) q[sl] = full(I.col[size_t(i)][size_t(sl)]);
-            y(i) = cable_reading<double>(I.m.geometry(), i, s, I.lay.cable, q);
+            for (int sl = 0; sl < lay.cable.nslots; ++sl) q[sl] = full(col[size_t(i)][size_t(sl)]);
+            y(i) = cable_reading<double>(m.geometry(), i, s, lay.cable, q);
         }
-        return true;
+        return;
     }
+    const int nloc = 3 + lay.cable.nslots;
     Eigen::Matrix<double, 4, kMaxCableSlots> dq;
     if (nloc <= 4)
-        cable_jacobians<4>(I.m, I.lay, I.col, full, P, t_s, y, dP, dq);
+        cable_jacobians<4>(m, lay, col, full, P, t_s, y, dP, dq);
     else if (nloc <= 8)
-        cable_jacobians<8>(I.m, I.lay, I.col, full, P, t_s, y, dP, dq);
+        cable_jacobians<8>(m, lay, col, full, P, t_s, y, dP, dq);
     else if (nloc <= 12)
-        cable_jacobians<12>(I.m, I.lay, I.col, full, P, t_s, y, dP, dq);
+        cable_jacobians<12>(m, lay, col, full, P, t_s, y, dP, dq);
     else if (nloc <= 16)
-        cable_jacobians<16>(I.m, I.lay, I.col, full, P, t_s, y, dP, dq);
+        cable_jacobians<16>(m, lay, col, full, P, t_s, y, dP, dq);
     else
-        cable_jacobians<kMaxLocal>(I.m, I.lay, I.col, full, P, t_s, y, dP, dq);
+        cable_jacobians<kMaxLocal>(m, lay, col, full, P, t_s, y, dP, dq);
     if (J) {
         for (int i = 0; i < 4; ++i) {
-            for (auto [e, first] : I.jig) {
-                const int np = int(I.desc[size_t(e)]->params.size());
-                J->block(i, I.off[size_t(e)], 1, np) += dP.row(i) * dPdj.middleCols(first, np);
+            for (auto [e, first] : jig) {
+                const int np = int(desc[size_t(e)]->params.size());
+                J->block(i, off[size_t(e)], 1, np) += dP.row(i) * dPdj.middleCols(first, np);
             }
-            for (int sl = 0; sl < I.lay.cable.nslots; ++sl) (*J)(i, I.col[size_t(i)][size_t(sl)]) += dq(i, sl);
+            for (int sl = 0; sl < lay.cable.nslots; ++sl) (*J)(i, col[size_t(i)][size_t(sl)]) += dq(i, sl);
         }
     }
-    if (I.lay.has_user && !I.user_chain(full, P, t_s, dPdj, y, J, dP, err)) return false;
+}
+
+bool ReadingEvaluator::eval(const Eigen::VectorXd &full, const double ref[3], double t_s, Eigen::Vector4d &y,
+                            Eigen::Matrix<double, 4, Eigen::Dynamic> *J, Eigen::Matrix<double, 4, 3> *dydP,
+                            std::string *err) const {
+    const Impl &I = *impl_;
+    double P[3];
+    DPdj dPdj;
+    Eigen::Matrix<double, 4, 3> dP;
+    I.builtin(full, ref, t_s, P, dPdj, y, J, dP, !J && !dydP && !I.lay.has_user);
+    if (I.lay.has_user) {
+        Eigen::Vector4d out[15 + 2 * kMaxUserParams]; // the most calls one user effect needs
+        for (size_t e = 0; e < I.desc.size(); ++e) {
+            if (I.desc[e]->stage != Stage::User) continue;
+            if (!I.user_one(e, full, P, y, J != nullptr, out, err)) return false;
+            I.chain(e, out, dPdj, y, J, dP);
+        }
+    }
     if (dydP) *dydP = dP;
+    return true;
+}
+
+bool ReadingEvaluator::Impl::user_one(size_t e, const Eigen::VectorXd &full, const double P[3],
+                                      const Eigen::Vector4d &y, bool deriv, Eigen::Vector4d *out,
+                                      std::string *err) const {
+    const EffectDesc &d = *desc[e];
+    const int np = int(d.params.size());
+    double prm[kMaxUserParams];
+    for (int k = 0; k < user_calls(d, deriv); ++k) {
+        const UserStep st = user_step(d, k);
+        for (int a = 0; a < np; ++a) prm[a] = full(off[e] + a);
+        double Pk[3] = {P[0], P[1], P[2]};
+        double buf[4] = {y(0), y(1), y(2), y(3)};
+        if (st.what == Moved::Param) prm[st.idx] += st.h;
+        if (st.what == Moved::Position) Pk[st.idx] += st.h;
+        if (st.what == Moved::Reading) buf[st.idx] += st.h;
+        if (d.apply_one(prm, Pk, buf) != 0) {
+            if (err) *err = "user effect \"" + d.name + "\": apply returned non-zero";
+            return false;
+        }
+        out[k] = Eigen::Vector4d(buf[0], buf[1], buf[2], buf[3]);
+    }
     return true;
 }
 
 // User effects act on the readings: chain their central-difference
 // derivatives (w.r.t. their parameters, the incoming readings and the
 // position) onto the built-in Jacobian.
-bool ReadingEvaluator::Impl::user_chain(const Eigen::VectorXd &full, const double P[3], double,
-                                        const Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxJig> &dPdj,
-                                        Eigen::Vector4d &y, Eigen::Matrix<double, 4, Eigen::Dynamic> *J,
-                                        Eigen::Matrix<double, 4, 3> &dP, std::string *err) const {
-    for (size_t e = 0; e < desc.size(); ++e) {
-        const EffectDesc &d = *desc[e];
+void ReadingEvaluator::Impl::chain(size_t e, const Eigen::Vector4d *out, const DPdj &dPdj, Eigen::Vector4d &y,
+                                   Eigen::Matrix<double, 4, Eigen::Dynamic> *J,
+                                   Eigen::Matrix<double, 4, 3> &dP) const {
+    const EffectDesc &d = *desc[e];
+    if (J) {
+        Eigen::Matrix4d Dy;
+        Eigen::Matrix<double, 4, 3> DP;
+        for (int c = 0; c < 4; ++c) Dy.col(c) = (out[1 + 2 * c] - out[2 + 2 * c]) / (2 * kReadingStep);
+        for (int k = 0; k < 3; ++k) DP.col(k) = (out[9 + 2 * k] - out[10 + 2 * k]) / (2 * kPositionStep);
+        Eigen::Matrix<double, 4, Eigen::Dynamic> Jn = Dy * (*J);
+        for (auto [je, first] : jig) {
+            const int jn = int(desc[size_t(je)]->params.size());
+            Jn.block(0, off[size_t(je)], 4, jn) += DP * dPdj.middleCols(first, jn);
+        }
+        for (int k = 0; k < int(d.params.size()); ++k)
+            Jn.col(off[e] + k) += (out[15 + 2 * k] - out[16 + 2 * k]) / (2 * param_step(d, k));
+        *J = Jn;
+        dP = Dy * dP + DP;
+    }
+    y = out[0];
+}
+
+bool ReadingEvaluator::has_batch() const {
+    for (const EffectDesc *d : impl_->desc)
+        if (d->stage == Stage::User && d->apply_batch) return true;
+    return false;
+}
+
+bool ReadingEvaluator::eval_batch(const Eigen::VectorXd &full, size_t n, const double *refs, const double *t_s,
+                                  bool want_J, bool want_dydP, Batch &out, std::string *err) const {
+    const Impl &I = *impl_;
+    out.y.resize(n);
+    out.J.resize(want_J ? n : 0);
+    out.dydP.resize(n);
+    std::vector<double> P(3 * n);
+    std::vector<DPdj> dPdj(n);
+    const bool values_only = !want_J && !want_dydP && !I.lay.has_user;
+    for (size_t i = 0; i < n; ++i)
+        I.builtin(full, refs + 3 * i, t_s[i], &P[3 * i], dPdj[i], out.y[i], want_J ? &out.J[i] : nullptr,
+                  out.dydP[i], values_only);
+    Eigen::Vector4d calls[15 + 2 * kMaxUserParams];
+    for (size_t e = 0; e < I.desc.size() && I.lay.has_user; ++e) {
+        const EffectDesc &d = *I.desc[e];
         if (d.stage != Stage::User) continue;
-        const int o = off[e], np = int(d.params.size());
-        std::vector<double> prm(full.data() + o, full.data() + o + np);
-        bool failed = false;
-        auto call = [&](const std::vector<double> &pv, const double *Pv, const Eigen::Vector4d &yin) {
-            double buf[4] = {yin(0), yin(1), yin(2), yin(3)};
-            if (d.apply(d.user, pv.data(), Pv, buf) != 0) failed = true;
-            return Eigen::Vector4d(buf[0], buf[1], buf[2], buf[3]);
-        };
-        Eigen::Vector4d y1 = call(prm, P, y);
-        if (J && !failed) {
-            Eigen::Matrix4d Dy;
-            Eigen::Matrix<double, 4, 3> DP;
-            for (int c = 0; c < 4; ++c) {
-                const double h = 1e-5;
-                Eigen::Vector4d yp = y, ym = y;
-                yp(c) += h;
-                ym(c) -= h;
-                Dy.col(c) = (call(prm, P, yp) - call(prm, P, ym)) / (2 * h);
+        if (!d.apply_batch) {
+            for (size_t i = 0; i < n; ++i) {
+                if (!I.user_one(e, full, &P[3 * i], out.y[i], want_J, calls, err)) return false;
+                I.chain(e, calls, dPdj[i], out.y[i], want_J ? &out.J[i] : nullptr, out.dydP[i]);
             }
-            for (int k = 0; k < 3; ++k) {
-                const double h = 1e-4;
-                double Pp[3] = {P[0], P[1], P[2]}, Pm[3] = {P[0], P[1], P[2]};
-                Pp[k] += h;
-                Pm[k] -= h;
-                DP.col(k) = (call(prm, Pp, y) - call(prm, Pm, y)) / (2 * h);
-            }
-            Eigen::Matrix<double, 4, Eigen::Dynamic> Jn = Dy * (*J);
-            for (auto [je, first] : jig) {
-                const int jn = int(desc[size_t(je)]->params.size());
-                Jn.block(0, off[size_t(je)], 4, jn) += DP * dPdj.middleCols(first, jn);
-            }
-            for (int k = 0; k < np; ++k) {
-                const double h = 1e-6 * std::max(1.0, d.params[size_t(k)].scale * 1e3);
-                auto pp = prm, pm = prm;
-                pp[size_t(k)] += h;
-                pm[size_t(k)] -= h;
-                Jn.col(o + k) += (call(pp, P, y) - call(pm, P, y)) / (2 * h);
-            }
-            *J = Jn;
-            dP = Dy * dP + DP;
+            continue;
         }
-        if (failed) {
-            if (err) *err = "user effect \"" + d.name + "\": apply returned non-zero";
-            return false;
+        // Every call's rows, as user_one would make them one position at a
+        // time: call k's readings at scratch[4 n k ...].
+        const int nc = user_calls(d, want_J), np = int(d.params.size());
+        out.scratch.resize(4 * n * size_t(nc));
+        std::vector<double> Pk(3 * n);
+        double prm[kMaxUserParams];
+        for (int k = 0; k < nc && n > 0; ++k) {
+            const UserStep st = user_step(d, k);
+            for (int a = 0; a < np; ++a) prm[a] = full(I.off[e] + a);
+            Pk = P;
+            double *Y = &out.scratch[4 * n * size_t(k)];
+            for (size_t i = 0; i < n; ++i) {
+                for (int c = 0; c < 4; ++c) Y[4 * i + size_t(c)] = out.y[i](c);
+                if (st.what == Moved::Position) Pk[3 * i + size_t(st.idx)] += st.h;
+                if (st.what == Moved::Reading) Y[4 * i + size_t(st.idx)] += st.h;
+            }
+            if (st.what == Moved::Param) prm[st.idx] += st.h;
+            if (d.apply_batch(d.user, prm, n, Pk.data(), Y) != 0) {
+                if (err) *err = "user effect \"" + d.name + "\": apply_batch returned non-zero";
+                return false;
+            }
         }
-        y = y1;
+        for (size_t i = 0; i < n; ++i) {
+            for (int k = 0; k < nc; ++k) calls[k] = Eigen::Map<const Eigen::Vector4d>(&out.scratch[4 * (n * size_t(k) + i)]);
+            I.chain(e, calls, dPdj[i], out.y[i], want_J ? &out.J[i] : nullptr, out.dydP[i]);
+        }
     }
     return true;
 }

@@ -3,7 +3,8 @@
 // templated kernel as the readings (effects/list.h): forward-mode automatic
 // differentiation seeded only on the position and on the parameters each
 // cable depends on, scattered into the full Jacobian by the layout; central
-// differences through user effects.
+// differences through user effects (over all positions at once for those
+// that work on arrays: eval_batch).
 #pragma once
 
 #include <string>
@@ -43,6 +44,22 @@ public:
     bool eval(const Eigen::VectorXd &full, const double ref[3], double t_s, Eigen::Vector4d &y,
               Eigen::Matrix<double, 4, Eigen::Dynamic> *J, Eigen::Matrix<double, 4, 3> *dydP,
               std::string *err) const;
+
+    // eval at n positions at once (refs: n x 3 row-major, t_s: n), with the
+    // same values and derivatives, into out (its memory is reused from one
+    // call to the next). A user effect with apply_batch is called once per
+    // central-difference step over all positions instead of once per
+    // position and step; one with only apply, per position as in eval.
+    struct Batch {
+        std::vector<Eigen::Vector4d> y;
+        std::vector<Eigen::Matrix<double, 4, Eigen::Dynamic>> J; // when want_J
+        std::vector<Eigen::Matrix<double, 4, 3>> dydP;           // when want_dydP
+        std::vector<double> scratch;                             // the batch calls' rows
+    };
+    bool eval_batch(const Eigen::VectorXd &full, size_t n, const double *refs, const double *t_s, bool want_J,
+                    bool want_dydP, Batch &out, std::string *err) const;
+    // A user effect of the model works on arrays: eval_batch saves calls.
+    bool has_batch() const;
 
 private:
     struct Impl;

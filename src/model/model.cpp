@@ -34,7 +34,7 @@ int Model::Impl::builtin_readings(const Sample<double> &s, double out[4]) const 
 int Model::Impl::apply_user(const double p[3], double readings[4], std::string *who) const {
     if (!lay.has_user) return 0;
     for (const auto &e : effects)
-        if (e.desc->stage == Stage::User && e.desc->apply(e.desc->user, e.p.data(), p, readings) != 0) {
+        if (e.desc->stage == Stage::User && e.desc->apply_one(e.p.data(), p, readings) != 0) {
             if (who) *who = e.desc->name;
             return -1;
         }

@@ -77,13 +77,20 @@ int register_user_effect(const cdm_effect_def *def, std::string &err) {
               (def->name ? def->name : "(null)") + "\"";
         return CDM_ERR_INVALID_ARG;
     }
-    if (!def->apply) {
-        err = std::string("cdm_effect_register: effect \"") + def->name + "\" has no apply function";
+    // since 1.1: a caller built against 1.0 has a smaller struct and no
+    // `apply_batch` field at all.
+    const cdm_effect_apply_batch_fn batch =
+        def->struct_size >= offsetof(cdm_effect_def, apply_batch) + sizeof(def->apply_batch) ? def->apply_batch
+                                                                                             : nullptr;
+    if (!def->apply && !batch) {
+        err = std::string("cdm_effect_register: effect \"") + def->name + "\" has neither apply nor apply_batch";
         return CDM_ERR_INVALID_ARG;
     }
-    if (def->n_params > 64 || (def->n_params > 0 && (!def->param_names || !def->param_scale))) {
+    if (def->n_params > uint32_t(kMaxUserParams) ||
+        (def->n_params > 0 && (!def->param_names || !def->param_scale))) {
         err = std::string("cdm_effect_register: effect \"") + def->name +
-              "\" needs param_names and param_scale for its n_params (at most 64)";
+              "\" needs param_names and param_scale for its n_params (at most " + std::to_string(kMaxUserParams) +
+              ")";
         return CDM_ERR_INVALID_ARG;
     }
     auto d = std::make_shared<EffectDesc>();
@@ -92,6 +99,7 @@ int register_user_effect(const cdm_effect_def *def, std::string &err) {
     d->stage = Stage::User;
     d->builtin_id = -1;
     d->apply = def->apply;
+    d->apply_batch = batch;
     d->user = def->user;
     for (uint32_t k = 0; k < def->n_params; ++k) {
         ParamDesc p;

@@ -141,6 +141,7 @@ namespace Cdm
         public IntPtr apply;
         public IntPtr user;
         public IntPtr initial; // since 1.1
+        public IntPtr apply_batch; // since 1.1
     }
 
     /// <summary>cdm_watch_event (CDM_EXPERIMENTAL, since 1.1).</summary>

@@ -133,6 +133,8 @@ class cdm_open_options(_Sized):
 
 
 cdm_effect_apply_fn = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, c_double_p, c_double_p, c_double_p)
+cdm_effect_apply_batch_fn = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, c_double_p, ctypes.c_size_t, c_double_p,
+                                             c_double_p)
 
 
 class cdm_effect_def(_Sized):
@@ -148,6 +150,7 @@ class cdm_effect_def(_Sized):
         ("apply", cdm_effect_apply_fn),
         ("user", ctypes.c_void_p),
         ("initial", c_double_p),  # since 1.1
+        ("apply_batch", cdm_effect_apply_batch_fn),  # since 1.1
     ]
 
 

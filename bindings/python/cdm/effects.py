@@ -52,6 +52,28 @@ class _Registration:
             self._record(e)
             return int(Error.CDM_ERR_INTERNAL)
 
+    def batch_trampoline(self, _user, params_p, n, positions_p, readings_p):
+        # vectorized=True: every position at once (numpy is checked at registration).
+        try:
+            if n == 0:
+                return 0
+            params = _np.ctypeslib.as_array(params_p, shape=(self.n,)).copy() if self.n else _np.zeros(0)
+            positions = _np.ctypeslib.as_array(positions_p, shape=(n, 3)).copy()
+            readings = _np.ctypeslib.as_array(readings_p, shape=(n, 4))  # a view: changed in place
+            out = self.apply(params, positions, readings)
+            if out is not None and out is not readings:
+                out = _np.asarray(out, dtype=float)
+                if out.shape != (n, 4):
+                    raise ValueError("effect %r: apply returned shape %r, expected (%d, 4)" % (self.name, out.shape, n))
+                readings[...] = out
+            return 0
+        except ArithmeticError as e:
+            self._record(e)
+            return int(Error.CDM_ERR_NUMERIC)
+        except BaseException as e:  # never let an exception unwind into C
+            self._record(e)
+            return int(Error.CDM_ERR_INTERNAL)
+
     def _record(self, e):
         self.errors.append((self.name, e))
         del self.errors[:-10]
@@ -68,15 +90,25 @@ def _doubles(values, n, what, name):
     return (ctypes.c_double * n)(*vals)
 
 
-def register_effect(name, param_names, param_scale, apply, doc="", lower=None, upper=None, initial=None):
+def register_effect(name, param_names, param_scale, apply, doc="", lower=None, upper=None, initial=None,
+                    vectorized=False):
     """Registers apply(params, position, readings) as the effect `name`.
 
     The model calls apply with the readings (4 values, mm) predicted by the
     nominal geometry and every effect before it; apply changes `readings` in
     place (a numpy view when numpy is installed, a ctypes array otherwise).
-    params and position (mm, device frame) are read-only copies. apply must be
+    params and position (mm, device frame) are copies. apply must be
     smooth in params and position: derivatives are central differences. An
     exception in apply fails the fit or diagnosis that called it.
+
+    vectorized=True (since 1.1; needs numpy; the name scipy uses for the same
+    choice): apply gets every position at once, params (k,), positions (n, 3)
+    and readings (n, 4) numpy arrays, row i being position i, and changes
+    readings in place or returns the new (n, 4) readings. The fit then calls
+    it once per central-difference step instead of once per position and
+    step: a few hundred times for a whole fit rather than tens of thousands.
+    Row i must not depend on the other rows. Calls at one position (a pose,
+    Calibration.lengths) pass n = 1.
 
     lower, upper: bounds per parameter; initial: where each parameter starts
     when the effect is added to a model (since 1.1; default 0 clamped into the
@@ -86,6 +118,8 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
         raise ValueError("register_effect: name must match [a-z0-9_]+, got %r" % (name,))
     if not callable(apply):
         raise TypeError("register_effect(%r): apply must be callable" % name)
+    if vectorized and _np is None:
+        raise ImportError("register_effect(%r, vectorized=True) needs numpy (pip install numpy)" % name)
     param_names = [str(p) for p in param_names]
     n = len(param_names)
     reg = _Registration(name, n, apply)
@@ -96,7 +130,12 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
     hi = _doubles(upper, n, "upper", name)
     init = _doubles(initial, n, "initial", name)
     names_c = (ctypes.c_char_p * max(n, 1))(*[p.encode("utf-8") for p in param_names])
-    fn = _native.cdm_effect_apply_fn(reg.trampoline)
+    # One function, registered as apply or as apply_batch: the library calls
+    # apply_batch with n = 1 where it needs one position.
+    if vectorized:
+        fn = _native.cdm_effect_apply_batch_fn(reg.batch_trampoline)
+    else:
+        fn = _native.cdm_effect_apply_fn(reg.trampoline)
     d = _native.cdm_effect_def()
     d.n_params = n
     d.name = name.encode("utf-8")
@@ -105,7 +144,10 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
     d.param_scale = scale if scale is not None else (ctypes.c_double * max(n, 1))(*([1.0] * n))
     d.lower = lo
     d.upper = hi
-    d.apply = fn
+    if vectorized:
+        d.apply_batch = fn
+    else:
+        d.apply = fn
     d.user = None
     d.initial = init
     reg.keep = [fn, names_c, d.param_scale, lo, hi, init, d]

@@ -177,12 +177,16 @@ class _Figure:
     Sections describe their figures instead of drawing them, so that the
     drawing (nearly all of the report's time) can be spread over processes;
     the page keeps the figure's place, filled in once it is drawn or failed.
-    ``weight`` is a rough cost (panels), to start the heavy ones first.
+    ``weight`` is a rough cost (tenths of a second, measured), to start the
+    heavy ones first. Figures of one ``group`` (the residual maps, the
+    fingerprints) redraw one figure of their layout in a process (see _FRAMES),
+    which costs ``build`` more the first time: they are drawn by as few
+    processes as keeps the load even.
     """
 
-    def __init__(self, name, draw, alt, caption, weight=1):
+    def __init__(self, name, draw, alt, caption, weight=1, group=None, build=0):
         self.name, self.draw, self.alt, self.caption = name, draw, alt, caption
-        self.weight = weight
+        self.weight, self.group, self.build = weight, group, build
         self.error = None  # why it could not be drawn, or None
 
 
@@ -198,8 +202,8 @@ class Page:
     def note(self, text):
         self.notes.append(text)
 
-    def figure(self, name, draw, alt, caption, weight=1):
-        f = _Figure(name, draw, alt, caption, weight)
+    def figure(self, name, draw, alt, caption, weight=1, group=None, build=0):
+        f = _Figure(name, draw, alt, caption, weight, group, build)
         self.figures.append(f)
         self.parts.append(f)
 
@@ -431,6 +435,57 @@ def _map_grid(figsize, nrows, groups):
     return fig, maps, cbars
 
 
+def _fit(fig, axs, right=0.15, left_min=0.0, wgap_min=0.0):
+    """Place a grid of equal axes (2-D array, as plt.subplots(squeeze=False)) with
+    margins and gaps in inches fitted to their tick labels, axis labels and titles.
+
+    What constrained layout does for these simple grids, measuring only those
+    texts once instead of every artist's extent twice before the real drawing;
+    it was a fifth of a single-panel figure's time. left_min: room for tick
+    labels that reach left of the axes (rotated ones); wgap_min: between
+    columns, for texts that reach right of an axes.
+    """
+    r = fig.canvas.get_renderer()
+    dpi = fig.dpi
+    W, H = fig.get_size_inches()
+    nrows, ncols = axs.shape
+
+    def ext(texts, dim):
+        sizes = [getattr(t.get_window_extent(r), dim) for t in texts
+                 if t.get_visible() and t.get_text()]
+        return max(sizes, default=0.0) / dpi
+
+    def label(t, dim):  # an axis label or title and its padding
+        return ext([t], dim) + 0.08 if t.get_visible() and t.get_text() else 0.0
+
+    tick = 0.1  # tick length and pad
+    cols = [max(ext(a.get_yticklabels(which="both"), "width") + label(a.yaxis.label, "width")
+                for a in axs[:, j]) + tick for j in range(ncols)]
+    rows = [max(ext(a.get_xticklabels(which="both"), "height") + label(a.xaxis.label, "height")
+                for a in axs[k, :]) + tick for k in range(nrows)]
+    titles = [max(label(a.title, "height") for a in axs[k, :]) for k in range(nrows)]
+    sup = fig._suptitle
+    top = 0.12 + titles[0] + (label(sup, "height") if sup is not None else 0.0)
+    left = max(cols[0], left_min) + 0.08
+    bottom = rows[-1] + 0.08
+    wgap = max(max(cols[1:], default=0.0), wgap_min) + 0.25
+    hgap = max((rows[k] + titles[k + 1] for k in range(nrows - 1)), default=0.0) + 0.15
+    aw = (W - left - right - (ncols - 1) * wgap) / ncols
+    ah = (H - top - bottom - (nrows - 1) * hgap) / nrows
+    fig.subplots_adjust(left=left / W, right=1 - right / W, bottom=bottom / H, top=1 - top / H,
+                        wspace=wgap / aw, hspace=hgap / ah)
+
+
+def _first_label_reach(ax):
+    """How far (inches) the first x tick label, right-aligned at its tick and
+    rotated, may reach left of the axes: at most its own width."""
+    labels = [t for t in ax.get_xticklabels() if t.get_text()]
+    if not labels:
+        return 0.0
+    fig = ax.get_figure()
+    return labels[0].get_window_extent(fig.canvas.get_renderer()).width / fig.dpi
+
+
 def _outer_labels(maps):
     """Axis labels on the left column and the bottom row only."""
     nrows, ncols = maps.shape
@@ -483,9 +538,37 @@ def _draw_one(f, tmp):
 _PENDING = None
 
 
-def _draw_pending(i):
+def _draw_pending(task):
     figures, tmp = _PENDING
-    return _draw_one(figures[i], tmp)
+    try:
+        return [_draw_one(figures[i], tmp) for i in task]
+    finally:
+        _drop_frames()
+
+
+def _tasks(figures, n):
+    """The figures' indices in tasks for n processes, heaviest task first.
+
+    A group's figures go into as few tasks (consecutive runs) as keep every
+    task under an n-th of the total, since each task builds the group's figure
+    once more; every other figure is a task of its own.
+    """
+    total = (sum(f.weight for f in figures)
+             + sum({f.group: f.build for f in figures if f.group is not None}.values()))
+    groups, tasks = {}, []
+    for i, f in enumerate(figures):
+        if f.group is None:
+            tasks.append(([i], f.weight))
+        else:
+            groups.setdefault(f.group, []).append(i)
+    for idx in groups.values():
+        w = sum(figures[i].weight for i in idx)
+        b = max(figures[i].build for i in idx)
+        k = max(1, min(len(idx), math.ceil((w + b) / (total / n) - 1e-9)))
+        for part in np.array_split(np.array(idx), k):
+            tasks.append(([int(i) for i in part], sum(figures[i].weight for i in part) + b))
+    tasks.sort(key=lambda t: -t[1])
+    return [t for t, _ in tasks]
 
 
 def _workers(n):
@@ -525,18 +608,19 @@ def _draw_all(figures, tmp):
         finally:
             _drop_frames()
         return
-    # Heaviest first, so that no long figure starts last and leaves a core idle.
-    order = sorted(range(len(figures)), key=lambda i: -figures[i].weight)
+    # Heaviest first, so that no long task starts last and leaves a core idle.
     _PENDING = (figures, tmp)
     try:
         with concurrent.futures.ProcessPoolExecutor(
                 n, mp_context=multiprocessing.get_context("fork")) as ex:
-            futures = [(i, ex.submit(_draw_pending, i)) for i in order]
-            for i, fut in futures:
+            futures = [(task, ex.submit(_draw_pending, task)) for task in _tasks(figures, n)]
+            for task, fut in futures:
                 try:
-                    figures[i].error = fut.result()
+                    for i, error in zip(task, fut.result()):
+                        figures[i].error = error
                 except Exception as e:  # e.g. a worker killed: its figures are lost, not the page
-                    figures[i].error = f"the drawing process failed ({type(e).__name__}: {e})"
+                    for i in task:
+                        figures[i].error = f"the drawing process failed ({type(e).__name__}: {e})"
     finally:
         _PENDING = None
 
@@ -706,7 +790,7 @@ def section_summary(diag, page):
     blocks = [(n, b) for n, b in blocks if b is not None]
     if blocks:
         def draw():
-            fig, ax = plt.subplots(figsize=(7.5, 3.6), constrained_layout=True)
+            fig, ax = plt.subplots(figsize=(7.5, 3.6))
             w = 0.8 / len(blocks)
             for i, (name, b) in enumerate(blocks):
                 vals = [_num((_dict(b, a) or {}).get("rms")) for a in AXES]
@@ -716,6 +800,7 @@ def section_summary(diag, page):
             ax.set_title("Position error RMS per axis")
             ax.legend(fontsize=8)
             ax.grid(axis="y", alpha=0.3)
+            _fit(fig, np.array([[ax]]))
             return fig
         page.figure("error_summary.png", draw, "RMS error per axis",
                     "RMS of the position error per axis for "
@@ -829,7 +914,8 @@ def section_maps(diag, page, P):
                     + ". One symmetric colour scale per axis for all "
                     f"heights (arrows on a colour bar: a few outliers beyond it are "
                     f"drawn at its ends); black crosses mark positions whose mean residual "
-                    f"is beyond what noise and jig tolerance explain.", weight=3 * ncol)
+                    f"is beyond what noise and jig tolerance explain.", weight=ncol,
+                    group="residual_map", build=2)
     if len(P.heights) == 1:
         page.note("Only one height in the data: the x error cannot be separated from a "
                   "height-dependent effect.")
@@ -859,7 +945,7 @@ def section_cut(page, P, solid, solid_name, dashed, dashed_name):
         return
 
     def draw():
-        fig, axs = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+        fig, axs = plt.subplots(1, 2, figsize=(11, 4.2))
         cmap = plt.get_cmap("viridis")
         for a, (along, ax) in enumerate(zip((1, 2), axs)):
             for i, h in enumerate(P.heights):
@@ -884,6 +970,7 @@ def section_cut(page, P, solid, solid_name, dashed, dashed_name):
             axs[0].legend(fontsize=8, title=f"solid: {solid_name}"
                           + (f"\ndashed: {dashed_name}" if dashed is not None else ""),
                           title_fontsize=8)
+        _fit(fig, axs.reshape(1, -1))
         return fig
     also = f", dashed {_e(dashed_name)}" if dashed is not None else ""
     page.figure("residual_cut.png", draw, "x residual cut",
@@ -940,7 +1027,7 @@ def section_candidates(diag, page):
             show_after = np.isfinite(after_x).any() and np.nanmin(after_x) > 0
             def draw():
                 fig, axs = plt.subplots(1, 2 if show_after else 1, figsize=(13 if show_after else 8.5,
-                                        0.45 * len(cands) + 1.6), constrained_layout=True, squeeze=False)
+                                        0.45 * len(cands) + 1.6), squeeze=False)
                 ax = axs[0][0]
                 yy = np.arange(len(cands))
                 if show_after:
@@ -966,14 +1053,19 @@ def section_candidates(diag, page):
                 ax.set_xlabel(label)
                 ax.set_title("Candidate effects, best first")
                 span = np.nanmax(np.abs(vals)) if np.isfinite(vals).any() else 1.0
+                notes = []  # they may reach right of the axes: the gap keeps room
                 for i, c in enumerate(cands):
                     t = _fmt_list(c.get("confused_with"))
                     txt = ("n/a" if not np.isfinite(vals[i]) else "") + \
                           (f"  ≈ {t}" if t else "")
                     if txt:
                         x0 = vals[i] if np.isfinite(vals[i]) and vals[i] > 0 else 0.0
-                        ax.text(x0 + 0.01 * span, i, txt, va="center", fontsize=8, color="0.15")
+                        notes.append(ax.text(x0 + 0.01 * span, i, txt, va="center", fontsize=8,
+                                             color="0.15"))
                 ax.grid(axis="x", alpha=0.3)
+                r = fig.canvas.get_renderer()
+                _fit(fig, axs, wgap_min=max((t.get_window_extent(r).width / fig.dpi for t in notes),
+                                            default=0.0))
                 return fig
             page.figure("candidates.png", draw, "candidate ranking",
                         f"Each catalogued effect not in the model, fitted on top of it, "
@@ -1040,7 +1132,7 @@ def section_search(diag, page):
                  "−" + str(st.get("removed")) if not st.get("added") else
                  str(st.get("removed")) + "→" + str(st.get("added"))) for st in path]
             def draw():
-                fig, ax = plt.subplots(figsize=(8.5, 3.2), constrained_layout=True)
+                fig, ax = plt.subplots(figsize=(8.5, 3.2))
                 ax.plot(np.arange(len(ys)), ys, "o-", color="tab:blue")
                 ax.set_yscale("log")
                 ax.set_xticks(np.arange(len(ys)), labels, rotation=25, ha="right", fontsize=8)
@@ -1049,6 +1141,7 @@ def section_search(diag, page):
                     ax.legend(fontsize=8)
                 ax.set_ylabel("x RMS (mm)")
                 ax.set_title("x error along the search path")
+                _fit(fig, np.array([[ax]]), left_min=_first_label_reach(ax))
                 return fig
             page.figure("search_path.png", draw, "x error along the search path",
                         "Each step of the search and the x error it leaves (log scale).")
@@ -1159,7 +1252,7 @@ def section_fingerprints(diag, page, P):
                     f"±1 and similar size). Correlation over all positions: x "
                     f"{fmt_g(cx, 3)}, all axes {fmt_g(c3, 3)}"
                     + (f"; reported by the diagnosis {fmt_g(cj, 3)}" if _finite(cj) else "")
-                    + ".", weight=2 * len(hsel))
+                    + ".", weight=len(hsel) // 2, group="fingerprint", build=2)
     if n == 0:
         page.add("<p>No usable fingerprints.</p>")
 
@@ -1302,7 +1395,7 @@ def section_variables(diag, page, P):
     # Length residual per cable vs that cable's length.
     if P.lengths is not None and P.length_residual is not None:
         def draw():
-            fig, axs = plt.subplots(2, 2, figsize=(10, 7.5), constrained_layout=True)
+            fig, axs = plt.subplots(2, 2, figsize=(10, 7.5))
             for i, ax in enumerate(axs.ravel()):
                 x, y = P.lengths[:, i], P.length_residual[:, i]
                 _dots(ax, x, y, 6, pal(i), 0.35, label="positions")
@@ -1316,13 +1409,14 @@ def section_variables(diag, page, P):
                 ax.grid(alpha=0.3)
                 _annot(ax, len_notes.get(i + 1, []) + (len_notes.get(None, []) if i == 0 else []))
             axs[0, 0].legend(fontsize=8, loc="lower right")
+            _fit(fig, axs)
             return fig
         page.figure("vs_cable_length.png", draw, "length residual versus cable length",
                     "Each cable's reading residual (mean measured minus what the model "
                     "predicts at the reference position) against that cable's length, "
                     "with the binned mean. A slope is a gain error, a curve a "
                     "non-linearity, a ripple a periodic effect of the drum or pulley; "
-                    "red boxes are the diagnosis's own findings.", weight=4)
+                    "red boxes are the diagnosis's own findings.", weight=3)
     else:
         page.note("\"positions.lengths_mm\" or \"positions.length_residual_mm\" is missing: "
                   "no length-residual plot.")
@@ -1376,7 +1470,7 @@ def section_variables(diag, page, P):
                 f"out of the cable plane (one colour per cable), with binned means; red "
                 f"boxes are the diagnosis's trend findings. Flat lines at zero mean "
                 f"nothing is left; a trend or bump says which variable the missing effect "
-                f"depends on.", weight=3 * len(cols))
+                f"depends on.", weight=len(cols) + 1)
 
 
 def section_comparison(runs, page):
@@ -1399,7 +1493,7 @@ def section_comparison(runs, page):
     page.add(_table(["model", "file", "x RMS (mm)", "y RMS (mm)", "z RMS (mm)", "chi²/dof",
                      "explained"], rows, "stats"))
     def draw():
-        fig, ax = plt.subplots(figsize=(max(7.0, 1.2 * len(runs) + 5), 4.4), constrained_layout=True)
+        fig, ax = plt.subplots(figsize=(max(7.0, 1.2 * len(runs) + 5), 4.4))
         w = 0.8 / len(runs)
         cmap = plt.get_cmap("viridis")
         for i in range(len(runs)):
@@ -1423,6 +1517,7 @@ def section_comparison(runs, page):
         ax.set_title("Position error RMS per run")
         ax.legend(fontsize=8)
         ax.grid(axis="y", alpha=0.3)
+        _fit(fig, np.array([[ax]]))
         return fig
     page.figure("comparison.png", draw, "error per run", "RMS position error per axis for each run, "
                 "labelled by the effects in its model, earliest first; the dashed line is "

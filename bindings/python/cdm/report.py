@@ -57,6 +57,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import PIL.Image  # noqa: E402  (matplotlib's own dependency)
+from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.colors import Normalize  # noqa: E402
 
 __all__ = ["DiagnosisError", "load_diagnosis", "write_report", "main"]
@@ -445,7 +446,7 @@ def _fit(fig, axs, right=0.15, left_min=0.0, wgap_min=0.0):
     labels that reach left of the axes (rotated ones); wgap_min: between
     columns, for texts that reach right of an axes.
     """
-    r = fig.canvas.get_renderer()
+    r = _agg(fig).get_renderer()
     dpi = fig.dpi
     W, H = fig.get_size_inches()
     nrows, ncols = axs.shape
@@ -464,7 +465,7 @@ def _fit(fig, axs, right=0.15, left_min=0.0, wgap_min=0.0):
     rows = [max(ext(a.get_xticklabels(which="both"), "height") + label(a.xaxis.label, "height")
                 for a in axs[k, :]) + tick for k in range(nrows)]
     titles = [max(label(a.title, "height") for a in axs[k, :]) for k in range(nrows)]
-    sup = fig._suptitle
+    sup = getattr(fig, "_suptitle", None)  # no public getter
     top = 0.12 + titles[0] + (label(sup, "height") if sup is not None else 0.0)
     left = max(cols[0], left_min) + 0.08
     bottom = rows[-1] + 0.08
@@ -483,7 +484,7 @@ def _first_label_reach(ax):
     if not labels:
         return 0.0
     fig = ax.get_figure()
-    return labels[0].get_window_extent(fig.canvas.get_renderer()).width / fig.dpi
+    return labels[0].get_window_extent(_agg(fig).get_renderer()).width / fig.dpi
 
 
 def _outer_labels(maps):
@@ -504,15 +505,22 @@ def _outer_labels(maps):
 _RC = {"axes.titley": 1.0, "figure.dpi": DPI}
 
 
+def _agg(fig):
+    """fig's Agg canvas (pyplot's under the Agg backend this module selects; a new
+    one if a caller's process had another backend forced)."""
+    return fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
+
+
 def _save_png(fig, path):
     """Render fig and write it as an RGB PNG at zlib level 3.
 
     savefig would write RGBA (an alpha channel that is opaque everywhere here)
     at level 6: the same pixels, about twice the encoding time, 10 % larger files.
     """
-    fig.canvas.draw()
-    w, h = fig.canvas.get_width_height(physical=True)
-    img = PIL.Image.frombuffer("RGBA", (w, h), fig.canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
+    canvas = _agg(fig)
+    canvas.draw()
+    w, h = canvas.get_width_height(physical=True)
+    img = PIL.Image.frombuffer("RGBA", (w, h), canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
     img.convert("RGB").save(path, format="png", compress_level=3, dpi=(DPI, DPI))
 
 
@@ -1063,7 +1071,7 @@ def section_candidates(diag, page):
                         notes.append(ax.text(x0 + 0.01 * span, i, txt, va="center", fontsize=8,
                                              color="0.15"))
                 ax.grid(axis="x", alpha=0.3)
-                r = fig.canvas.get_renderer()
+                r = _agg(fig).get_renderer()
                 _fit(fig, axs, wgap_min=max((t.get_window_extent(r).width / fig.dpi for t in notes),
                                             default=0.0))
                 return fig

@@ -362,7 +362,7 @@ def _crosses(ax, y, z):
 # colour scale, title) instead of building its axes and their ticks anew, which
 # is most of such a figure's time. name -> (signature, figure, handles); emptied
 # when a figure fails, after each task of a worker and after each report.
-_FRAMES = {}
+_FRAMES: dict = {}
 
 
 def _drop_frames(name=None):

@@ -245,3 +245,56 @@ def test_page_is_the_same_drawn_in_one_or_two_processes(tmp_path, monkeypatch):
         m.write_report([_synth.nominal_run(n=5, heights=(40, 60)), d], str(out))
         pages.append((check_page(out), sorted(p.name for p in out.glob("*.png"))))
     assert pages[0] == pages[1]
+
+
+def test_redrawn_figures_are_the_figures_drawn_anew(tmp_path, monkeypatch):
+    """The residual maps after the first height and the fingerprints after the first
+    are drawn into the process's last figure of their layout (report._FRAMES); they
+    must be pixel for pixel the figures drawn from nothing, whatever was marked or
+    scaled in the figure before (here: failing crosses at some heights only, a
+    fingerprint with an outlier so that its colour scale is clipped)."""
+    import numpy as np
+    m = _imported()
+    monkeypatch.setenv("CDM_REPORT_JOBS", "1")
+    d = _synth.make_diag(n=9, heights=(30, 40, 50, 60))
+    pos = d["positions"]
+    h = np.array(pos["height"])
+    pos["failing"] = [bool(f) and hh in (40.0, 60.0) for f, hh in zip(pos["failing"], h)]
+    pos["failing"][int(np.flatnonzero(h == 50.0)[3])] = True  # one cross only
+    fps = d["fingerprints"]
+    fps["second"] = (np.array(next(iter(fps.values()))) * -3.0).tolist()
+    fps["third"] = (np.array(next(iter(fps.values()))) * 0.5).tolist()
+    fps["third"][5] = [40.0, 0.0, 0.0]
+    assert len(fps) >= 3
+    m.write_report([d], str(tmp_path / "kept"))
+
+    class Forgetful(dict):  # keeps no figure: every one drawn anew
+        def __setitem__(self, key, value):
+            pass
+    monkeypatch.setattr(m, "_FRAMES", Forgetful())
+    m.write_report([d], str(tmp_path / "anew"))
+
+    import matplotlib.image as mpimg
+    names = sorted(p.name for p in (tmp_path / "anew").glob("*.png"))
+    assert sum(n.startswith("residual_map_") for n in names) == 4
+    assert sum(n.startswith("fingerprint_") for n in names) >= 3
+    for name in names:
+        a = mpimg.imread(tmp_path / "kept" / name)
+        b = mpimg.imread(tmp_path / "anew" / name)
+        assert a.shape == b.shape and (a == b).all(), name
+
+
+def test_a_group_of_figures_is_drawn_by_few_processes():
+    m = _imported()
+
+    def fig(name, weight, group=None):
+        return m._Figure(name, None, "", "", weight, group, 2 if group else 0)
+    figures = ([fig(f"map{i}", 2, "maps") for i in range(5)]
+               + [fig("a", 7), fig("b", 3), fig("c", 2), fig("d", 1)])
+    two = m._tasks(figures, 2)
+    assert sorted(i for t in two for i in t) == list(range(len(figures)))
+    assert [0, 1, 2, 3, 4] in two  # the maps (10 + 2 to build, of 25) in one process of two
+    four = m._tasks(figures, 4)
+    assert sorted(i for t in four for i in t) == list(range(len(figures)))
+    assert [t for t in four if 0 in t][0] != [0, 1, 2, 3, 4]  # split over two of four
+    assert four[0] == [0, 1, 2] and four[1] == [5]  # heaviest first

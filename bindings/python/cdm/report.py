@@ -56,6 +56,8 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import PIL.Image  # noqa: E402  (matplotlib's own dependency)
+from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.colors import Normalize  # noqa: E402
 
 __all__ = ["DiagnosisError", "load_diagnosis", "write_report", "main"]
@@ -176,12 +178,16 @@ class _Figure:
     Sections describe their figures instead of drawing them, so that the
     drawing (nearly all of the report's time) can be spread over processes;
     the page keeps the figure's place, filled in once it is drawn or failed.
-    ``weight`` is a rough cost (panels), to start the heavy ones first.
+    ``weight`` is a rough cost (tenths of a second, measured), to start the
+    heavy ones first. Figures of one ``group`` (the residual maps, the
+    fingerprints) redraw one figure of their layout in a process (see _FRAMES),
+    which costs ``build`` more the first time: they are drawn by as few
+    processes as keeps the load even.
     """
 
-    def __init__(self, name, draw, alt, caption, weight=1):
+    def __init__(self, name, draw, alt, caption, weight=1, group=None, build=0):
         self.name, self.draw, self.alt, self.caption = name, draw, alt, caption
-        self.weight = weight
+        self.weight, self.group, self.build = weight, group, build
         self.error = None  # why it could not be drawn, or None
 
 
@@ -197,8 +203,8 @@ class Page:
     def note(self, text):
         self.notes.append(text)
 
-    def figure(self, name, draw, alt, caption, weight=1):
-        f = _Figure(name, draw, alt, caption, weight)
+    def figure(self, name, draw, alt, caption, weight=1, group=None, build=0):
+        f = _Figure(name, draw, alt, caption, weight, group, build)
         self.figures.append(f)
         self.parts.append(f)
 
@@ -316,27 +322,53 @@ def _edges(c):
     return np.concatenate([c - p / 2, [c[-1] + p / 2]])
 
 
-def _map(ax, y, z, v, norm, failing=None):
-    """Draw values v at (y, z): raster on a regular grid, scatter otherwise."""
-    g = _regular_grid(y, z)
+def _raster(g, v):
+    """Values v on the regular grid g (from _regular_grid), nan where no position."""
+    yc, zc, iy, iz = g
+    G = np.full((len(zc), len(yc)), np.nan)
+    G[iz, iy] = v
+    return np.ma.masked_invalid(G)
+
+
+def _map(ax, y, z, v, norm, failing=None, g=None):
+    """Draw values v at (y, z): raster on a regular grid (g, from _regular_grid(y, z)),
+    scatter otherwise. Returns (mappable, the line of failing crosses or None)."""
     if g is not None:
-        yc, zc, iy, iz = g
-        G = np.full((len(zc), len(yc)), np.nan)
-        G[iz, iy] = v
-        ey, ez = _edges(yc), _edges(zc)
-        m = ax.imshow(np.ma.masked_invalid(G), cmap=CMAP, norm=norm, origin="lower",
+        ey, ez = _edges(g[0]), _edges(g[1])
+        m = ax.imshow(_raster(g, v), cmap=CMAP, norm=norm, origin="lower",
                       extent=(ey[0], ey[-1], ez[0], ez[-1]), interpolation="nearest")
     else:
         s = max(8.0, min(200.0, 4000.0 / max(1, len(y))))
         m = ax.scatter(y, z, c=v, cmap=CMAP, norm=norm, s=s, edgecolors="0.5",
                        linewidths=0.3, plotnonfinite=True)
+    cross = None
     if failing is not None and failing.any():
-        ax.scatter(y[failing], z[failing], marker="x", c="k", s=14, linewidths=0.8,
-                   label="failing")
+        cross = _crosses(ax, y[failing], z[failing])
     ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("y (mm)")
     ax.set_ylabel("z (mm)")
-    return m
+    return m, cross
+
+
+def _crosses(ax, y, z):
+    # line markers, not a scatter collection: one marker stamped per position
+    return ax.plot(y, z, "x", ls="none", ms=math.sqrt(14), mew=0.8, color="k",
+                   label="failing")[0]
+
+
+# Figures of one layout drawn one after another (the residual maps of the
+# heights, the fingerprints of the candidates): the figure drawn last in this
+# process, kept to be drawn again with the next one's data (images, crosses,
+# colour scale, title) instead of building its axes and their ticks anew, which
+# is most of such a figure's time. name -> (signature, figure, handles); emptied
+# when a figure fails, after each task of a worker and after each report.
+_FRAMES: dict = {}
+
+
+def _drop_frames(name=None):
+    """Close and forget the kept figure of that name (None: every one)."""
+    for k in [k for k in _FRAMES if name in (None, k)]:
+        plt.close(_FRAMES.pop(k)[1])
 
 
 def _symnorm(*arrays):
@@ -405,6 +437,57 @@ def _map_grid(figsize, nrows, groups):
     return fig, maps, cbars
 
 
+def _fit(fig, axs, right=0.15, left_min=0.0, wgap_min=0.0):
+    """Place a grid of equal axes (2-D array, as plt.subplots(squeeze=False)) with
+    margins and gaps in inches fitted to their tick labels, axis labels and titles.
+
+    What constrained layout does for these simple grids, measuring only those
+    texts once instead of every artist's extent twice before the real drawing;
+    it was a fifth of a single-panel figure's time. left_min: room for tick
+    labels that reach left of the axes (rotated ones); wgap_min: between
+    columns, for texts that reach right of an axes.
+    """
+    r = _agg(fig).get_renderer()
+    dpi = fig.dpi
+    W, H = fig.get_size_inches()
+    nrows, ncols = axs.shape
+
+    def ext(texts, dim):
+        sizes = [getattr(t.get_window_extent(r), dim) for t in texts
+                 if t.get_visible() and t.get_text()]
+        return max(sizes, default=0.0) / dpi
+
+    def label(t, dim):  # an axis label or title and its padding
+        return ext([t], dim) + 0.08 if t.get_visible() and t.get_text() else 0.0
+
+    tick = 0.1  # tick length and pad
+    cols = [max(ext(a.get_yticklabels(which="both"), "width") + label(a.yaxis.label, "width")
+                for a in axs[:, j]) + tick for j in range(ncols)]
+    rows = [max(ext(a.get_xticklabels(which="both"), "height") + label(a.xaxis.label, "height")
+                for a in axs[k, :]) + tick for k in range(nrows)]
+    titles = [max(label(a.title, "height") for a in axs[k, :]) for k in range(nrows)]
+    sup = getattr(fig, "_suptitle", None)  # no public getter
+    top = 0.12 + titles[0] + (label(sup, "height") if sup is not None else 0.0)
+    left = max(cols[0], left_min) + 0.08
+    bottom = rows[-1] + 0.08
+    wgap = max(max(cols[1:], default=0.0), wgap_min) + 0.25
+    hgap = max((rows[k] + titles[k + 1] for k in range(nrows - 1)), default=0.0) + 0.15
+    aw = (W - left - right - (ncols - 1) * wgap) / ncols
+    ah = (H - top - bottom - (nrows - 1) * hgap) / nrows
+    fig.subplots_adjust(left=left / W, right=1 - right / W, bottom=bottom / H, top=1 - top / H,
+                        wspace=wgap / aw, hspace=hgap / ah)
+
+
+def _first_label_reach(ax):
+    """How far (inches) the first x tick label, right-aligned at its tick and
+    rotated, may reach left of the axes: at most its own width."""
+    labels = [t for t in ax.get_xticklabels() if t.get_text()]
+    if not labels:
+        return 0.0
+    fig = ax.get_figure()
+    return labels[0].get_window_extent(_agg(fig).get_renderer()).width / fig.dpi
+
+
 def _outer_labels(maps):
     """Axis labels on the left column and the bottom row only."""
     nrows, ncols = maps.shape
@@ -416,15 +499,44 @@ def _outer_labels(maps):
                 maps[k, j].set_ylabel("")
 
 
+# Titles sit at the top of their axes (axes.titley 1.0, matplotlib's own place
+# when no tick labels are on top, as in every figure here): without it matplotlib
+# measures every axes' y tick labels again for each title to see whether they
+# reach up to it (a sixth of the drawing time in a profile).
+_RC = {"axes.titley": 1.0, "figure.dpi": DPI}
+
+
+def _agg(fig):
+    """fig's Agg canvas (pyplot's under the Agg backend this module selects; a new
+    one if a caller's process had another backend forced)."""
+    return fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
+
+
+def _save_png(fig, path):
+    """Render fig and write it as an RGB PNG at zlib level 3.
+
+    savefig would write RGBA (an alpha channel that is opaque everywhere here)
+    at level 6: the same pixels, about twice the encoding time, 10 % larger files.
+    """
+    canvas = _agg(fig)
+    canvas.draw()
+    w, h = canvas.get_width_height(physical=True)
+    img = PIL.Image.frombuffer("RGBA", (w, h), canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
+    img.convert("RGB").save(path, format="png", compress_level=3, dpi=(DPI, DPI))
+
+
 def _draw_one(f, tmp):
     """Draw one figure into tmp; None, or why it could not be drawn."""
     try:
-        fig = f.draw()
-        try:
-            fig.savefig(os.path.join(tmp, f.name), dpi=DPI)
-        finally:
-            plt.close(fig)
+        with matplotlib.rc_context(_RC):
+            fig = f.draw()
+            try:
+                _save_png(fig, os.path.join(tmp, f.name))
+            finally:
+                if not any(fig is fr[1] for fr in _FRAMES.values()):
+                    plt.close(fig)
     except Exception as e:  # one broken figure must not lose the rest of the report
+        _FRAMES.clear()  # a figure left half redrawn
         plt.close("all")
         return f"{type(e).__name__}: {e}"
     return None
@@ -435,9 +547,37 @@ def _draw_one(f, tmp):
 _PENDING = None
 
 
-def _draw_pending(i):
+def _draw_pending(task):
     figures, tmp = _PENDING
-    return _draw_one(figures[i], tmp)
+    try:
+        return [_draw_one(figures[i], tmp) for i in task]
+    finally:
+        _drop_frames()
+
+
+def _tasks(figures, n):
+    """The figures' indices in tasks for n processes, heaviest task first.
+
+    A group's figures go into as few tasks (consecutive runs) as keep every
+    task under an n-th of the total, since each task builds the group's figure
+    once more; every other figure is a task of its own.
+    """
+    total = (sum(f.weight for f in figures)
+             + sum({f.group: f.build for f in figures if f.group is not None}.values()))
+    groups, tasks = {}, []
+    for i, f in enumerate(figures):
+        if f.group is None:
+            tasks.append(([i], f.weight))
+        else:
+            groups.setdefault(f.group, []).append(i)
+    for idx in groups.values():
+        w = sum(figures[i].weight for i in idx)
+        b = max(figures[i].build for i in idx)
+        k = max(1, min(len(idx), math.ceil((w + b) / (total / n) - 1e-9)))
+        for part in np.array_split(np.array(idx), k):
+            tasks.append(([int(i) for i in part], sum(figures[i].weight for i in part) + b))
+    tasks.sort(key=lambda t: -t[1])
+    return [t for t, _ in tasks]
 
 
 def _workers(n):
@@ -471,21 +611,25 @@ def _draw_all(figures, tmp):
     global _PENDING
     n = _workers(len(figures))
     if n <= 1:
-        for f in figures:
-            f.error = _draw_one(f, tmp)
+        try:
+            for f in figures:
+                f.error = _draw_one(f, tmp)
+        finally:
+            _drop_frames()
         return
-    # Heaviest first, so that no long figure starts last and leaves a core idle.
-    order = sorted(range(len(figures)), key=lambda i: -figures[i].weight)
+    # Heaviest first, so that no long task starts last and leaves a core idle.
     _PENDING = (figures, tmp)
     try:
         with concurrent.futures.ProcessPoolExecutor(
                 n, mp_context=multiprocessing.get_context("fork")) as ex:
-            futures = [(i, ex.submit(_draw_pending, i)) for i in order]
-            for i, fut in futures:
+            futures = [(task, ex.submit(_draw_pending, task)) for task in _tasks(figures, n)]
+            for task, fut in futures:
                 try:
-                    figures[i].error = fut.result()
+                    for i, error in zip(task, fut.result()):
+                        figures[i].error = error
                 except Exception as e:  # e.g. a worker killed: its figures are lost, not the page
-                    figures[i].error = f"the drawing process failed ({type(e).__name__}: {e})"
+                    for i in task:
+                        figures[i].error = f"the drawing process failed ({type(e).__name__}: {e})"
     finally:
         _PENDING = None
 
@@ -655,7 +799,7 @@ def section_summary(diag, page):
     blocks = [(n, b) for n, b in blocks if b is not None]
     if blocks:
         def draw():
-            fig, ax = plt.subplots(figsize=(7.5, 3.6), constrained_layout=True)
+            fig, ax = plt.subplots(figsize=(7.5, 3.6))
             w = 0.8 / len(blocks)
             for i, (name, b) in enumerate(blocks):
                 vals = [_num((_dict(b, a) or {}).get("rms")) for a in AXES]
@@ -665,6 +809,7 @@ def section_summary(diag, page):
             ax.set_title("Position error RMS per axis")
             ax.legend(fontsize=8)
             ax.grid(axis="y", alpha=0.3)
+            _fit(fig, np.array([[ax]]))
             return fig
         page.figure("error_summary.png", draw, "RMS error per axis",
                     "RMS of the position error per axis for "
@@ -705,33 +850,70 @@ def section_maps(diag, page, P):
                 zoom[k] = nk
     ncol = len(cols) + (1 if any(zoom) else 0)
     groups = [len(cols)] + ([1] if ncol > len(cols) else [])
+    # The panels: (row, column, values over all positions, norm, crosses marked).
+    panels = []
+    for k in range(3):
+        for j, (arr, title, current) in enumerate(cols):
+            panels.append((k, j, arr[:, k], norms[k], current))
+        if ncol > len(cols) and zoom[k] is not None:
+            panels.append((k, ncol - 1, cur[:, k], zoom[k], True))
+    # Same layout at every height on the same grid: a process redraws its last figure.
+    signature = (ncol, tuple(cols[j][1] for j in range(len(cols))))
+
+    def suptitle(h, idx):
+        nf = int(P.failing[idx].sum())
+        return (f"Residual (estimate - reference) at height x = {h:g} mm"
+                + (f"; {nf} failing positions marked ×" if nf else ""))
+
+    def redraw(h, idx, g):
+        """The last figure drawn, with this height's data, or None if it cannot be."""
+        last = _FRAMES.get("residual_map")
+        if g is None or last is None or last[0] != (signature, g[0].tobytes(), g[1].tobytes()):
+            return None
+        _, fig, handles = last
+        y, z = P.ref[idx, 1], P.ref[idx, 2]
+        fail = P.failing[idx]
+        for i, ((k, j, vals, norm, marked), (im, cross)) in enumerate(zip(panels, handles)):
+            im.set_data(_raster(g, vals[idx]))
+            if marked:
+                if cross is None and fail.any():
+                    handles[i] = (im, _crosses(im.axes, y[fail], z[fail]))
+                elif cross is not None:
+                    cross.set_data(y[fail], z[fail])
+        fig.suptitle(suptitle(h, idx))
+        return fig
+
     for h, idx in zip(P.heights, P.height_index):
         def draw(h=h, idx=idx):
             y, z = P.ref[idx, 1], P.ref[idx, 2]
+            g = _regular_grid(y, z)
+            fig = redraw(h, idx, g)
+            if fig is not None:
+                return fig
+            _drop_frames("residual_map")
             fig, axs, cbs = _map_grid((4.0 * ncol + 1.6 * (ncol - len(cols) + 1), 11), 3, groups)
-            for k in range(3):
-                m = None
-                for j, (arr, title, current) in enumerate(cols):
-                    ax = axs[k, j]
-                    fail = P.failing[idx] if current else None
-                    m = _map(ax, y, z, arr[idx, k], norms[k], fail)
-                    ax.set_title(f"{AXES[k]} residual, {title}", fontsize=9)
-                _colorbar(fig, m, cbs[k, 0], norms[k], f"{AXES[k]} residual (mm)")
-                if ncol > len(cols):
-                    ax = axs[k, -1]
-                    if zoom[k] is None:
-                        ax.set_axis_off()
-                        cbs[k, 1].remove()
-                        ax.text(0.5, 0.5, "current residual:\nsee the shared scale", ha="center",
-                                va="center", transform=ax.transAxes, fontsize=9, color="0.4")
-                        continue
-                    m = _map(ax, y, z, cur[idx, k], zoom[k], P.failing[idx])
+            handles = []
+            for k, j, vals, norm, marked in panels:
+                ax = axs[k, j]
+                handles.append(_map(ax, y, z, vals[idx], norm, P.failing[idx] if marked else None, g))
+                if j < len(cols):
+                    ax.set_title(f"{AXES[k]} residual, {cols[j][1]}", fontsize=9)
+                    if j == len(cols) - 1:
+                        _colorbar(fig, handles[-1][0], cbs[k, 0], norm, f"{AXES[k]} residual (mm)")
+                else:
                     ax.set_title(f"{AXES[k]} residual, current, own scale", fontsize=9)
-                    _colorbar(fig, m, cbs[k, 1], zoom[k], f"{AXES[k]} residual (mm)")
+                    _colorbar(fig, handles[-1][0], cbs[k, 1], norm, f"{AXES[k]} residual (mm)")
+            for k in range(3):
+                if ncol > len(cols) and zoom[k] is None:
+                    ax = axs[k, -1]
+                    ax.set_axis_off()
+                    cbs[k, 1].remove()
+                    ax.text(0.5, 0.5, "current residual:\nsee the shared scale", ha="center",
+                            va="center", transform=ax.transAxes, fontsize=9, color="0.4")
             _outer_labels(axs)
-            nf = int(P.failing[idx].sum())
-            fig.suptitle(f"Residual (estimate - reference) at height x = {h:g} mm"
-                         + (f"; {nf} failing positions marked ×" if nf else ""))
+            fig.suptitle(suptitle(h, idx))
+            if g is not None:
+                _FRAMES["residual_map"] = ((signature, g[0].tobytes(), g[1].tobytes()), fig, handles)
             return fig
         page.figure(f"residual_map_h{h:g}.png".replace("-", "m"), draw, f"residual maps at {h:g} mm",
                     f"Height {h:g} mm: residual per jig position in the cable plane "
@@ -741,7 +923,8 @@ def section_maps(diag, page, P):
                     + ". One symmetric colour scale per axis for all "
                     f"heights (arrows on a colour bar: a few outliers beyond it are "
                     f"drawn at its ends); black crosses mark positions whose mean residual "
-                    f"is beyond what noise and jig tolerance explain.", weight=3 * ncol)
+                    f"is beyond what noise and jig tolerance explain.", weight=ncol,
+                    group="residual_map", build=2)
     if len(P.heights) == 1:
         page.note("Only one height in the data: the x error cannot be separated from a "
                   "height-dependent effect.")
@@ -771,7 +954,7 @@ def section_cut(page, P, solid, solid_name, dashed, dashed_name):
         return
 
     def draw():
-        fig, axs = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+        fig, axs = plt.subplots(1, 2, figsize=(11, 4.2))
         cmap = plt.get_cmap("viridis")
         for a, (along, ax) in enumerate(zip((1, 2), axs)):
             for i, h in enumerate(P.heights):
@@ -796,6 +979,7 @@ def section_cut(page, P, solid, solid_name, dashed, dashed_name):
             axs[0].legend(fontsize=8, title=f"solid: {solid_name}"
                           + (f"\ndashed: {dashed_name}" if dashed is not None else ""),
                           title_fontsize=8)
+        _fit(fig, axs.reshape(1, -1))
         return fig
     also = f", dashed {_e(dashed_name)}" if dashed is not None else ""
     page.figure("residual_cut.png", draw, "x residual cut",
@@ -852,7 +1036,7 @@ def section_candidates(diag, page):
             show_after = np.isfinite(after_x).any() and np.nanmin(after_x) > 0
             def draw():
                 fig, axs = plt.subplots(1, 2 if show_after else 1, figsize=(13 if show_after else 8.5,
-                                        0.45 * len(cands) + 1.6), constrained_layout=True, squeeze=False)
+                                        0.45 * len(cands) + 1.6), squeeze=False)
                 ax = axs[0][0]
                 yy = np.arange(len(cands))
                 if show_after:
@@ -878,14 +1062,19 @@ def section_candidates(diag, page):
                 ax.set_xlabel(label)
                 ax.set_title("Candidate effects, best first")
                 span = np.nanmax(np.abs(vals)) if np.isfinite(vals).any() else 1.0
+                notes = []  # they may reach right of the axes: the gap keeps room
                 for i, c in enumerate(cands):
                     t = _fmt_list(c.get("confused_with"))
                     txt = ("n/a" if not np.isfinite(vals[i]) else "") + \
                           (f"  ≈ {t}" if t else "")
                     if txt:
                         x0 = vals[i] if np.isfinite(vals[i]) and vals[i] > 0 else 0.0
-                        ax.text(x0 + 0.01 * span, i, txt, va="center", fontsize=8, color="0.15")
+                        notes.append(ax.text(x0 + 0.01 * span, i, txt, va="center", fontsize=8,
+                                             color="0.15"))
                 ax.grid(axis="x", alpha=0.3)
+                r = _agg(fig).get_renderer()
+                _fit(fig, axs, wgap_min=max((t.get_window_extent(r).width / fig.dpi for t in notes),
+                                            default=0.0))
                 return fig
             page.figure("candidates.png", draw, "candidate ranking",
                         f"Each catalogued effect not in the model, fitted on top of it, "
@@ -952,7 +1141,7 @@ def section_search(diag, page):
                  "−" + str(st.get("removed")) if not st.get("added") else
                  str(st.get("removed")) + "→" + str(st.get("added"))) for st in path]
             def draw():
-                fig, ax = plt.subplots(figsize=(8.5, 3.2), constrained_layout=True)
+                fig, ax = plt.subplots(figsize=(8.5, 3.2))
                 ax.plot(np.arange(len(ys)), ys, "o-", color="tab:blue")
                 ax.set_yscale("log")
                 ax.set_xticks(np.arange(len(ys)), labels, rotation=25, ha="right", fontsize=8)
@@ -961,6 +1150,7 @@ def section_search(diag, page):
                     ax.legend(fontsize=8)
                 ax.set_ylabel("x RMS (mm)")
                 ax.set_title("x error along the search path")
+                _fit(fig, np.array([[ax]]), left_min=_first_label_reach(ax))
                 return fig
             page.figure("search_path.png", draw, "x error along the search path",
                         "Each step of the search and the x error it leaves (log scale).")
@@ -1029,20 +1219,39 @@ def section_fingerprints(diag, page, P):
             title += f", reported correlation = {fmt_g(cj, 3)}"
 
         def draw(fp=fp, title=title):
-            nr = _symnorm(P.residual[:, 0])
             nf = _symnorm(fp[:, 0])
+            grids = [_regular_grid(P.ref[P.height_index[hi], 1], P.ref[P.height_index[hi], 2])
+                     for hi in hsel]
+            # Every candidate's figure has the same layout and bottom row: a process
+            # redraws its last one with this one's top row (values, colour scale) and title.
+            sig = (None if any(g is None for g in grids) else
+                   (nf.clipped,) + tuple(g[0].tobytes() + g[1].tobytes() for g in grids))
+            last = _FRAMES.get("fingerprint")
+            if sig is not None and last is not None and last[0] == sig:
+                _, fig, top = last
+                for im, g, hi in zip(top, grids, hsel):
+                    im.set_data(_raster(g, fp[P.height_index[hi], 0]))
+                    im.set_norm(nf)  # the colour bar follows its image's norm
+                fig.suptitle(title)
+                return fig
+            _drop_frames("fingerprint")
+            nr = _symnorm(P.residual[:, 0])
             fig, axs, cbs = _map_grid((3.3 * len(hsel) + 1.3, 6.8), 2, [len(hsel)])
-            for j, hi in enumerate(hsel):
+            top = []
+            for j, (hi, g) in enumerate(zip(hsel, grids)):
                 idx = P.height_index[hi]
                 y, z = P.ref[idx, 1], P.ref[idx, 2]
-                m0 = _map(axs[0, j], y, z, fp[idx, 0], nf)
+                m0, _ = _map(axs[0, j], y, z, fp[idx, 0], nf, g=g)
+                top.append(m0)
                 axs[0, j].set_title(f"fingerprint x, {P.heights[hi]:g} mm", fontsize=9)
-                m1 = _map(axs[1, j], y, z, P.residual[idx, 0], nr)
+                m1, _ = _map(axs[1, j], y, z, P.residual[idx, 0], nr, g=g)
                 axs[1, j].set_title(f"current residual x, {P.heights[hi]:g} mm", fontsize=9)
             _colorbar(fig, m0, cbs[0, 0], nf, "x shift by the effect (mm)")
             _colorbar(fig, m1, cbs[1, 0], nr, "x residual (mm)")
             _outer_labels(axs)
             fig.suptitle(title)
+            if sig is not None:
+                _FRAMES["fingerprint"] = (sig, fig, top)
             return fig
         safe = re.sub(r"[^A-Za-z0-9_.-]", "_", eff)
         page.figure(f"fingerprint_{n}_{safe}.png", draw, f"fingerprint of {eff}",
@@ -1052,7 +1261,7 @@ def section_fingerprints(diag, page, P):
                     f"±1 and similar size). Correlation over all positions: x "
                     f"{fmt_g(cx, 3)}, all axes {fmt_g(c3, 3)}"
                     + (f"; reported by the diagnosis {fmt_g(cj, 3)}" if _finite(cj) else "")
-                    + ".", weight=2 * len(hsel))
+                    + ".", weight=len(hsel) // 2, group="fingerprint", build=2)
     if n == 0:
         page.add("<p>No usable fingerprints.</p>")
 
@@ -1195,7 +1404,7 @@ def section_variables(diag, page, P):
     # Length residual per cable vs that cable's length.
     if P.lengths is not None and P.length_residual is not None:
         def draw():
-            fig, axs = plt.subplots(2, 2, figsize=(10, 7.5), constrained_layout=True)
+            fig, axs = plt.subplots(2, 2, figsize=(10, 7.5))
             for i, ax in enumerate(axs.ravel()):
                 x, y = P.lengths[:, i], P.length_residual[:, i]
                 _dots(ax, x, y, 6, pal(i), 0.35, label="positions")
@@ -1209,13 +1418,14 @@ def section_variables(diag, page, P):
                 ax.grid(alpha=0.3)
                 _annot(ax, len_notes.get(i + 1, []) + (len_notes.get(None, []) if i == 0 else []))
             axs[0, 0].legend(fontsize=8, loc="lower right")
+            _fit(fig, axs)
             return fig
         page.figure("vs_cable_length.png", draw, "length residual versus cable length",
                     "Each cable's reading residual (mean measured minus what the model "
                     "predicts at the reference position) against that cable's length, "
                     "with the binned mean. A slope is a gain error, a curve a "
                     "non-linearity, a ripple a periodic effect of the drum or pulley; "
-                    "red boxes are the diagnosis's own findings.", weight=4)
+                    "red boxes are the diagnosis's own findings.", weight=3)
     else:
         page.note("\"positions.lengths_mm\" or \"positions.length_residual_mm\" is missing: "
                   "no length-residual plot.")
@@ -1269,7 +1479,7 @@ def section_variables(diag, page, P):
                 f"out of the cable plane (one colour per cable), with binned means; red "
                 f"boxes are the diagnosis's trend findings. Flat lines at zero mean "
                 f"nothing is left; a trend or bump says which variable the missing effect "
-                f"depends on.", weight=3 * len(cols))
+                f"depends on.", weight=len(cols) + 1)
 
 
 def section_comparison(runs, page):
@@ -1292,7 +1502,7 @@ def section_comparison(runs, page):
     page.add(_table(["model", "file", "x RMS (mm)", "y RMS (mm)", "z RMS (mm)", "chi²/dof",
                      "explained"], rows, "stats"))
     def draw():
-        fig, ax = plt.subplots(figsize=(max(7.0, 1.2 * len(runs) + 5), 4.4), constrained_layout=True)
+        fig, ax = plt.subplots(figsize=(max(7.0, 1.2 * len(runs) + 5), 4.4))
         w = 0.8 / len(runs)
         cmap = plt.get_cmap("viridis")
         for i in range(len(runs)):
@@ -1316,6 +1526,7 @@ def section_comparison(runs, page):
         ax.set_title("Position error RMS per run")
         ax.legend(fontsize=8)
         ax.grid(axis="y", alpha=0.3)
+        _fit(fig, np.array([[ax]]))
         return fig
     page.figure("comparison.png", draw, "error per run", "RMS position error per axis for each run, "
                 "labelled by the effects in its model, earliest first; the dashed line is "

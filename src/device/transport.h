@@ -29,6 +29,9 @@ struct Uri {
 // INVALID_ARG for a malformed option list) with err naming the culprit.
 int parse_uri(const std::string &text, Uri &out, std::string &err);
 
+// "0x1f": a report ID as the transports' error messages name it.
+std::string report_id_text(uint8_t id);
+
 // Transport::read results besides a byte count > 0.
 enum ReadStatus : int {
     kReadTimeout = 0,       // nothing within timeout_ms

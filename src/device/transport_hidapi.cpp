@@ -160,7 +160,7 @@ public:
         }
         const int n = hid_get_feature_report(dev_, buf, len);
         if (n < 0) {
-            err = "hid_get_feature_report(0x" + hex(buf[0]) + "): " + hid_err(dev_);
+            err = "hid_get_feature_report(" + report_id_text(buf[0]) + "): " + hid_err(dev_);
             return CDM_ERR_IO;
         }
         return n;
@@ -173,7 +173,7 @@ public:
             return CDM_ERR_DISCONNECTED;
         }
         if (hid_send_feature_report(dev_, buf, len) < 0) {
-            err = "hid_send_feature_report(0x" + hex(buf[0]) + "): " + hid_err(dev_);
+            err = "hid_send_feature_report(" + report_id_text(buf[0]) + "): " + hid_err(dev_);
             return CDM_ERR_IO;
         }
         return CDM_OK;
@@ -204,11 +204,6 @@ public:
     std::string uri() const override { return serial_.empty() ? "hid:" + path_ : "serial:" + serial_; }
 
 private:
-    static std::string hex(uint8_t v) {
-        char b[4];
-        std::snprintf(b, sizeof b, "%02x", v);
-        return b;
-    }
     std::mutex mu_;
     hid_device *dev_;
     std::string path_, serial_;

@@ -1,3 +1,4 @@
+#include <cstdio>
 #include <cerrno>
 #include <chrono>
 #include <cstdlib>
@@ -43,6 +44,12 @@ int Transport::reopen(std::string &err) {
 bool Transport::wait_arrival(int timeout_ms) {
     std::this_thread::sleep_for(std::chrono::milliseconds(timeout_ms));
     return false;
+}
+
+std::string report_id_text(uint8_t id) {
+    char b[8];
+    std::snprintf(b, sizeof b, "0x%02x", unsigned(id));
+    return b;
 }
 
 int parse_uri(const std::string &text, Uri &out, std::string &err) {

@@ -125,7 +125,7 @@ public:
     int get_feature(uint8_t *buf, size_t len, std::string &err) override {
         const int n = fw_.get_feature(buf, len);
         if (n < 0) {
-            err = "simulated firmware refused GET feature report 0x" + hex(buf[0]);
+            err = "simulated firmware refused GET feature report " + report_id_text(buf[0]);
             return CDM_ERR_IO;
         }
         return n;
@@ -133,7 +133,7 @@ public:
 
     int send_feature(const uint8_t *buf, size_t len, std::string &err) override {
         if (fw_.send_feature(buf, len) < 0) {
-            err = "simulated firmware refused SET feature report 0x" + hex(len ? buf[0] : 0);
+            err = "simulated firmware refused SET feature report " + report_id_text(len ? buf[0] : 0);
             return CDM_ERR_IO;
         }
         return CDM_OK;
@@ -151,11 +151,6 @@ public:
     }
 
 private:
-    static std::string hex(uint8_t v) {
-        char b[4];
-        std::snprintf(b, sizeof b, "%02x", v);
-        return b;
-    }
 
     std::string uri_;
     sim::Firmware fw_;

@@ -56,7 +56,11 @@ Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos) {
         // prepare() shrank it toward the pooled one and added quantisation.
         // Not the larger of it and the position's own: with few samples that
         // maximum is biased up, and weights from it inflate the chi-square.
-        const Eigen::Matrix3d C = E.Jp[j] * pos[j].cov_mean * E.Jp[j].transpose();
+        // The diagonal is var_mean, the fit's own weights, however the
+        // position was built.
+        Eigen::Matrix4d Cl = pos[j].cov_mean;
+        Cl.diagonal() = pos[j].var_mean;
+        const Eigen::Matrix3d C = E.Jp[j] * Cl * E.Jp[j].transpose();
         for (int a = 0; a < 3; ++a) E.var_mean[j](a) = std::max(C(a, a), 1e-10);
         E.ok[j] = 1;
         const double n = pos[j].n;

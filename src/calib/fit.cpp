@@ -261,6 +261,7 @@ struct Whitened {
     Eigen::MatrixXd T;      // full = base + T * zeta
     double best = INFINITY;
     Eigen::VectorXd best_full;
+    nlopt_opt opt = nullptr; // the running optimiser, for nlopt_force_stop
 };
 
 double objective(unsigned n, const double *z, double *grad, void *data) {
@@ -272,9 +273,11 @@ double objective(unsigned n, const double *z, double *grad, void *data) {
     Eigen::VectorXd res;
     Eigen::MatrixXd J;
     if (!pb.residuals(res, grad ? &J : nullptr)) {
-        // A user effect failed: stop; fit_model reports it.
+        // A user effect failed: stop (a NULL handle would be refused, and
+        // SLSQP would call the failing effect until max_evals); fit_model
+        // reports it.
         if (grad) std::fill(grad, grad + n, 0.0);
-        nlopt_force_stop(nullptr);
+        if (W->opt) nlopt_force_stop(W->opt);
         return 1e300;
     }
     Eigen::VectorXd pg;
@@ -291,7 +294,7 @@ double objective(unsigned n, const double *z, double *grad, void *data) {
     }
     if (pb.opt.progress && pb.evals % 5 == 0 && !pb.opt.progress(std::min(1.0, pb.evals / double(pb.opt.max_evals))))
         pb.cancelled = true;
-    if (pb.cancelled) nlopt_force_stop(nullptr);
+    if (pb.cancelled && W->opt) nlopt_force_stop(W->opt);
     return f;
 }
 
@@ -377,6 +380,7 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
             }
         }
         nlopt_opt o = nlopt_create(NLOPT_LD_SLSQP, unsigned(nfree));
+        W.opt = o;
         nlopt_set_min_objective(o, objective, &W);
         BoundData B{&W, {}, {}, {}};
         for (int a = 0; a < int(full.size()); ++a) {

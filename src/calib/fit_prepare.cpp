@@ -6,6 +6,39 @@
 
 namespace cdm {
 
+namespace {
+
+// How much weight the pooled covariance gets beside a position's own: the
+// empirical-Bayes prior of moderated variances (Smyth 2004), by moments.
+// With one noise everywhere, z = s^2 / pooled at a position of n samples
+// has mean 1 and variance 2 / (n - 1) (Gaussian noise); an excess V of the
+// observed spread over that says the true variances differ between
+// positions, as a scaled inverse chi-square of nu0 dof would, V = 2 / (nu0 - 4).
+// nu0 is capped at 50 (the shrinkage's bias then 3.5 % at 10 samples) and at
+// the pooled estimate's own dof; the most uneven cable decides. So a few
+// positions that are really noisier (a worn track, a badly seated hole) keep
+// much of their own variance instead of being flagged as failing.
+double prior_weight(const Dataset &d, const Eigen::Matrix4d &pooled, double dof) {
+    constexpr double kMaxPriorDof = 50;
+    double nu0 = std::min(kMaxPriorDof, dof);
+    for (int c = 0; c < 4; ++c) {
+        if (!(pooled(c, c) > 0)) continue;
+        double excess = 0;
+        int m = 0;
+        for (auto &p : d.pos)
+            if (p.n > 1) {
+                const double z = p.cov[c][c] / pooled(c, c);
+                excess += (z - 1) * (z - 1) - 2.0 / (p.n - 1);
+                ++m;
+            }
+        if (m < 2 || excess <= 0) continue;
+        nu0 = std::min(nu0, 4 + 2 / (excess / m));
+    }
+    return std::max(0.0, nu0);
+}
+
+} // namespace
+
 std::vector<PreparedPos> prepare(const Dataset &d) {
     // The readings' resolution per cable: the smallest step between distinct
     // values (the ADC count through the nominal scale; the CSV's last digit
@@ -22,6 +55,7 @@ std::vector<PreparedPos> prepare(const Dataset &d) {
             dof += p.n - 1;
         }
     if (dof > 0) pooled /= dof;
+    const double prior_dof = prior_weight(d, pooled, dof);
     std::vector<PreparedPos> v;
     v.reserve(d.pos.size());
     for (auto &p : d.pos) {
@@ -37,13 +71,12 @@ std::vector<PreparedPos> prepare(const Dataset &d) {
         // noise is the pot's, much the same over the workspace, so each
         // position's covariance (variances and cross-cable terms alike) is
         // shrunk toward the pooled one, as if the pooled estimate were
-        // worth kPriorDof samples' worth of degrees of freedom: 10 samples
-        // then weigh in with 59 dof (bias 3.5 %), 100 with 149 (1.4 %), and
-        // a position that really is noisier still shows it. A convex
-        // combination of two covariance matrices stays one.
-        constexpr double kPriorDof = 50;
+        // worth prior_dof samples' worth of degrees of freedom (at most 50:
+        // 10 samples then weigh in with 59 dof, bias 3.5 %; 100 with 149,
+        // 1.4 %; fewer where the positions' noise really differs, see
+        // prior_weight). A convex combination of two covariances stays one.
         const Eigen::Matrix4d shrunk =
-            p.n > 1 ? Eigen::Matrix4d(((p.n - 1) * pp.cov + kPriorDof * pooled) / (p.n - 1 + kPriorDof)) : pooled;
+            p.n > 1 ? Eigen::Matrix4d(((p.n - 1) * pp.cov + prior_dof * pooled) / (p.n - 1 + prior_dof)) : pooled;
         pp.cov_mean = shrunk / p.n;
         for (int c = 0; c < 4; ++c) {
             const double var = shrunk(c, c);

@@ -1,6 +1,8 @@
 // See evaluator.h.
 #include "model/evaluator.h"
 
+#include <cstdio>
+#include <cmath>
 #include <stdexcept>
 
 #include "model/model_impl.h"
@@ -219,6 +221,26 @@ bool ReadingEvaluator::eval(const Eigen::VectorXd &full, const double ref[3], do
     return true;
 }
 
+namespace {
+// A user effect's readings must be numbers: a NaN or an infinity (numpy
+// overflows warn, they do not raise) would reach the optimiser's gradient
+// and end a fit on a misleading status. Names the effect, cable and position.
+bool finite_readings(const EffectDesc &d, const double *Y, size_t n, const double *P, std::string *err) {
+    for (size_t i = 0; i < n; ++i)
+        for (int c = 0; c < 4; ++c)
+            if (!std::isfinite(Y[4 * i + size_t(c)])) {
+                if (err) {
+                    char b[160];
+                    std::snprintf(b, sizeof b, "\": non-finite reading of cable %d at (%.6g, %.6g, %.6g) mm", c + 1,
+                                  P[3 * i], P[3 * i + 1], P[3 * i + 2]);
+                    *err = "user effect \"" + d.name + b;
+                }
+                return false;
+            }
+    return true;
+}
+} // namespace
+
 bool ReadingEvaluator::Impl::user_one(size_t e, const Eigen::VectorXd &full, const double P[3],
                                       const Eigen::Vector4d &y, bool deriv, Eigen::Vector4d *out,
                                       std::string *err) const {
@@ -237,6 +259,7 @@ bool ReadingEvaluator::Impl::user_one(size_t e, const Eigen::VectorXd &full, con
             if (err) *err = "user effect \"" + d.name + "\": apply returned non-zero";
             return false;
         }
+        if (!finite_readings(d, buf, 1, Pk, err)) return false;
         out[k] = Eigen::Vector4d(buf[0], buf[1], buf[2], buf[3]);
     }
     return true;
@@ -317,6 +340,7 @@ bool ReadingEvaluator::eval_batch(const Eigen::VectorXd &full, size_t n, const d
                 if (err) *err = "user effect \"" + d.name + "\": apply_batch returned non-zero";
                 return false;
             }
+            if (!finite_readings(d, Y, n, Pk.data(), err)) return false;
         }
         for (size_t i = 0; i < n; ++i) {
             for (int k = 0; k < nc; ++k) calls[k] = Eigen::Map<const Eigen::Vector4d>(&out.scratch[4 * (n * size_t(k) + i)]);

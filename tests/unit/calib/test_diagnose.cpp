@@ -315,6 +315,73 @@ static void sparse_noisy_jig(void **) {
     if (std::fabs(z) > 4) fail_msg("sparse jig, true model: chi2 %g on %g dof (Z %.2f)", chi2, dof, z);
 }
 
+// The noise model's shrinkage (prepare()): with one noise everywhere each
+// position's variance is pulled toward the pooled one (prior weight 50);
+// where a tenth of the positions are really 4x noisier in variance, the
+// spread of the sample variances says so and they keep most of their own
+// (a fixed weight of 50 gives them 1.7x the pooled's 1/1.3, 0.43 of their
+// truth, and a chi-square 2.3x too large there). Sample variances
+// drawn as sigma^2 chi2(9)/9 (10 samples), 600 positions.
+static void noisier_positions_keep_their_variance(void **) {
+    for (bool uneven : {false, true}) {
+        Dataset d;
+        uint64_t s = 12345;
+        auto unif = [&]() {
+            s = s * 6364136223846793005ULL + 1442695040888963407ULL;
+            return (double(s >> 11) + 0.5) / 9007199254740992.0;
+        };
+        auto gauss = [&]() { return std::sqrt(-2 * std::log(unif())) * std::cos(2 * M_PI * unif()); };
+        double noisy_ratio = 0, quiet_ratio = 0;
+        int noisy = 0, quiet = 0;
+        for (int j = 0; j < 600; ++j) {
+            JigHole h;
+            h.n = 10;
+            h.ref[0] = 30;
+            h.ref[1] = j;
+            const double var = (uneven && j % 10 == 0 ? 4.0 : 1.0) * 0.0025;
+            for (int c = 0; c < 4; ++c) {
+                double chi = 0;
+                for (int k = 0; k < 9; ++k) {
+                    const double g = gauss();
+                    chi += g * g;
+                }
+                h.cov[c][c] = var * chi / 9;
+                h.mean[c] = 200;
+            }
+            d.pos.push_back(h);
+        }
+        const auto pp = prepare(d);
+        for (size_t j = 0; j < pp.size(); ++j) {
+            const double truth = (uneven && j % 10 == 0 ? 4.0 : 1.0) * 0.0025 / 10;
+            for (int c = 0; c < 4; ++c) {
+                if (uneven && j % 10 == 0) {
+                    noisy_ratio += pp[j].var_mean(c) / truth;
+                    ++noisy;
+                } else {
+                    quiet_ratio += pp[j].var_mean(c) / truth;
+                    ++quiet;
+                }
+            }
+        }
+        quiet_ratio /= quiet;
+        if (!uneven) {
+            // One noise: nearly the pooled everywhere, so the ratio's mean is
+            // 1 within the pooled estimate's sampling error (600 x 9 x 4 dof).
+            if (std::fabs(quiet_ratio - 1) > 0.05) fail_msg("even noise: var_mean / truth %g", quiet_ratio);
+            continue;
+        }
+        noisy_ratio /= noisy;
+        // The prior by moments here is nu0 = 4 + 2 / 0.48 = 8.2, so they get
+        // (9 x 4 + 8.2 x 1.3) / 17.2 / 4 = 0.68 of it; the fixed 50 gave
+        // 0.43. 0.6 lies between, far beyond the mean's spread (about 0.02
+        // over 240 values).
+        if (noisy_ratio < 0.6) fail_msg("4x noisier positions get %g of their variance", noisy_ratio);
+        // The quiet majority is not pulled up much by the noisy tenth
+        // (the pooled is 1.3x theirs; their own weighs in).
+        if (quiet_ratio > 1.2) fail_msg("quiet positions get %g of their variance", quiet_ratio);
+    }
+}
+
 // A drum ripple: the period is fitted, within 1 % of the truth and within
 // 5 of its own standard errors.
 static void ripple_period_is_fitted(void **) {
@@ -528,6 +595,7 @@ int main(void) {
         cmocka_unit_test(review_suggests_the_leaner_model),
         cmocka_unit_test(search_lands_on_hidden_effects),
         cmocka_unit_test(sparse_noisy_jig),
+        cmocka_unit_test(noisier_positions_keep_their_variance),
         cmocka_unit_test(ripple_period_is_fitted),
         cmocka_unit_test(drift_is_named),
         cmocka_unit_test(plate_is_named_as_the_jig),

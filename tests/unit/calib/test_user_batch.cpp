@@ -59,6 +59,19 @@ int spot_apply_batch(void *, const double *p, size_t n, const double *P, double 
     return 0;
 }
 int failing_batch(void *, const double *, size_t, const double *, double *) { return 5; }
+// Gives a NaN reading once the depth has moved away from its start (by more
+// than any central-difference step, 1e-4 mm): a failure in the middle of
+// the optimisation, as numpy's overflow (a warning, not an exception) gives.
+long g_nan_calls = 0, g_nan_calls_after = 0;
+int nan_when_moved(void *, const double *p, size_t n, const double *P, double *r) {
+    for (size_t i = 0; i < n; ++i) spot_row(p, P + 3 * i, r + 4 * i);
+    if (g_nan_calls > 0) ++g_nan_calls_after;
+    if (std::fabs(p[0]) > 0.05 && n > 0) {
+        r[4 * (n - 1) + 2] = std::nan("");
+        ++g_nan_calls;
+    }
+    return 0;
+}
 
 const char *kNames[] = {"depth_mm", "centre_mm", "width_mm", "tilt"};
 const double kScale[] = {0.1, 10.0, 2.0, 0.1};
@@ -116,10 +129,11 @@ int setup(void **) {
     if (register_spot("spot_batch", nullptr, spot_apply_batch) != CDM_OK) return -1;
     if (register_spot("spot_both", spot_apply, spot_apply_batch) != CDM_OK) return -1;
     if (register_spot("spot_fail", nullptr, failing_batch) != CDM_OK) return -1;
+    if (register_spot("spot_nan", nullptr, nan_when_moved) != CDM_OK) return -1;
     return 0;
 }
 int teardown(void **) {
-    for (const char *n : {"spot_one", "spot_batch", "spot_both", "spot_fail"}) cdm_effect_unregister(n);
+    for (const char *n : {"spot_one", "spot_batch", "spot_both", "spot_fail", "spot_nan"}) cdm_effect_unregister(n);
     return 0;
 }
 
@@ -235,6 +249,23 @@ static void failing_batch_fails_the_fit(void **) {
     assert_true(err.find("spot_fail") != std::string::npos);
 }
 
+// A NaN reading from a user effect in the middle of a fit fails the fit,
+// naming the effect and the cable, and stops the optimiser there: the
+// effect is not called again (before, the stop was asked of a NULL handle
+// and SLSQP went on calling the failing effect up to its evaluation limit).
+static void nan_reading_fails_and_stops_the_fit(void **) {
+    const auto pos = jig_data();
+    FitOptions opt;
+    Model m = model_with("spot_nan");
+    FitReport rep;
+    g_nan_calls = g_nan_calls_after = 0;
+    assert_false(fit_model(m, pos, opt, rep));
+    if (rep.message.find("\"spot_nan\"") == std::string::npos || rep.message.find("non-finite reading of cable 3") == std::string::npos)
+        fail_msg("message: %s", rep.message.c_str());
+    assert_int_equal(g_nan_calls, 1);
+    if (g_nan_calls_after != 0) fail_msg("the effect was called %ld times after its NaN", g_nan_calls_after);
+}
+
 // One position (the pose, a position solve): a batch-only effect is called
 // with n = 1 and gives the per-position effect's readings.
 static void batch_only_at_one_position(void **) {
@@ -274,6 +305,7 @@ int main(void) {
         cmocka_unit_test(evaluator_batch_equals_per_position),
         cmocka_unit_test(fit_batch_equals_per_position),
         cmocka_unit_test(failing_batch_fails_the_fit),
+        cmocka_unit_test(nan_reading_fails_and_stops_the_fit),
         cmocka_unit_test(batch_only_at_one_position),
         cmocka_unit_test(registration),
     };

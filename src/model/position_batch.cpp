@@ -5,7 +5,9 @@
 // The arithmetic is model_position.cpp's (the shared pieces are declared in
 // model_impl.h); only the order of the user effects' calls differs. Not the
 // haptic path: this allocates.
+#include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <vector>
 
 #include "model/model_impl.h"
@@ -24,11 +26,33 @@ struct Stencil {
     std::vector<double> P, T, Y; // rows x 3, rows, rows x 4
 };
 
-// The readings and 4x3 Jacobians at m points (X: m x 3, T: m): the built-in
-// stages row by row, then each user effect in the model's order over every
-// row in one apply_batch call (apply per row for one without it), as
-// Model::readings applies them one position at a time. False when a user
+// The readings at `rows` points (P: rows x 3, T: rows) into Y (rows x 4):
+// the built-in stages row by row, then each user effect in the model's order
+// over every row in one apply_batch call (apply per row for one without it),
+// as Model::readings applies them one point at a time. False when a user
 // effect returns non-zero (on which row is not known).
+bool readings_rows(const Model::Impl &I, size_t rows, const double *P, const double *T, double *Y) {
+    for (size_t r = 0; r < rows; ++r) {
+        Sample<double> s;
+        for (int k = 0; k < 3; ++k) s.P[k] = P[3 * r + size_t(k)];
+        s.t_s = T[r];
+        I.builtin_readings(s, &Y[4 * r]);
+    }
+    for (const auto &e : I.effects) {
+        const EffectDesc &d = *e.desc;
+        if (d.stage != Stage::User) continue;
+        if (d.apply_batch) {
+            if (rows > 0 && d.apply_batch(d.user, e.p.data(), rows, P, Y) != 0) return false;
+            continue;
+        }
+        for (size_t r = 0; r < rows; ++r)
+            if (d.apply(d.user, e.p.data(), &P[3 * r], &Y[4 * r]) != 0) return false;
+    }
+    return true;
+}
+
+// The readings and 4x3 Jacobians at m points (X: m x 3, T: m): every point's
+// stencil rows in one readings_rows.
 bool stencil(const Model::Impl &I, size_t m, const double *X, const double *T, Stencil &S) {
     const size_t rows = kRowsPerPoint * m;
     S.P.resize(3 * rows);
@@ -43,23 +67,26 @@ bool stencil(const Model::Impl &I, size_t m, const double *X, const double *T, S
             S.T[kRowsPerPoint * a + r] = T[a];
         }
     }
-    for (size_t r = 0; r < rows; ++r) {
-        Sample<double> s;
-        for (int k = 0; k < 3; ++k) s.P[k] = S.P[3 * r + size_t(k)];
-        s.t_s = S.T[r];
-        I.builtin_readings(s, &S.Y[4 * r]);
-    }
-    for (const auto &e : I.effects) {
-        const EffectDesc &d = *e.desc;
-        if (d.stage != Stage::User) continue;
-        if (d.apply_batch) {
-            if (rows > 0 && d.apply_batch(d.user, e.p.data(), rows, S.P.data(), S.Y.data()) != 0) return false;
+    return readings_rows(I, rows, S.P.data(), S.T.data(), S.Y.data());
+}
+
+// stencil() over m points, and where a user effect fails on one of them,
+// each point's rows alone (one call over its 7 rows; rows are independent,
+// so a point fails alone exactly when it fails in the whole): bad[a] = 1
+// for the points that fail then. The only case that calls an effect with
+// fewer rows than the points' count.
+void stencil_each(const Model::Impl &I, size_t m, const double *X, const double *T, Stencil &S,
+                  std::vector<char> &bad) {
+    bad.assign(m, 0);
+    if (stencil(I, m, X, T, S)) return;
+    Stencil one;
+    for (size_t a = 0; a < m; ++a) {
+        if (!stencil(I, 1, X + 3 * a, T + a, one)) {
+            bad[a] = 1;
             continue;
         }
-        for (size_t r = 0; r < rows; ++r)
-            if (d.apply(d.user, e.p.data(), &S.P[3 * r], &S.Y[4 * r]) != 0) return false;
+        std::copy(one.Y.begin(), one.Y.end(), S.Y.begin() + std::ptrdiff_t(4 * kRowsPerPoint * a));
     }
-    return true;
 }
 
 // Point a's readings and Jacobian from the stencil's rows.
@@ -79,19 +106,30 @@ bool Model::has_batch_user() const {
     return false;
 }
 
+void Model::readings_at(size_t n, const double *p, const double *t_s, double *out, int *status) const {
+    if (has_batch_user() && readings_rows(*impl_, n, p, t_s, out)) {
+        for (size_t j = 0; j < n; ++j) status[j] = 0;
+        return;
+    }
+    // No effect to batch, or a batch call failed: each point alone.
+    for (size_t j = 0; j < n; ++j) status[j] = readings(p + 3 * j, t_s[j], out + 4 * j);
+}
+
 void Model::readings_jacobians(size_t n, const double *p, const double *t_s, double *out, double *dr_dp,
                                int *status) const {
-    Stencil S;
-    if (!has_batch_user() || !stencil(*impl_, n, p, t_s, S)) {
-        // No effect to batch, or a batch call failed: each point alone, so
-        // that only the failing points fail.
+    if (!has_batch_user()) {
         for (size_t j = 0; j < n; ++j)
             status[j] = readings_jacobian(p + 3 * j, t_s[j], out + 4 * j, dr_dp + 12 * j);
         return;
     }
+    Stencil S;
+    std::vector<char> bad;
+    stencil_each(*impl_, n, p, t_s, S, bad);
     Eigen::Matrix<double, 4, 1> y;
     Eigen::Matrix<double, 4, 3> J;
     for (size_t j = 0; j < n; ++j) {
+        status[j] = -1;
+        if (bad[j]) continue;
         point(S, j, y, J);
         for (int i = 0; i < 4; ++i) {
             out[4 * j + size_t(i)] = y(i);
@@ -121,6 +159,7 @@ void Model::positions(size_t n, const double *lengths, const double *t_s, double
     // Gauss-Newton in lockstep: each iteration evaluates the positions still
     // iterating together; each leaves as position() would return.
     Stencil S;
+    std::vector<char> bad;
     std::vector<double> X, T;
     Eigen::Matrix<double, 4, 1> y;
     Eigen::Matrix<double, 4, 3> J;
@@ -131,15 +170,12 @@ void Model::positions(size_t n, const double *lengths, const double *t_s, double
             for (int k = 0; k < 3; ++k) X[3 * a + size_t(k)] = x[3 * active[a] + size_t(k)];
             T[a] = t_s[active[a]];
         }
-        if (!stencil(m, active.size(), X.data(), T.data(), S)) {
-            // A user effect failed on a row of one of them: each alone, from
-            // the start, so that only the failing positions fail.
-            for (size_t j : active) status[j] = position(lengths + 4 * j, t_s[j], p + 3 * j, nullptr);
-            return;
-        }
+        // Where a user effect fails at a position, position() returns -1.
+        stencil_each(m, active.size(), X.data(), T.data(), S, bad);
         next.clear();
         for (size_t a = 0; a < active.size(); ++a) {
             const size_t j = active[a];
+            if (bad[a]) continue;
             double *xj = &x[3 * j];
             point(S, a, y, J);
             const int st = fk_step(lengths + 4 * j, y, J, xj);

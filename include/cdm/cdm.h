@@ -471,8 +471,8 @@ typedef struct cdm_effect_def {
      *  position solves behind their error statistics) call apply_batch, once
      *  per central-difference step (a position solve: once per iteration,
      *  its steps as rows) over every position, when it is given, else apply
-     *  per position; after a non-zero return there, each position's rows
-     *  again alone, so that only the failing ones fail. Evaluations at one
+     *  per position (a position solve that gets a non-zero return calls it
+     *  again on each position's rows alone: only those fail). Evaluations at one
      *  position (cdm_get_pose, cdm_calibration_lengths) call apply, or
      *  apply_batch with n = 1 when only it is given. For an effect written
      *  in an interpreted language the batch form saves a call per position. */

@@ -4,6 +4,9 @@
 // and chi-square, with one call per central-difference step over all
 // positions; a non-zero return fails the fit naming the effect; a
 // batch-only effect is called with n = 1 where the model needs one position.
+// The position solves over all positions (Model::positions, behind
+// diag::evaluate) give what the per-position solve gives, fail where it
+// fails, and leave a whole diagnosis without a call with n = 1.
 //
 // The effect is the worn spot of docs/calibration.md (a Gaussian dip of the
 // reading around one cable length), with a position term so that the

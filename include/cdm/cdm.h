@@ -467,11 +467,14 @@ typedef struct cdm_effect_def {
     const double *initial;
     /** since 1.1: the effect on all positions at once, or NULL. At least one
      *  of apply and apply_batch is given. Evaluations over many positions
-     *  (the fit and its chi-squares, the diagnosis' candidate fits) call
-     *  apply_batch, once per central-difference step over every position,
-     *  when it is given, else apply per position; evaluations at one position
-     *  (cdm_get_pose, a position solve, cdm_calibration_lengths) call apply,
-     *  or apply_batch with n = 1 when only it is given. For an effect written
+     *  (the fit and its chi-squares, the diagnosis' candidate fits, the
+     *  position solves behind their error statistics) call apply_batch, once
+     *  per central-difference step (a position solve: once per iteration,
+     *  its steps as rows) over every position, when it is given, else apply
+     *  per position (a position solve that gets a non-zero return calls it
+     *  again on each position's rows alone: only those fail). Evaluations at one
+     *  position (cdm_get_pose, cdm_calibration_lengths) call apply, or
+     *  apply_batch with n = 1 when only it is given. For an effect written
      *  in an interpreted language the batch form saves a call per position. */
     cdm_effect_apply_batch_fn apply_batch;
 } cdm_effect_def;

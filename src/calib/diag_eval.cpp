@@ -7,16 +7,6 @@ namespace cdm {
 namespace diag {
 
 namespace {
-Eigen::Matrix<double, 4, 3> reading_jacobian(const Model &m, const double p[3], double t_s) {
-    // The model's own derivative (automatic differentiation through the
-    // built-ins); NaN when a user effect fails, so nothing downstream
-    // mistakes it for a number.
-    Eigen::Matrix<double, 4, 3, Eigen::RowMajor> J;
-    double y[4];
-    if (m.readings_jacobian(p, t_s, y, J.data()) != 0) J.setConstant(std::numeric_limits<double>::quiet_NaN());
-    return J;
-}
-
 Eval init_eval(size_t P) {
     Eval E;
     E.res.assign(P, V3::Zero());
@@ -36,20 +26,45 @@ Eval init_eval(size_t P) {
 Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos) {
     const size_t P = pos.size();
     Eval E = init_eval(P);
+    // Every position's FK of its mean readings, at its acquisition time
+    // (effects that drift in time, pot_drift, are undone as of when it was
+    // measured), then the reading Jacobians at the estimates: position()
+    // and readings_jacobian() at each, or over all positions at once where
+    // a user effect works on arrays (Model::positions).
+    std::vector<double> l(4 * P), ts(P), est(3 * P), y(4 * P), dr(12 * P);
+    std::vector<int> st(P), stj(P);
     for (size_t j = 0; j < P; ++j) {
-        double l[4] = {pos[j].mean(0), pos[j].mean(1), pos[j].mean(2), pos[j].mean(3)};
-        double p[3];
-        // At the position's acquisition time: effects that drift in time
-        // (pot_drift) are undone as of when it was measured.
-        if (m.position(l, pos[j].t_s, p, nullptr) != 0) {
+        for (int c = 0; c < 4; ++c) l[4 * j + size_t(c)] = pos[j].mean(c);
+        ts[j] = pos[j].t_s;
+    }
+    m.positions(P, l.data(), ts.data(), est.data(), st.data());
+    // Only the converged ones need a Jacobian: pack them.
+    std::vector<size_t> conv;
+    std::vector<double> pc, tc;
+    for (size_t j = 0; j < P; ++j)
+        if (st[j] == 0) {
+            conv.push_back(j);
+            pc.insert(pc.end(), {est[3 * j], est[3 * j + 1], est[3 * j + 2]});
+            tc.push_back(ts[j]);
+        }
+    m.readings_jacobians(conv.size(), pc.data(), tc.data(), y.data(), dr.data(), stj.data());
+    std::vector<size_t> slot(P, 0);
+    for (size_t c = 0; c < conv.size(); ++c) slot[conv[c]] = c;
+    for (size_t j = 0; j < P; ++j) {
+        if (st[j] != 0) {
             E.bad_samples += size_t(pos[j].n);
             continue;
         }
+        const double *p = &est[3 * j];
         double t[3];
         m.jig_to_device(pos[j].ref.data(), t);
         E.est[j] = V3(p[0], p[1], p[2]);
         E.res[j] = E.est[j] - V3(t[0], t[1], t[2]);
-        auto J = reading_jacobian(m, p, pos[j].t_s);
+        // The model's own derivative (automatic differentiation through the
+        // built-ins); NaN when a user effect fails, so nothing downstream
+        // mistakes it for a number.
+        Eigen::Matrix<double, 4, 3, Eigen::RowMajor> J = Eigen::Map<const Eigen::Matrix<double, 4, 3, Eigen::RowMajor>>(&dr[12 * slot[j]]);
+        if (stj[slot[j]] != 0) J.setConstant(std::numeric_limits<double>::quiet_NaN());
         Eigen::Matrix3d H = J.transpose() * J;
         E.Jp[j] = H.inverse() * J.transpose();
         // Covariance of the mean readings (cross-cable terms included), as

@@ -28,11 +28,20 @@ LengthView length_view(const Model &m, const std::vector<PreparedPos> &pos) {
     v.lres.resize(P);
     v.angle.resize(P);
     v.dir.resize(P);
+    // The model's readings at every reference (one call of a user effect
+    // that works on arrays over them all).
+    std::vector<double> tp(3 * P), ts(P), yp(4 * P);
+    std::vector<int> st(P);
     for (size_t j = 0; j < P; ++j) {
-        double t[3], y[4];
-        m.jig_to_device(pos[j].ref.data(), t);
-        if (m.readings(t, pos[j].t_s, y) != 0)
-            for (double &yc : y) yc = NAN; // a failing user effect: no residual here
+        m.jig_to_device(pos[j].ref.data(), &tp[3 * j]);
+        ts[j] = pos[j].t_s;
+    }
+    m.readings_at(P, tp.data(), ts.data(), yp.data(), st.data());
+    for (size_t j = 0; j < P; ++j) {
+        const double *t = &tp[3 * j];
+        double *y = &yp[4 * j];
+        if (st[j] != 0)
+            for (int c = 0; c < 4; ++c) y[c] = NAN; // a failing user effect: no residual here
         for (int c = 0; c < 4; ++c) {
             v.lres[j][size_t(c)] = pos[j].mean(c) - y[c];
             v.lmean[j][size_t(c)] = pos[j].mean(c);

@@ -102,6 +102,30 @@ public:
     int position(const double lengths[4], double p[3]) const { return position(lengths, 0.0, p, nullptr); }
     int position(const double lengths[4], double t_s, double p[3], double dp_dl[12]) const;
 
+    // Over n points or positions at once (row-major arrays, one row each;
+    // status[j]: what the one-point function returns for row j):
+    // readings_at is readings() (p n x 3, out n x 4), positions is
+    // position() without dp_dl (lengths n x 4, p n x 3, a row untouched
+    // where -1), readings_jacobians is readings_jacobian() (out n x 4,
+    // dr_dp n x 12). When a user effect of the model works on arrays
+    // (has_batch_user), each user effect is called once over every row:
+    // readings_at once, readings_jacobians once with each point's
+    // central-difference steps as rows, positions once per Gauss-Newton
+    // iteration over the positions still iterating (lockstep). Same start,
+    // steps, convergence test and failures per position as position(), whose
+    // results they reproduce (to the last bit when apply_batch computes a
+    // row as apply does). When a batch call fails, the points it covered
+    // are redone one at a time (a position solve: that iteration's rows of
+    // each, in one call per point), so a failure stays the failing point's
+    // own.
+    // Otherwise the one-point functions at each row. They allocate: not for
+    // the haptic path.
+    bool has_batch_user() const;
+    void readings_at(size_t n, const double *p, const double *t_s, double *out, int *status) const;
+    void positions(size_t n, const double *lengths, const double *t_s, double *p, int *status) const;
+    void readings_jacobians(size_t n, const double *p, const double *t_s, double *out, double *dr_dp,
+                            int *status) const;
+
     // Position-space correction of the seed's ellipsoid (eq. 4), if the
     // model has the `ellipsoid` effect; applied inside position().
     bool is_nominal() const;

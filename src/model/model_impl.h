@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Dense>
+
 #include "model/effect.h"
 #include "model/kernel.h"
 #include "model/model.h"
@@ -55,5 +57,22 @@ struct Model::Impl {
     int builtin_readings(const Sample<double> &s, double out[4]) const;
     int apply_user(const double p[3], double readings[4], std::string *who) const;
 };
+
+// The forward kinematics' pieces (model_position.cpp), shared by the
+// per-position solve and the batched one (position_batch.cpp) so that both
+// do the same arithmetic: the position step of the readings' central
+// differences through user effects, the Gauss-Newton limits, the start when
+// the nominal spheres do not meet, one Gauss-Newton step (x += the
+// least-squares step on lengths - y; -1 when anything is not finite, 1 when
+// the step's norm is under kFkTolerance, else 0) and the Position-stage
+// corrections (with their 3x3 Jacobian when D is not null; false when a
+// Position-stage effect has more parameters than its stack buffer holds).
+constexpr double kFkPositionStep = 1e-4; // mm
+constexpr int kFkIterations = 30;
+constexpr double kFkTolerance = 1e-9; // mm
+void fk_fallback_start(const DeviceGeometry &g, const double lengths[4], double x[3]);
+int fk_step(const double lengths[4], const Eigen::Matrix<double, 4, 1> &y, const Eigen::Matrix<double, 4, 3> &J,
+            double x[3]);
+bool fk_correct(const Model::Impl &I, double x[3], Eigen::Matrix3d *D);
 
 } // namespace cdm

@@ -46,11 +46,13 @@ bool readings_and_jacobian(const Model &m, const Model::Impl &I, const double x[
     return true;
 }
 
+} // namespace
+
 // Position-stage corrections at x, and their Jacobian (3x3) when asked.
 // False when a Position-stage effect has more parameters than the stack
 // buffer holds (a new built-in that needs a larger kMaxPositionParams).
 constexpr size_t kMaxPositionParams = 8;
-bool correct(const Model::Impl &I, double x[3], Eigen::Matrix3d *D) {
+bool fk_correct(const Model::Impl &I, double x[3], Eigen::Matrix3d *D) {
     const EffectParams<double> pd = I.whole_params();
     if (!D) {
         position_map<double>(pd, x);
@@ -77,7 +79,26 @@ bool correct(const Model::Impl &I, double x[3], Eigen::Matrix3d *D) {
     return true;
 }
 
-} // namespace
+void fk_fallback_start(const DeviceGeometry &g, const double lengths[4], double x[3]) {
+    const double a = g.a_mm, b = g.b_mm, mm = g.m_mm;
+    const double R1 = lengths[0] * lengths[0], R2 = lengths[1] * lengths[1], R3 = lengths[2] * lengths[2],
+                 R4 = lengths[3] * lengths[3];
+    x[1] = ((R3 - R1) + (R4 - R2)) / (4.0 * (2.0 * a - mm));
+    x[2] = ((R1 - R2) + (R3 - R4)) / (4.0 * (2.0 * b - mm));
+    x[0] = 50.0;
+}
+
+int fk_step(const double lengths[4], const Eigen::Matrix<double, 4, 1> &y, const Eigen::Matrix<double, 4, 3> &J,
+            double x[3]) {
+    Eigen::Matrix<double, 4, 1> r;
+    for (int i = 0; i < 4; ++i) r(i) = lengths[i] - y(i);
+    if (!r.allFinite() || !J.allFinite()) return -1;
+    Eigen::Matrix3d H = J.transpose() * J;
+    Eigen::Vector3d dx = H.ldlt().solve(J.transpose() * r);
+    if (!dx.allFinite()) return -1;
+    for (int k = 0; k < 3; ++k) x[k] += dx(k);
+    return dx.norm() < kFkTolerance ? 1 : 0;
+}
 
 int Model::readings_jacobian(const double p[3], double t_s, double out[4], double dr_dp[12]) const {
     Eigen::Matrix<double, 4, 1> y;
@@ -104,25 +125,15 @@ int Model::position(const double lengths[4], double t_s, double p[3], double dp_
         if (!tri) {
             // Effects can push the readings past the nominal spheres' reach:
             // start from eq. (1)-(2) at mid-workspace height instead.
-            const double a = m.g.a_mm, b = m.g.b_mm, mm = m.g.m_mm;
-            const double R1 = lengths[0] * lengths[0], R2 = lengths[1] * lengths[1],
-                         R3 = lengths[2] * lengths[2], R4 = lengths[3] * lengths[3];
-            x[1] = ((R3 - R1) + (R4 - R2)) / (4.0 * (2.0 * a - mm));
-            x[2] = ((R1 - R2) + (R3 - R4)) / (4.0 * (2.0 * b - mm));
-            x[0] = 50.0;
+            fk_fallback_start(m.g, lengths, x);
         }
         // Gauss-Newton on the four readings.
         bool ok = false;
-        for (int it = 0; it < 30; ++it) {
+        for (int it = 0; it < kFkIterations; ++it) {
             if (!readings_and_jacobian(*this, m, x, t_s, y, J)) return -1;
-            Eigen::Matrix<double, 4, 1> r;
-            for (int i = 0; i < 4; ++i) r(i) = lengths[i] - y(i);
-            if (!r.allFinite() || !J.allFinite()) return -1;
-            Eigen::Matrix3d H = J.transpose() * J;
-            Eigen::Vector3d dx = H.ldlt().solve(J.transpose() * r);
-            if (!dx.allFinite()) return -1;
-            for (int k = 0; k < 3; ++k) x[k] += dx(k);
-            if (dx.norm() < 1e-9) {
+            const int st = fk_step(lengths, y, J, x);
+            if (st < 0) return -1;
+            if (st > 0) {
                 ok = true;
                 break;
             }
@@ -145,7 +156,7 @@ int Model::position(const double lengths[4], double t_s, double p[3], double dp_
         dxdl = H.ldlt().solve(J.transpose());
     }
     Eigen::Matrix3d D;
-    if (!correct(m, x, dp_dl ? &D : nullptr)) return -1;
+    if (!fk_correct(m, x, dp_dl ? &D : nullptr)) return -1;
     if (!std::isfinite(x[0] + x[1] + x[2])) return -1;
     if (dp_dl) {
         Eigen::Matrix<double, 3, 4> G = D * dxdl;

@@ -106,9 +106,10 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
     and readings (n, 4) numpy arrays, row i being position i, and changes
     readings in place or returns the new (n, 4) readings. The fit then calls
     it once per central-difference step instead of once per position and
-    step: a few hundred times for a whole fit rather than tens of thousands.
-    Row i must not depend on the other rows. Calls at one position (a pose,
-    Calibration.lengths) pass n = 1.
+    step (and the position solves of its error statistics once per
+    iteration over every position): a few hundred times for a whole fit
+    rather than tens of thousands. Row i must not depend on the other rows.
+    Calls at one position (a pose, Calibration.lengths) pass n = 1.
 
     lower, upper: bounds per parameter; initial: where each parameter starts
     when the effect is added to a model (since 1.1; default 0 clamped into the

@@ -4,6 +4,9 @@
 // and chi-square, with one call per central-difference step over all
 // positions; a non-zero return fails the fit naming the effect; a
 // batch-only effect is called with n = 1 where the model needs one position.
+// The position solves over all positions (Model::positions, behind
+// diag::evaluate) give what the per-position solve gives, fail where it
+// fails, and leave a whole diagnosis without a call with n = 1.
 //
 // The effect is the worn spot of docs/calibration.md (a Gaussian dip of the
 // reading around one cable length), with a position term so that the
@@ -17,6 +20,8 @@
 #include <cstring>
 #include <setjmp.h>
 
+#include "calib/diag_eval.h"
+#include "calib/diagnose.h"
 #include "calib/fit.h"
 #include "calib/simulate.h"
 #include "model/effect.h"
@@ -41,7 +46,7 @@ int spot_row(const double *p, const double *P, double *r) {
 }
 
 struct Counts {
-    long one = 0, batch = 0;
+    long one = 0, batch = 0, batch_n1 = 0;
     size_t batch_min_n = SIZE_MAX, batch_max_n = 0;
 };
 Counts g_count;
@@ -52,6 +57,7 @@ int spot_apply(void *, const double *p, const double P[3], double r[4]) {
 }
 int spot_apply_batch(void *, const double *p, size_t n, const double *P, double *r) {
     ++g_count.batch;
+    if (n == 1) ++g_count.batch_n1;
     g_count.batch_min_n = std::min(g_count.batch_min_n, n);
     g_count.batch_max_n = std::max(g_count.batch_max_n, n);
     for (size_t i = 0; i < n; ++i)
@@ -71,6 +77,16 @@ int nan_when_moved(void *, const double *p, size_t n, const double *P, double *r
         ++g_nan_calls;
     }
     return 0;
+}
+// The spot, failing beyond y = 55 mm (the plate's outer column of holes, at
+// y = 60 mm, and the nearby points of a solve).
+int picky_apply(void *u, const double *p, const double P[3], double r[4]) {
+    return P[1] > 55 ? 1 : spot_apply(u, p, P, r);
+}
+int picky_apply_batch(void *u, const double *p, size_t n, const double *P, double *r) {
+    for (size_t i = 0; i < n; ++i)
+        if (P[3 * i + 1] > 55) return 1;
+    return spot_apply_batch(u, p, n, P, r);
 }
 
 const char *kNames[] = {"depth_mm", "centre_mm", "width_mm", "tilt"};
@@ -107,7 +123,7 @@ Model model_with(const char *user_effect) {
 
 // Jig data from a truth with the spot (the per-position form) and the
 // built-ins: the 13x13 plate at 10 mm on 5 heights, 20 samples.
-std::vector<PreparedPos> jig_data() {
+Dataset jig_dataset() {
     Model truth{DeviceGeometry{}};
     std::string err;
     if (!truth.add_effect("cable_offset", {{"o1", 0.3}, {"o2", -0.2}, {"o3", 0.25}, {"o4", -0.3}}, err) ||
@@ -121,19 +137,87 @@ std::vector<PreparedPos> jig_data() {
     o.seed = 21;
     Dataset d;
     if (!simulate_jig(truth, o, d, err)) fail_msg("simulate: %s", err.c_str());
-    return prepare(d);
+    return d;
+}
+std::vector<PreparedPos> jig_data() { return prepare(jig_dataset()); }
+
+// Sets the user effect (the model's last) to v.
+void set_spot(Model &m, const std::vector<double> &v) {
+    std::string err;
+    if (!m.set_effect_params(m.effect_count() - 1, v, err)) fail_msg("%s", err.c_str());
 }
 
-int setup(void **) {
+// evaluate() (FK of every position's mean readings, the reading Jacobians,
+// the noise of the estimates) with the batch-only effect and with the same
+// effect per position. Both solves take the same steps from the same start
+// and stop at the same test (a step under 1e-9 mm); the batch rows go
+// through spot_row on the same doubles, so the results are equal to the last
+// bit here. The check allows what the convergence test leaves open: 1e-9 mm
+// on a position (a solve stopped one step apart moves it by less than its
+// last step, under 1e-9 mm), and 1e-9 relative on var_mean and Jp (their
+// central differences at points 1e-9 mm apart). Returns the count of
+// positions that failed.
+size_t evaluate_same(const Model &mb, const Model &mo, const std::vector<PreparedPos> &pos) {
+    g_count = Counts{};
+    const diag::Eval Eb = diag::evaluate(mb, pos);
+    const Counts cb = g_count;
+    const diag::Eval Eo = diag::evaluate(mo, pos);
+    // No call with one position: after a failed batch call the points are
+    // redone with their 7 rows in one call each.
+    assert_int_equal(cb.batch_n1, 0);
+    assert_int_equal(cb.one, 0);
+    size_t failed = 0;
+    bool bit_identical = true;
+    auto near = [&](double a, double b, double tol) {
+        if (a != b) bit_identical = false;
+        return std::fabs(a - b) <= tol;
+    };
+    for (size_t j = 0; j < pos.size(); ++j) {
+        assert_int_equal(Eb.ok[j], Eo.ok[j]);
+        if (!Eo.ok[j]) {
+            ++failed;
+            continue;
+        }
+        for (int a = 0; a < 3; ++a) {
+            if (!near(Eb.est[j](a), Eo.est[j](a), 1e-9) || !near(Eb.res[j](a), Eo.res[j](a), 1e-9))
+                fail_msg("position %zu axis %d: est %.17g vs %.17g", j, a, Eb.est[j](a), Eo.est[j](a));
+            if (!near(Eb.var_mean[j](a), Eo.var_mean[j](a), 1e-9 * Eo.var_mean[j](a)))
+                fail_msg("position %zu var_mean %d: %.17g vs %.17g", j, a, Eb.var_mean[j](a), Eo.var_mean[j](a));
+            for (int c = 0; c < 4; ++c)
+                assert_true(near(Eb.Jp[j](a, c), Eo.Jp[j](a, c), 1e-9 * std::max(1.0, std::fabs(Eo.Jp[j](a, c)))));
+        }
+    }
+    assert_int_equal(Eb.bad_samples, Eo.bad_samples);
+    for (int a = 0; a < 3; ++a) {
+        assert_true(near(Eb.err[a].n, Eo.err[a].n, 0));
+        // The sums over positions of the error and its square (mm, mm^2).
+        assert_true(near(Eb.err[a].s, Eo.err[a].s, 1e-9 * Eo.err[a].n));
+        assert_true(near(Eb.err[a].ss, Eo.err[a].ss, 1e-9 * std::max(1.0, Eo.err[a].ss)));
+    }
+    print_message("%zu positions, %zu failed, batch calls %ld (n = 1: %ld), per position %ld; %s\n", pos.size(),
+                  failed, cb.batch, cb.batch_n1, g_count.one, bit_identical ? "bit-identical" : "within tolerance");
+    return failed;
+}
+
+// Every test effect but spot_batch (the diagnosis test takes them out: its
+// review tries every registered effect in the model).
+const char *kOthers[] = {"spot_one", "spot_both", "spot_fail", "spot_nan", "picky_one", "picky_batch"};
+int register_others() {
     if (register_spot("spot_one", spot_apply, nullptr) != CDM_OK) return -1;
-    if (register_spot("spot_batch", nullptr, spot_apply_batch) != CDM_OK) return -1;
     if (register_spot("spot_both", spot_apply, spot_apply_batch) != CDM_OK) return -1;
     if (register_spot("spot_fail", nullptr, failing_batch) != CDM_OK) return -1;
     if (register_spot("spot_nan", nullptr, nan_when_moved) != CDM_OK) return -1;
+    if (register_spot("picky_one", picky_apply, nullptr) != CDM_OK) return -1;
+    if (register_spot("picky_batch", nullptr, picky_apply_batch) != CDM_OK) return -1;
     return 0;
 }
+int setup(void **) {
+    if (register_spot("spot_batch", nullptr, spot_apply_batch) != CDM_OK) return -1;
+    return register_others();
+}
 int teardown(void **) {
-    for (const char *n : {"spot_one", "spot_batch", "spot_both", "spot_fail", "spot_nan"}) cdm_effect_unregister(n);
+    for (const char *n : {"spot_one", "spot_batch", "spot_both", "spot_fail", "spot_nan", "picky_one", "picky_batch"})
+        cdm_effect_unregister(n);
     return 0;
 }
 
@@ -287,6 +371,72 @@ static void batch_only_at_one_position(void **) {
     for (int k = 0; k < 3; ++k) assert_true(std::fabs(q[k] - p[k]) < 1e-6);
 }
 
+// evaluate() over the jig: at the truth's spot every position converges; a
+// spot steeper than the cable (-5 mm deep over 1 mm: the reading falls as the
+// cable lengthens near its centre) leaves Gauss-Newton without convergence
+// at some positions, which fail in the batch as they do one at a time.
+static void evaluate_batch_equals_per_position(void **) {
+    const auto pos = jig_data();
+    Model mb = model_with("spot_batch"), mo = model_with("spot_one");
+    for (Model *m : {&mb, &mo}) set_spot(*m, {-0.25, 180, 6, 0.5});
+    assert_int_equal(evaluate_same(mb, mo, pos), 0);
+    // At most one call per Gauss-Newton iteration and one for the Jacobians.
+    g_count = Counts{};
+    (void)diag::evaluate(mb, pos);
+    assert_true(g_count.batch <= 30 + 1);
+    for (Model *m : {&mb, &mo}) set_spot(*m, {-5, 190, 1, 0.5});
+    assert_true(evaluate_same(mb, mo, pos) > 0);
+}
+
+// A user effect that fails at some positions (y > 55 mm): the batch call
+// over all of them fails, that step is redone one position at a time, and
+// the same positions fail as one at a time (the 65 holes of the y = 60 mm
+// column at least), the others solved alike; the redo costs one call per
+// position once, not a solve per position.
+static void failing_positions_fail_alike(void **) {
+    const auto pos = jig_data();
+    Model mb = model_with("picky_batch"), mo = model_with("picky_one");
+    for (Model *m : {&mb, &mo}) set_spot(*m, {-0.25, 180, 6, 0.5});
+    const size_t failed = evaluate_same(mb, mo, pos);
+    assert_true(failed >= 65);
+    g_count = Counts{};
+    (void)diag::evaluate(mb, pos);
+    // Two failed batch calls (the first iteration, the Jacobians) each
+    // redone per position, and the iterations' batch calls.
+    assert_true(size_t(g_count.batch) <= 2 * (pos.size() + 1) + 30);
+    assert_true(failed < pos.size());
+}
+
+// A whole diagnosis (the fit, its evaluations, the model review, the
+// validation, the residual views; no candidates) with the batch-only effect:
+// nothing calls the effect one position at a time. Before the batched solve
+// every evaluate() made 7 calls with n = 1 per position and Gauss-Newton
+// iteration and 7 for its Jacobian (over 20,000 for these 845 positions each
+// time), and each residual view one per position.
+static void diagnosis_calls_with_one_position(void **) {
+    const Dataset d = jig_dataset();
+    DiagnoseOptions o;
+    o.effects = {"jig_misalignment", "cable_offset", "spot_batch"};
+    o.candidates = false;
+    o.search = false;
+    nlohmann::json out;
+    Model fitted{DeviceGeometry{}};
+    std::string err;
+    for (const char *n : kOthers) assert_int_equal(cdm_effect_unregister(n), CDM_OK);
+    g_count = Counts{};
+    const bool ok = diagnose(d, DeviceGeometry{}, o, out, fitted, err);
+    const Counts c = g_count;
+    assert_int_equal(register_others(), 0);
+    if (!ok) fail_msg("diagnose: %s", err.c_str());
+    const size_t P = prepare(d).size();
+    print_message("diagnosis: %ld batch calls, %ld of them with n = 1, %ld per position (%zu positions)\n",
+                  c.batch, c.batch_n1, c.one, P);
+    assert_int_equal(c.one, 0);
+    // None left: the residual views' readings are batched too (they made P
+    // calls with n = 1 per view).
+    assert_int_equal(c.batch_n1, 0);
+}
+
 // Registration: neither function is refused; a 1.0-sized struct has no
 // apply_batch field, so one given there is not read.
 static void registration(void **) {
@@ -307,6 +457,9 @@ int main(void) {
         cmocka_unit_test(failing_batch_fails_the_fit),
         cmocka_unit_test(nan_reading_fails_and_stops_the_fit),
         cmocka_unit_test(batch_only_at_one_position),
+        cmocka_unit_test(evaluate_batch_equals_per_position),
+        cmocka_unit_test(failing_positions_fail_alike),
+        cmocka_unit_test(diagnosis_calls_with_one_position),
         cmocka_unit_test(registration),
     };
     return cmocka_run_group_tests(tests, setup, teardown);

@@ -1073,8 +1073,15 @@ def section_candidates(diag, page):
                                              color="0.15"))
                 ax.grid(axis="x", alpha=0.3)
                 r = _agg(fig).get_renderer()
-                _fit(fig, axs, wgap_min=max((t.get_window_extent(r).width / fig.dpi for t in notes),
-                                            default=0.0))
+                gap = max((t.get_window_extent(r).width / fig.dpi for t in notes), default=0.0)
+                _fit(fig, axs, wgap_min=gap)
+                if notes and not show_after:
+                    # One column: the notes beside the longest bars reach
+                    # past the axes into the right margin, which must hold them.
+                    edge = ax.get_window_extent(r).x1
+                    over = max((t.get_window_extent(r).x1 - edge) / fig.dpi for t in notes)
+                    if over > 0:
+                        _fit(fig, axs, right=0.15 + over, wgap_min=gap)
                 return fig
             page.figure("candidates.png", draw, "candidate ranking",
                         f"Each catalogued effect not in the model, fitted on top of it, "

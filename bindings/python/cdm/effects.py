@@ -33,17 +33,11 @@ class _Registration:
         self.errors = []  # exceptions raised by apply, newest last (capped)
         self.keep = []    # ctypes objects native code points into
 
-    def trampoline(self, _user, params_p, position_p, readings_p):
+    def _guarded(self, body, *args):
+        # Runs body(*args) for native code: 0 on success, an error code
+        # (the exception kept in self.errors) otherwise.
         try:
-            if _np is not None:
-                params = _np.ctypeslib.as_array(params_p, shape=(self.n,)).copy() if self.n else _np.zeros(0)
-                position = _np.ctypeslib.as_array(position_p, shape=(3,)).copy()
-                readings = _np.ctypeslib.as_array(readings_p, shape=(4,))  # a view: changed in place
-            else:
-                params = tuple(params_p[i] for i in range(self.n))
-                position = tuple(position_p[i] for i in range(3))
-                readings = ctypes.cast(readings_p, ctypes.POINTER(ctypes.c_double * 4)).contents
-            self.apply(params, position, readings)
+            body(*args)
             return 0
         except ArithmeticError as e:
             self._record(e)
@@ -52,27 +46,36 @@ class _Registration:
             self._record(e)
             return int(Error.CDM_ERR_INTERNAL)
 
+    def trampoline(self, _user, params_p, position_p, readings_p):
+        return self._guarded(self._one, params_p, position_p, readings_p)
+
     def batch_trampoline(self, _user, params_p, n, positions_p, readings_p):
         # vectorized=True: every position at once (numpy is checked at registration).
-        try:
-            if n == 0:
-                return 0
+        return self._guarded(self._batch, params_p, n, positions_p, readings_p)
+
+    def _one(self, params_p, position_p, readings_p):
+        if _np is not None:
             params = _np.ctypeslib.as_array(params_p, shape=(self.n,)).copy() if self.n else _np.zeros(0)
-            positions = _np.ctypeslib.as_array(positions_p, shape=(n, 3)).copy()
-            readings = _np.ctypeslib.as_array(readings_p, shape=(n, 4))  # a view: changed in place
-            out = self.apply(params, positions, readings)
-            if out is not None and out is not readings:
-                out = _np.asarray(out, dtype=float)
-                if out.shape != (n, 4):
-                    raise ValueError("effect %r: apply returned shape %r, expected (%d, 4)" % (self.name, out.shape, n))
-                readings[...] = out
-            return 0
-        except ArithmeticError as e:
-            self._record(e)
-            return int(Error.CDM_ERR_NUMERIC)
-        except BaseException as e:  # never let an exception unwind into C
-            self._record(e)
-            return int(Error.CDM_ERR_INTERNAL)
+            position = _np.ctypeslib.as_array(position_p, shape=(3,)).copy()
+            readings = _np.ctypeslib.as_array(readings_p, shape=(4,))  # a view: changed in place
+        else:
+            params = tuple(params_p[i] for i in range(self.n))
+            position = tuple(position_p[i] for i in range(3))
+            readings = ctypes.cast(readings_p, ctypes.POINTER(ctypes.c_double * 4)).contents
+        self.apply(params, position, readings)
+
+    def _batch(self, params_p, n, positions_p, readings_p):
+        if n == 0:
+            return
+        params = _np.ctypeslib.as_array(params_p, shape=(self.n,)).copy() if self.n else _np.zeros(0)
+        positions = _np.ctypeslib.as_array(positions_p, shape=(n, 3)).copy()
+        readings = _np.ctypeslib.as_array(readings_p, shape=(n, 4))  # a view: changed in place
+        out = self.apply(params, positions, readings)
+        if out is not None and out is not readings:
+            out = _np.asarray(out, dtype=float)
+            if out.shape != (n, 4):
+                raise ValueError("effect %r: apply returned shape %r, expected (%d, 4)" % (self.name, out.shape, n))
+            readings[...] = out
 
     def _record(self, e):
         self.errors.append((self.name, e))

@@ -8,6 +8,7 @@
 #include <unordered_map>
 #include <utility>
 
+#include "calib/dataset_glitches.h"
 #include "io/json.h"
 
 namespace cdm {
@@ -93,26 +94,37 @@ private:
 };
 
 using Visit = std::function<void(size_t, const double *)>;
+// A row as the parser sees it: position index, 0-based data row, 1-based
+// line, the four readings.
+using Tap = std::function<void(size_t, size_t, size_t, const double *)>;
 
 // One CSV line at a time, in order: the header, then rows accumulated into
 // per-position statistics (Welford's update of the mean and the co-moment
 // matrix). With `expect` it reads a dataset again and checks it is the one
-// `expect` describes, handing each row's readings to `visit`.
+// `expect` describes, handing each row to `tap`. Rows listed in `exclude`
+// (sorted data-row indices: the glitches) are checked but neither
+// accumulated nor handed on.
 class Parser {
 public:
-    Parser(const std::string &src, Dataset &d, const Dataset *expect, const Visit *visit)
-        : src_(src), d_(d), expect_(expect), visit_(visit) {
+    Parser(const std::string &src, Dataset &d, const Dataset *expect, const Tap *tap,
+           const std::vector<size_t> *exclude = nullptr)
+        : src_(src), d_(d), expect_(expect), tap_(tap), exclude_(exclude) {
         d_.path = src;
     }
     bool line(const char *b, const char *le, std::string &err);
     bool finish(std::string &err);
+    // Per position, the readings' range (ReadingRange), from a first pass.
+    std::vector<ReadingRange> &range() { return range_; }
 
 private:
     bool header(std::string &err);
     const std::string &src_;
     Dataset &d_;
     const Dataset *expect_;
-    const Visit *visit_;
+    const Tap *tap_;
+    const std::vector<size_t> *exclude_;
+    size_t next_excluded_ = 0; // cursor into *exclude_
+    std::vector<ReadingRange> range_;
     size_t line_ = 0;
     std::vector<std::pair<const char *, const char *>> f_;
     int colidx_[8] = {};
@@ -217,6 +229,7 @@ bool Parser::line(const char *b, const char *le, std::string &err) {
         jp.point = id;
         for (int k = 0; k < 3; ++k) jp.ref[k] = v[1 + k];
         d_.pos.push_back(jp);
+        if (!expect_) range_.push_back({INFINITY, INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY, -INFINITY});
     } else {
         g = it->second;
         for (int k = 0; k < 3; ++k)
@@ -228,15 +241,21 @@ bool Parser::line(const char *b, const char *le, std::string &err) {
             }
     }
     JigHole &h = d_.pos[g];
+    double t = 0;
     if (tcol_ >= 0) {
         auto &x = f[size_t(tcol_)];
-        double t;
         if (!to_double(x.first, x.second, t) || !std::isfinite(t)) {
             err = at(src, line, size_t(tcol_) + 1) + "t_s is not a finite number: '" + shown(x.first, x.second) + "'";
             return false;
         }
-        h.t_s += t; // summed here, divided by n in finish()
     }
+    const size_t row = d_.rows;
+    if (exclude_ && next_excluded_ < exclude_->size() && (*exclude_)[next_excluded_] == row) {
+        ++next_excluded_; // a glitch: checked above, counted in rows, left out of the statistics
+        ++d_.rows;
+        return true;
+    }
+    h.t_s += t; // summed here, divided by n in finish()
     // Welford: the mean and the co-moment sum (l - mean_old)(l - mean_new)',
     // upper triangle; finish() mirrors it and divides by n - 1.
     const double *l = v + 4;
@@ -248,11 +267,17 @@ bool Parser::line(const char *b, const char *le, std::string &err) {
     }
     for (int a = 0; a < 4; ++a)
         for (int c = a; c < 4; ++c) h.cov[a][c] += dx[a] * (l[c] - h.mean[c]);
-    h.mean_row += double(d_.rows); // summed here (exact: integers), divided by n in finish()
+    h.mean_row += double(row); // summed here (exact: integers), divided by n in finish()
     ++d_.rows;
-    if (visit_) (*visit_)(g, l);
-    else
-        for (int c = 0; c < 4; ++c) distinct_[c].add(l[c]);
+    if (tap_) (*tap_)(g, row, line, l);
+    if (!expect_) {
+        ReadingRange &r = range_[g];
+        for (int c = 0; c < 4; ++c) {
+            distinct_[c].add(l[c]);
+            r[size_t(c)] = std::min(r[size_t(c)], l[c]);
+            r[4 + size_t(c)] = std::max(r[4 + size_t(c)], l[c]);
+        }
+    }
     return true;
 }
 
@@ -280,8 +305,10 @@ bool Parser::finish(std::string &err) {
     d_.heights.erase(std::unique(d_.heights.begin(), d_.heights.end(),
                                  [](double a, double b) { return std::fabs(a - b) < 1e-6; }),
                      d_.heights.end());
-    if (!visit_)
+    if (!expect_)
         for (int c = 0; c < 4; ++c) d_.resolution[c] = distinct_[c].min_step();
+    else
+        std::copy(std::begin(expect_->resolution), std::end(expect_->resolution), d_.resolution);
     if (expect_) {
         bool same = d_.rows == expect_->rows && d_.pos.size() == expect_->pos.size();
         for (size_t g = 0; same && g < d_.pos.size(); ++g) {
@@ -341,12 +368,50 @@ struct SourceReader {
     }
 };
 
+// The glitch screen (dataset_glitches.h), on a dataset just parsed by `p`:
+// the suspect positions' samples are read again, and when some are set
+// aside the dataset is parsed once more without them.
+bool screen_glitches(Dataset &d, Parser &p, std::string &err) {
+    const GlitchScreen s = glitch_suspects(d, p.range());
+    d.glitch_z = s.z;
+    std::copy(std::begin(s.scale), std::end(s.scale), d.glitch_scale);
+    if (!s.any()) return true;
+    std::vector<ScreenSample> samples;
+    const Tap collect = [&](size_t g, size_t row, size_t line, const double *l) {
+        if (!s.suspect[g]) return;
+        ScreenSample x;
+        x.g = g, x.row = row, x.line = line;
+        std::copy(l, l + 4, x.l);
+        samples.push_back(x);
+    };
+    {
+        Dataset again;
+        Parser p2(d.path, again, &d, &collect);
+        if (!stream_lines(SourceReader{*d.source, err}, p2, err)) return false;
+    }
+    std::vector<DatasetGlitch> glitches;
+    std::vector<size_t> rows;
+    glitch_flags(d, s, samples, glitches, rows);
+    if (rows.empty()) return true;
+    Dataset clean;
+    Parser p3(d.path, clean, nullptr, nullptr, &rows);
+    if (!stream_lines(SourceReader{*d.source, err}, p3, err)) return false;
+    clean.source = d.source;
+    clean.glitches = std::move(glitches);
+    clean.excluded_rows = std::move(rows);
+    clean.glitch_z = d.glitch_z;
+    std::copy(std::begin(d.glitch_scale), std::end(d.glitch_scale), clean.glitch_scale);
+    d = std::move(clean);
+    return true;
+}
+
 bool parse_source(const std::shared_ptr<const DatasetSource> &s, const std::string &src, Dataset &out,
                   std::string &err) {
     Dataset d;
     Parser p(src, d, nullptr, nullptr);
     if (!stream_lines(SourceReader{*s, err}, p, err)) return false;
     d.source = s;
+    if (!screen_glitches(d, p, err)) return false;
     out = std::move(d);
     return true;
 }
@@ -380,6 +445,10 @@ bool load_dataset(const std::string &path, Dataset &out, std::string &err, bool 
         return false;
     }
     d.source = std::move(s);
+    if (!screen_glitches(d, p, err)) {
+        if (io_failure) *io_failure = true; // the file could not be read again, or changed meanwhile
+        return false;
+    }
     out = std::move(d);
     return true;
 }
@@ -390,7 +459,8 @@ bool for_each_sample(const Dataset &d, const Visit &visit, std::string &err) {
         return false;
     }
     Dataset again;
-    Parser p(d.path, again, &d, &visit);
+    const Tap tap = [&](size_t g, size_t, size_t, const double *l) { visit(g, l); };
+    Parser p(d.path, again, &d, &tap, &d.excluded_rows);
     return stream_lines(SourceReader{*d.source, err}, p, err);
 }
 

@@ -40,6 +40,18 @@ constexpr size_t kDatasetResolutionValues = size_t(1) << 16;
 
 struct DatasetSource; // where the rows can be read again (dataset.cpp)
 
+// A sample set aside as a glitch: one reading far from the rest of its
+// position's samples (a spike of the pot's wiper, a dropped ADC bit, a bumped
+// cable). See screen_glitches in dataset_glitches.h for the test.
+struct DatasetGlitch {
+    size_t line = 0;       // 1-based line of the file
+    long point = 0;
+    int cable = 0;         // 1-4: the reading that departs most (in units of its scale)
+    double reading = 0;    // mm
+    double median = 0;     // the position's median reading of that cable (mm)
+    double z = 0;          // |reading - median| / the cable's noise scale at that position
+};
+
 struct Dataset {
     std::string path;
     size_t rows = 0;
@@ -53,10 +65,18 @@ struct Dataset {
     // smallest step among the first that many (an upper bound on it).
     double resolution[4] = {0, 0, 0, 0};
     std::shared_ptr<const DatasetSource> source;
+    // Samples set aside as glitches (the screen in dataset_glitches.h):
+    // left out of every position's statistics and of for_each_sample; `rows`
+    // still counts them. excluded_rows: their 0-based data-row indices, sorted.
+    std::vector<DatasetGlitch> glitches;
+    std::vector<size_t> excluded_rows;
+    double glitch_z = 0;         // the screen's threshold (robust sd), 0 when it did not run
+    double glitch_scale[4] = {}; // the cables' pooled noise scale it used (mm)
 };
 
 // Reads the rows of `d` again, in file order, and calls visit(position
-// index into d.pos, the four readings) for each; the same parser and checks
+// index into d.pos, the four readings) for each row not set aside as a
+// glitch; the same parser and checks
 // as the first read. A file is read through the descriptor load_dataset()
 // opened (a file replaced by rename since is still the one loaded); if its
 // content changed in place the pass stops with an error naming the line.
@@ -76,6 +96,10 @@ constexpr double kDatasetMaxLengthMm = 10000.0;
 // ranges above; a field echoed in a message is cut to ~40 characters.
 // `io_failure` (optional) tells a file that could not be read (missing,
 // special, too large: CDM_ERR_IO) from one that does not parse.
+// Glitches are screened as the file is loaded (dataset_glitches.h): when
+// some position's readings spread wider than the noise allows, the file is
+// read again for those positions' samples, and once more without the
+// samples set aside (Dataset::glitches says which, and why).
 bool load_dataset(const std::string &path, Dataset &out, std::string &err, bool *io_failure = nullptr);
 bool parse_dataset(const std::string &text, const std::string &source, Dataset &out, std::string &err);
 

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <set>
 
 #include "calib/diag_findings.h"
 
@@ -70,5 +71,49 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
     return J;
 }
 
+nlohmann::json glitches_json(const Dataset &d) {
+    std::set<long> points;
+    nlohmann::json list = nlohmann::json::array();
+    for (auto &g : d.glitches) {
+        points.insert(g.point);
+        if (list.size() < kGlitchesListed)
+            list.push_back({{"line", g.line}, {"point", g.point}, {"cable", g.cable}, {"reading_mm", g.reading},
+                            {"median_mm", g.median}, {"sd", g.z}});
+    }
+    return {{"count", d.glitches.size()},
+            {"positions", points.size()},
+            {"threshold_sd", d.glitch_z},
+            {"noise_sd_mm", std::vector<double>(d.glitch_scale, d.glitch_scale + 4)},
+            {"test", "|reading - position median| > threshold_sd * max(cable's pooled noise sd, position's 1.4826 MAD); "
+                     "threshold: two-sided Gaussian, Bonferroni 0.01 over every reading"},
+            {"samples", list}};
+}
+
+std::string glitches_words(const Dataset &d) {
+    if (d.glitches.empty()) return "";
+    std::set<long> points;
+    const DatasetGlitch *worst = &d.glitches[0];
+    double lo = INFINITY;
+    int per_cable[4] = {0, 0, 0, 0};
+    for (auto &g : d.glitches) {
+        points.insert(g.point);
+        lo = std::min(lo, g.z);
+        if (g.z > worst->z) worst = &g;
+        ++per_cable[g.cable - 1];
+    }
+    std::string cables;
+    for (int c = 0; c < 4; ++c)
+        if (per_cable[c]) cables += (cables.empty() ? "" : ", ") + std::to_string(per_cable[c]) + " on cable " + std::to_string(c + 1);
+    return "The data as read: " + std::to_string(d.glitches.size()) + " of " + std::to_string(d.rows) +
+           " samples, at " + std::to_string(points.size()) + " positions, were set aside as glitches (" + cables +
+           "): one reading off its position's median by " + fmt_num(lo, 0) + " to " + fmt_num(worst->z, 0) +
+           " times the noise (beyond " + fmt_num(d.glitch_z, 1) + ", the level at which clean data has one such reading "
+           "in a hundred datasets); the largest, " + fmt_num(std::fabs(worst->reading - worst->median), 2) +
+           " mm on cable " + std::to_string(worst->cable) + " at line " + std::to_string(worst->line) + " (point " +
+           std::to_string(worst->point) + "). Spikes like these come from a wiper or a connector: check the pots' wiring. "
+           "Every number here is without them.";
+}
+
 } // namespace diag
 } // namespace cdm
+

@@ -14,6 +14,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "calib/dataset.h"
 #include "calib/diag_candidates.h"
 
 namespace cdm {
@@ -32,6 +33,13 @@ struct Judgement {
 // axis (mm).
 Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candidate> *cands,
                       const nlohmann::json *findings, const V3 &noise);
+
+// The samples the dataset's glitch screen set aside (calib/dataset_glitches.h):
+// the JSON of data.glitches (the count, the test, the first
+// kGlitchesListed by line) and a sentence for the verdict ("" when none).
+constexpr size_t kGlitchesListed = 100;
+nlohmann::json glitches_json(const Dataset &d);
+std::string glitches_words(const Dataset &d);
 
 
 } // namespace diag

@@ -337,6 +337,8 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
             verdict += " " + sentence + ".";
         }
     }
+    // What the screen set aside as it read the file (dataset_glitches.h).
+    if (!data.glitches.empty()) verdict += " " + glitches_words(data);
     if (!findings.empty()) {
         unexplained_summary += "; found: ";
         for (size_t k = 0; k < std::min<size_t>(3, findings.size()); ++k)
@@ -354,7 +356,8 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
                    {"positions", P},
                    {"heights", data.heights},
                    {"ignored_columns", data.ignored_columns},
-                   {"out_of_workspace_samples", nom.bad_samples}};
+                   {"out_of_workspace_samples", nom.bad_samples},
+                   {"glitches", glitches_json(data)}};
     out["device"] = io::device_to_json(g);
     json mlist = json::array();
     for (size_t k = 0; k < model.effect_count(); ++k) mlist.push_back(model.effect_name(k));

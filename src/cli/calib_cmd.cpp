@@ -66,6 +66,10 @@ void print_summary(const nlohmann::json &r) {
                 r["structure"]["p_value"].get<double>(), r["failing_positions"].get<int>(),
                 r["data"]["positions"].get<int>());
     std::printf("  explained: %s\n", r["explained"].get<bool>() ? "yes" : "no");
+    if (r["data"].contains("glitches") && r["data"]["glitches"]["count"].get<size_t>() > 0)
+        std::printf("  glitches set aside: %zu samples at %zu positions (beyond %.1f sd; the verdict says more)\n",
+                    r["data"]["glitches"]["count"].get<size_t>(), r["data"]["glitches"]["positions"].get<size_t>(),
+                    r["data"]["glitches"]["threshold_sd"].get<double>());
     if (r.contains("recommended") && !r["recommended"].is_null()) {
         const auto &rec = r["recommended"];
         std::string names;

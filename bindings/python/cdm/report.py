@@ -77,6 +77,7 @@ class DiagnosisError(Exception):
 
 # --------------------------------------------------------------------------- input
 
+
 def load_diagnosis(path):
     """Read and sanity-check one diagnosis JSON; raise DiagnosisError if unusable."""
     try:
@@ -653,6 +654,14 @@ def _stat_cells(block):
     return cells
 
 
+def _glitch_words(g):
+    """The samples the dataset's screen set aside, for the Data line ('' when none)."""
+    if not isinstance(g, dict) or not _finite(g.get("count")) or g["count"] <= 0:
+        return ""
+    return (f"; {int(g['count'])} samples at {fmt_g(g.get('positions'))} positions set aside as "
+            f"glitches (beyond {fmt_g(g.get('threshold_sd'), 3)} sd of their position's median)")
+
+
 def section_summary(diag, page):
     page.add("<h2>1. Summary</h2>")
     verdict = diag.get("verdict")
@@ -743,7 +752,8 @@ def section_summary(diag, page):
                          if isinstance(ign, list) and ign else "")
                       + (f"; {int(data['out_of_workspace_samples'])} samples out of the "
                          f"workspace" if _finite(data.get("out_of_workspace_samples"))
-                         and data["out_of_workspace_samples"] > 0 else "")))
+                         and data["out_of_workspace_samples"] > 0 else "")
+                      + _glitch_words(data.get("glitches"))))
     dev = _dict(diag, "device")
     if dev is not None:
         facts.append(("Device (mm)", ", ".join(

@@ -506,7 +506,10 @@ typedef int (*cdm_progress_fn)(void *user, const char *stage, double fraction);
  * result as JSON text (docs/calibration.md gives the schema), allocated by the
  * library: free it with cdm_free_string. `options_json` may be NULL or e.g.
  * {"effects": ["exit_pulley"], "jig_tolerance_mm": 0.03, "candidates": true,
- *  "per_position": true, "calibration_out": "calib.json"}.
+ *  "per_position": true, "outliers": true, "calibration_out": "calib.json"}
+ * ("outliers", since 1.1: positions the model and their neighbours both
+ * disown are set aside and the diagnosis run again without them; false
+ * keeps every position).
  * Errors name the file, line and column (cdm_thread_error). Any thread.
  * The dataset is streamed into per-position statistics (memory does not grow
  * with the samples per position) and read again during the call through the

@@ -40,6 +40,7 @@ int diagnose_body(const char *data_csv_path, const char *device_json_path, const
     opt.search = a.search;
     opt.validation = a.validation;
     opt.per_position = a.per_position;
+    opt.outliers = a.outliers;
     if (progress) opt.progress = [&](const std::string &s, double f) { return progress(user, s.c_str(), f) == 0; };
     cdm::api::JobInputs in;
     if (int rc = cdm::api::open_job(data_csv_path, device_json_path, a, in)) return rc;

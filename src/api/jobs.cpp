@@ -53,7 +53,7 @@ int load_device(const char *path, cdm::DeviceGeometry &g) {
 } // namespace
 
 int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs &a) {
-    const char *known = diagnosis ? "effects, jig_tolerance_mm, candidates, search, validation, per_position, calibration_out"
+    const char *known = diagnosis ? "effects, jig_tolerance_mm, candidates, search, validation, per_position, outliers, calibration_out"
                                   : "effects, jig_tolerance_mm, calibration_out";
     if (!text || !*text) {
         if (diagnosis) return CDM_OK;
@@ -82,10 +82,14 @@ int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs 
             if (v.type != J::Number || !(v.number >= 0) || v.number > cdm::kDatasetMaxRefMm)
                 return bad(v, k, "a number of mm in 0..5000");
             a.jig_tolerance_mm = v.number;
-        } else if (diagnosis && (k == "candidates" || k == "search" || k == "validation" || k == "per_position")) {
+        } else if (diagnosis && (k == "candidates" || k == "search" || k == "validation" || k == "per_position" ||
+                                 k == "outliers")) {
             if (v.type != J::Bool) return bad(v, k, "true or false");
-            (k == "candidates" ? a.candidates : k == "search" ? a.search : k == "validation" ? a.validation
-                                                                                         : a.per_position) = v.boolean;
+            (k == "candidates" ? a.candidates
+             : k == "search"   ? a.search
+             : k == "validation" ? a.validation
+             : k == "outliers"   ? a.outliers
+                                 : a.per_position) = v.boolean;
         } else if (k == "calibration_out") {
             if (v.type == J::Null) continue;
             if (v.type != J::String) return bad(v, k, "a path");

@@ -18,12 +18,12 @@ namespace cdm::api {
 struct JobArgs {
     std::vector<std::string> effects;
     double jig_tolerance_mm = -1; // < 0: estimated from the data
-    bool candidates = true, search = true, validation = true, per_position = true; // DiagnoseOptions defaults
+    bool candidates = true, search = true, validation = true, per_position = true, outliers = true; // DiagnoseOptions defaults
     std::string calib_out;
 };
 
 // Parses `text` (NULL or empty: defaults). `diagnosis`: the diagnosis's own
-// options (candidates, search, validation, per_position) are accepted; cdm_fit
+// options (candidates, search, validation, per_position, outliers) are accepted; cdm_fit
 // refuses them and requires a non-empty "effects".
 int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs &out);
 

@@ -107,8 +107,8 @@ using Tap = std::function<void(size_t, size_t, size_t, const double *)>;
 class Parser {
 public:
     Parser(const std::string &src, Dataset &d, const Dataset *expect, const Tap *tap,
-           const std::vector<size_t> *exclude = nullptr)
-        : src_(src), d_(d), expect_(expect), tap_(tap), exclude_(exclude) {
+           const std::vector<size_t> *exclude = nullptr, const std::vector<long> *skip = nullptr)
+        : src_(src), d_(d), expect_(expect), tap_(tap), exclude_(exclude), skip_(skip) {
         d_.path = src;
     }
     bool line(const char *b, const char *le, std::string &err);
@@ -124,6 +124,7 @@ private:
     const Tap *tap_;
     const std::vector<size_t> *exclude_;
     size_t next_excluded_ = 0; // cursor into *exclude_
+    const std::vector<long> *skip_; // points left out whole (sorted)
     std::vector<ReadingRange> range_;
     size_t line_ = 0;
     std::vector<std::pair<const char *, const char *>> f_;
@@ -213,6 +214,13 @@ bool Parser::line(const char *b, const char *le, std::string &err) {
             return false;
         }
     long id = long(v[0]);
+    if (skip_ && std::binary_search(skip_->begin(), skip_->end(), id)) {
+        // A point left out whole: counted in rows (the row indices stay the
+        // file's), nothing else.
+        if (exclude_ && next_excluded_ < exclude_->size() && (*exclude_)[next_excluded_] == d_.rows) ++next_excluded_;
+        ++d_.rows;
+        return true;
+    }
     auto it = index_.find(id);
     size_t g;
     if (it == index_.end()) {
@@ -460,8 +468,34 @@ bool for_each_sample(const Dataset &d, const Visit &visit, std::string &err) {
     }
     Dataset again;
     const Tap tap = [&](size_t g, size_t, size_t, const double *l) { visit(g, l); };
-    Parser p(d.path, again, &d, &tap, &d.excluded_rows);
+    Parser p(d.path, again, &d, &tap, &d.excluded_rows, &d.excluded_points);
     return stream_lines(SourceReader{*d.source, err}, p, err);
+}
+
+bool without_points(const Dataset &d, const std::vector<long> &points, Dataset &out, std::string &err) {
+    if (!d.source) {
+        err = d.path + ": the dataset's rows cannot be read again (it was not read by load_dataset or parse_dataset)";
+        return false;
+    }
+    std::vector<long> skip = d.excluded_points;
+    skip.insert(skip.end(), points.begin(), points.end());
+    std::sort(skip.begin(), skip.end());
+    skip.erase(std::unique(skip.begin(), skip.end()), skip.end());
+    Dataset again;
+    Parser p(d.path, again, nullptr, nullptr, &d.excluded_rows, &skip);
+    if (!stream_lines(SourceReader{*d.source, err}, p, err)) return false;
+    if (again.pos.empty()) {
+        err = d.path + ": no position would be left without points " + std::to_string(skip.size()) + " listed";
+        return false;
+    }
+    again.source = d.source;
+    again.glitches = d.glitches;
+    again.excluded_rows = d.excluded_rows;
+    again.glitch_z = d.glitch_z;
+    std::copy(std::begin(d.glitch_scale), std::end(d.glitch_scale), again.glitch_scale);
+    again.excluded_points = std::move(skip);
+    out = std::move(again);
+    return true;
 }
 
 bool DatasetWriter::open(const std::string &path, const std::vector<std::string> &protect, std::string &err) {

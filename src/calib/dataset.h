@@ -72,6 +72,9 @@ struct Dataset {
     std::vector<size_t> excluded_rows;
     double glitch_z = 0;         // the screen's threshold (robust sd), 0 when it did not run
     double glitch_scale[4] = {}; // the cables' pooled noise scale it used (mm)
+    // Points left out whole (without_points: the diagnosis' outliers),
+    // sorted; their rows are still counted in `rows`.
+    std::vector<long> excluded_points;
 };
 
 // Reads the rows of `d` again, in file order, and calls visit(position
@@ -102,6 +105,12 @@ constexpr double kDatasetMaxLengthMm = 10000.0;
 // samples set aside (Dataset::glitches says which, and why).
 bool load_dataset(const std::string &path, Dataset &out, std::string &err, bool *io_failure = nullptr);
 bool parse_dataset(const std::string &text, const std::string &source, Dataset &out, std::string &err);
+
+// `d` read again without the rows of `points` (any order; added to those
+// already left out), glitches still set aside: the diagnosis' second round
+// without the positions it set aside as outliers. False + err when the rows
+// cannot be read again, or no position would be left.
+bool without_points(const Dataset &d, const std::vector<long> &points, Dataset &out, std::string &err);
 
 // The one dataset writer: the header, then add_row() per sample, then
 // commit() (atomic: io::AtomicFile). Rows are written as they come, so a

@@ -214,5 +214,53 @@ Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free) {
     return v;
 }
 
+std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig) {
+    const size_t P = E.res.size();
+    size_t used = 0;
+    for (size_t j = 0; j < P; ++j)
+        if (E.ok[j]) ++used;
+    std::vector<Outlier> out;
+    if (used < 3) return out;
+    const double q = chi2_isf(0.01 / double(used), 3); // 1 % family-wise, as judge()
+    std::vector<double> chi2(P, 0.0), typical;
+    for (size_t j = 0; j < P; ++j) {
+        if (!E.ok[j]) continue;
+        for (int a = 0; a < 3; ++a) chi2[j] += E.res[j](a) * E.res[j](a) / (E.var_mean[j](a) + jig(a) * jig(a));
+        typical.push_back(chi2[j]);
+    }
+    // Only against a model that fits the bulk: the median position's
+    // chi-square at most kOutlierBulkRatio times chi2(3)'s median (2.366).
+    // A model far from the data leaves a large smooth residual whose
+    // curvature no neighbour average follows (edges and corners would look
+    // isolated); that is the verdict's to judge, not outliers.
+    std::nth_element(typical.begin(), typical.begin() + std::ptrdiff_t(typical.size() / 2), typical.end());
+    if (typical[typical.size() / 2] > kOutlierBulkRatio * chi2_isf(0.5, 3)) return out;
+    for (size_t j = 0; j < P; ++j) {
+        if (!E.ok[j]) continue;
+        V3 s2;
+        for (int a = 0; a < 3; ++a) s2(a) = E.var_mean[j](a) + jig(a) * jig(a);
+        const double c = chi2[j];
+        if (!(c > q)) continue;
+        V3 mean = V3::Zero(), var = V3::Zero();
+        int n = 0;
+        for (int k : G.nb[j]) {
+            if (!E.ok[size_t(k)]) continue;
+            mean += E.res[size_t(k)];
+            for (int a = 0; a < 3; ++a) var(a) += E.var_mean[size_t(k)](a) + jig(a) * jig(a);
+            ++n;
+        }
+        if (n < 2) continue; // no neighbours to speak for the smooth part
+        mean /= n;
+        var /= double(n) * n;
+        const double cn = ((E.res[j] - mean).array().square() / (s2 + var).array()).sum();
+        if (!(cn > q)) continue;
+        Outlier o;
+        o.j = j, o.chi2 = c, o.chi2_nb = cn, o.res = E.res[j], o.nb = mean;
+        out.push_back(o);
+    }
+    if (double(out.size()) > std::max(1.0, kOutlierMaxFraction * double(used))) out.clear();
+    return out;
+}
+
 } // namespace diag
 } // namespace cdm

@@ -40,5 +40,29 @@ double moran_z(const std::vector<double> &zv, const std::vector<char> &ok, const
 // parameters.
 Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free);
 
+// A position the model and its neighbours both disown: its residual fails
+// the chi-square against the noise and the jig's tolerance (3 dof, 1 %
+// family-wise over the positions, as judge() fails positions), and so does
+// its difference from the mean residual of its neighbours on the plate
+// (same height; at least two), so it is no part of a smooth structure a
+// missing effect would leave. A mis-seated probe, a wrong hole, a bump
+// during the samples. More than kOutlierMaxFraction of the positions are
+// not "a few bad positions" but a worse jig or a wrong model, and none is
+// returned: the verdict judges them. Nor against a model far from the data
+// (kOutlierBulkRatio below).
+constexpr double kOutlierMaxFraction = 0.02;
+// Only against a model that fits the bulk of the positions: the median
+// position's chi-square at most this many times chi-square(3)'s median.
+constexpr double kOutlierBulkRatio = 2.0;
+struct Outlier {
+    size_t j = 0;          // position index
+    double chi2 = 0;       // against the noise and the jig (3 dof)
+    double chi2_nb = 0;    // its difference from its neighbours' mean
+    V3 res = V3::Zero();   // its residual (mm)
+    V3 nb = V3::Zero();    // the neighbours' mean residual (mm)
+};
+// E: the residual with the jig's own offsets removed; jig: its tolerance.
+std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig);
+
 } // namespace diag
 } // namespace cdm

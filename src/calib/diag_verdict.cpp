@@ -114,6 +114,32 @@ std::string glitches_words(const Dataset &d) {
            "Every number here is without them.";
 }
 
+std::string outliers_words(const nlohmann::json &set_aside, size_t read) {
+    double lo = INFINITY, hi = 0, nb = 0;
+    std::string points;
+    for (size_t k = 0; k < set_aside.size(); ++k) {
+        const auto &o = set_aside[k];
+        double r = 0, n = 0;
+        for (int a = 0; a < 3; ++a) {
+            r += o["residual_mm"][size_t(a)].get<double>() * o["residual_mm"][size_t(a)].get<double>();
+            n += o["neighbours_mm"][size_t(a)].get<double>() * o["neighbours_mm"][size_t(a)].get<double>();
+        }
+        lo = std::min(lo, std::sqrt(r));
+        hi = std::max(hi, std::sqrt(r));
+        nb = std::max(nb, std::sqrt(n));
+        if (k < 8) points += (k ? ", " : "") + std::to_string(o["point"].get<long>());
+    }
+    if (set_aside.size() > 8) points += ", ...";
+    const bool one = set_aside.size() == 1;
+    return "Set aside as " + std::string(one ? "an outlier" : "outliers") + ": " + std::to_string(set_aside.size()) +
+           " of " + std::to_string(read) + " positions (point" + (one ? " " : "s ") + points + "), off by " +
+           (one ? fmt_num(hi, 3) : fmt_num(lo, 3) + " to " + fmt_num(hi, 3)) +
+           " mm where the mean of their neighbours is within " + fmt_num(nb, 3) +
+           " mm of the model (each beyond the 1 % family-wise chi-square against the noise and the jig, and against its "
+           "neighbours): a mis-seated probe, a wrong hole or a bump during the samples, not the device; re-measure " +
+           (one ? "it" : "them") + ". Every number here is without " + (one ? "it" : "them") + ".";
+}
+
 } // namespace diag
 } // namespace cdm
 

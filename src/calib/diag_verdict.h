@@ -40,6 +40,9 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
 constexpr size_t kGlitchesListed = 100;
 nlohmann::json glitches_json(const Dataset &d);
 std::string glitches_words(const Dataset &d);
+// The positions diagnose() set aside as outliers (data.outliers.set_aside),
+// of `read` positions, as a sentence for the verdict.
+std::string outliers_words(const nlohmann::json &set_aside, size_t read);
 
 
 } // namespace diag

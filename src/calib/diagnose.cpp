@@ -113,8 +113,11 @@ std::string effect_advice(const Model &m, const FitReport &rep, const std::vecto
 
 // ============================================================== diagnose
 
-bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOptions &opt, json &out, Model &fitted,
-              std::string &err) {
+// One round of the diagnosis on `data`; `outliers`: the positions the
+// model and their neighbours both disown (find_outliers), for diagnose() to
+// set aside.
+static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const DiagnoseOptions &opt, json &out,
+                          Model &fitted, std::string &err, std::vector<Outlier> &outliers) {
     auto t0 = std::chrono::steady_clock::now();
     FitCalibrationOptions fopt;
     fopt.effects = opt.effects;
@@ -217,6 +220,7 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     Eval bJ = bE;
     for (size_t j = 0; j < P; ++j) bJ.res[j] -= ja.offset[j];
     json findings = residual_findings(pos, shifted(lv, ja.offset), bJ, bjig);
+    if (opt.outliers) outliers = find_outliers(bJ, cf.grid, bjig);
     if (!jig_report["finding"].is_null()) findings.push_back(jig_report["finding"]);
 
     // --- what needs every sample: the maxima of the reported evaluations and
@@ -461,6 +465,50 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     out["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     fitted = model;
     ctx.report("done", 1.0);
+    return true;
+}
+
+// Outliers: the diagnosis is run again without the positions it set aside
+// (their pull on the jig's tolerance and on the fits gone, more can show:
+// at most kOutlierRounds rounds), and says which they were.
+bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOptions &opt, json &out, Model &fitted,
+              std::string &err) {
+    constexpr int kOutlierRounds = 3;
+    std::vector<Outlier> found;
+    if (!diagnose_data(data, g, opt, out, fitted, err, found)) return false;
+    json set_aside = json::array();
+    const size_t P0 = data.pos.size();
+    Dataset kept;
+    const Dataset *cur = &data;
+    for (int round = 1; round < kOutlierRounds && !found.empty(); ++round) {
+        std::vector<long> ids;
+        for (auto &o : found) {
+            const JigHole &h = cur->pos[o.j];
+            ids.push_back(h.point);
+            set_aside.push_back({{"point", h.point},
+                                 {"ref", {h.ref[0], h.ref[1], h.ref[2]}},
+                                 {"residual_mm", {o.res(0), o.res(1), o.res(2)}},
+                                 {"neighbours_mm", {o.nb(0), o.nb(1), o.nb(2)}},
+                                 {"chi2", o.chi2},
+                                 {"chi2_neighbours", o.chi2_nb},
+                                 {"round", round}});
+        }
+        Dataset next;
+        if (!without_points(*cur, ids, next, err)) return false;
+        kept = std::move(next);
+        cur = &kept;
+        found.clear();
+        if (!diagnose_data(*cur, g, opt, out, fitted, err, found)) return false;
+    }
+    out["data"]["outliers"] = {{"count", set_aside.size()},
+                               {"positions_read", P0},
+                               {"test", "chi-square (3 dof) of the residual against the noise and the jig's tolerance, "
+                                        "and of its difference from the mean residual of its neighbours on the plate, "
+                                        "both beyond the 1 % family-wise level (Bonferroni over the positions); only when "
+                                        "the median position's chi-square is within twice chi2(3)'s median, and at most "
+                                        "2 % of the positions, else none"},
+                               {"set_aside", set_aside}};
+    if (!set_aside.empty()) out["verdict"] = out["verdict"].get<std::string>() + " " + outliers_words(set_aside, P0);
     return true;
 }
 

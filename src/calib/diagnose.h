@@ -22,6 +22,10 @@ struct DiagnoseOptions {
     bool search = true;                // the model search (needs candidates)
     bool validation = true;
     bool per_position = true;
+    // Positions the model and their neighbours both disown (a mis-seated
+    // probe, a wrong hole) are set aside and the diagnosis run again without
+    // them (data.outliers says which); false keeps every position.
+    bool outliers = true;
     std::function<bool(const std::string &stage, double fraction)> progress;
     // Threads for the search's independent fits (0: the machine's cores, at
     // most 8). The result does not depend on it.

@@ -66,6 +66,9 @@ void print_summary(const nlohmann::json &r) {
                 r["structure"]["p_value"].get<double>(), r["failing_positions"].get<int>(),
                 r["data"]["positions"].get<int>());
     std::printf("  explained: %s\n", r["explained"].get<bool>() ? "yes" : "no");
+    if (r["data"].contains("outliers") && r["data"]["outliers"]["count"].get<size_t>() > 0)
+        std::printf("  outliers set aside: %zu of %zu positions (the verdict says which)\n",
+                    r["data"]["outliers"]["count"].get<size_t>(), r["data"]["outliers"]["positions_read"].get<size_t>());
     if (r["data"].contains("glitches") && r["data"]["glitches"]["count"].get<size_t>() > 0)
         std::printf("  glitches set aside: %zu samples at %zu positions (beyond %.1f sd; the verdict says more)\n",
                     r["data"]["glitches"]["count"].get<size_t>(), r["data"]["glitches"]["positions"].get<size_t>(),
@@ -159,7 +162,7 @@ struct DiagArgs {
     std::string data, device, effects, json_out, report, calib_out, plugin;
     std::vector<std::string> before;
     double jig = -1;
-    bool quiet = false, no_candidates = false, no_search = false;
+    bool quiet = false, no_candidates = false, no_search = false, keep_outliers = false;
 };
 
 int write_outputs(const DiagArgs &a, const nlohmann::json &r) {
@@ -199,6 +202,7 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     if (!a.calib_out.empty()) o["calibration_out"] = a.calib_out;
     if (!fit_only && a.no_candidates) o["candidates"] = false;
     if (!fit_only && a.no_search) o["search"] = false;
+    if (!fit_only && a.keep_outliers) o["outliers"] = false;
     char *res = nullptr;
     // fit: cdm_fit, the fit alone (no candidates, review or validation)
     const int rc = (fit_only ? cdm_fit : cdm_diagnose)(a.data.c_str(), device.c_str(), o.dump().c_str(),
@@ -349,6 +353,9 @@ void add_calib_commands(CLI::App &app) {
                    "which effect could be missing");
     diag->add_flag("--no-search", d.no_search,
                    "Skip the model search (forward-backward stepwise by BIC from --effects; on by default)");
+    diag->add_flag("--keep-outliers", d.keep_outliers,
+                   "Keep every position: by default positions that the model and their neighbours on the plate "
+                   "both disown (a mis-seated probe, a wrong hole) are set aside and the diagnosis run again");
     diag->callback([] { select_command([] { return cmd_diagnose(d, false); }); });
 
     auto *fit = calib->add_subcommand("fit", "Fit the model with the given effects and write the calibration");

@@ -102,7 +102,7 @@ def diagnose(data_csv: PathLike, device_json: PathLike, effects: Optional[Union[
     jig_tolerance_mm  the jig's positioning tolerance
     progress          progress(stage: str, fraction: float) -> truthy to cancel
     **options         any other option of cdm_diagnose (candidates=True,
-                      per_position=True, calibration_out="calib.json", ...)"""
+                      per_position=True, outliers=True, calibration_out="calib.json", ...)"""
     return _as_diagnosis(_run("cdm_diagnose", data_csv, device_json, effects, jig_tolerance_mm, progress, options))
 
 

@@ -662,6 +662,15 @@ def _glitch_words(g):
             f"glitches (beyond {fmt_g(g.get('threshold_sd'), 3)} sd of their position's median)")
 
 
+def _outlier_words(o):
+    """The positions the diagnosis set aside as outliers, for the Data line ('' when none)."""
+    if not isinstance(o, dict) or not _finite(o.get("count")) or o["count"] <= 0:
+        return ""
+    pts = [str(x.get("point")) for x in o.get("set_aside", []) if isinstance(x, dict)][:8]
+    return (f"; {int(o['count'])} of {fmt_g(o.get('positions_read'))} positions set aside as outliers "
+            f"(points {_e(', '.join(pts))}{', ...' if o['count'] > 8 else ''})")
+
+
 def section_summary(diag, page):
     page.add("<h2>1. Summary</h2>")
     verdict = diag.get("verdict")
@@ -753,7 +762,8 @@ def section_summary(diag, page):
                       + (f"; {int(data['out_of_workspace_samples'])} samples out of the "
                          f"workspace" if _finite(data.get("out_of_workspace_samples"))
                          and data["out_of_workspace_samples"] > 0 else "")
-                      + _glitch_words(data.get("glitches"))))
+                      + _glitch_words(data.get("glitches"))
+                      + _outlier_words(data.get("outliers"))))
     dev = _dict(diag, "device")
     if dev is not None:
         facts.append(("Device (mm)", ", ".join(

@@ -1,5 +1,5 @@
 // Test helper: a simulated jig dataset as CSV lines, to be tampered with
-// (spikes in the readings) before it is parsed. Include after <cmocka.h>.
+// (spikes in the readings, misplaced references) before it is parsed. Include after <cmocka.h>.
 #pragma once
 
 #include <cstdio>
@@ -53,6 +53,26 @@ inline void spike(std::vector<std::string> &lines, size_t k, int c, double mm) {
     std::string s;
     for (size_t i = 0; i < f.size(); ++i) s += (i ? "," : "") + f[i];
     lines[k] = s;
+}
+
+// Moves the reference of every row of `point` by (0, dy, dz) mm: the jig
+// says the probe was there, it was not (a mis-seated probe, a wrong hole).
+inline void misplace(std::vector<std::string> &lines, long point, double dy, double dz) {
+    const std::string id = std::to_string(point) + ",";
+    for (size_t k = 1; k < lines.size(); ++k) {
+        if (lines[k].compare(0, id.size(), id) != 0) continue;
+        std::vector<std::string> f;
+        std::stringstream ss(lines[k]);
+        for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
+        char v[64];
+        std::snprintf(v, sizeof v, "%.4f", std::atof(f[2].c_str()) + dy);
+        f[2] = v;
+        std::snprintf(v, sizeof v, "%.4f", std::atof(f[3].c_str()) + dz);
+        f[3] = v;
+        std::string s;
+        for (size_t i = 0; i < f.size(); ++i) s += (i ? "," : "") + f[i];
+        lines[k] = s;
+    }
 }
 
 } // namespace test

@@ -58,6 +58,10 @@ static nlohmann::json run(const Model &truth, uint64_t seed, std::vector<std::st
     nlohmann::json out;
     Model fitted{DeviceGeometry{}};
     if (!diagnose(d, truth.geometry(), o, out, fitted, err)) fail_msg("diagnose failed: %s", err.c_str());
+    // The simulator's jigs have no outliers (every position is seated to
+    // the jig's tolerance): none may be set aside, whatever is hidden.
+    if (out["data"]["outliers"]["count"].get<int>() != 0)
+        fail_msg("outliers set aside in data without any: %s", out["data"]["outliers"].dump().c_str());
     return out;
 }
 
@@ -631,6 +635,53 @@ static void spikes_change_nothing_but_their_count(void **) {
         fail_msg("the verdict does not name the glitches: %s", r[1]["verdict"].dump().c_str());
 }
 
+// Three positions whose reference is wrong by 0.6 to 1.4 mm (a mis-seated
+// probe, a wrong hole): set aside by point, the diagnosis run again without
+// them, landing where the file without them lands, with the jig tolerance
+// of the clean file (the outliers would otherwise inflate it toward its
+// 0.05 mm cap). With outliers=false every position is kept.
+static void misplaced_positions_are_set_aside(void **) {
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    assert_true(truth.add_effect("exit_pulley", {{"radius_mm", 1.5}}, err));
+    const std::vector<std::string> clean = test::simulated_lines(small_jig(41), truth);
+    std::vector<std::string> lines = clean;
+    const long bad[3] = {100, 431, 702};
+    test::misplace(lines, bad[0], 0.6, -0.4);
+    test::misplace(lines, bad[1], -1.0, 1.0);
+    test::misplace(lines, bad[2], 0.0, 1.4);
+    nlohmann::json r[3];
+    for (int k = 0; k < 3; ++k) {
+        Dataset d;
+        assert_true(parse_dataset(test::join(k == 0 ? clean : lines), "jig.csv", d, err));
+        DiagnoseOptions o;
+        o.validation = false;
+        o.per_position = false;
+        o.outliers = k != 2;
+        Model fitted{DeviceGeometry{}};
+        if (!diagnose(d, truth.geometry(), o, r[k], fitted, err)) fail_msg("diagnose failed: %s", err.c_str());
+        check_consistent(r[k]);
+    }
+    assert_int_equal(r[0]["data"]["outliers"]["count"].get<int>(), 0);
+    const auto &out = r[1]["data"]["outliers"];
+    std::vector<long> got;
+    for (auto &x : out["set_aside"]) got.push_back(x["point"].get<long>());
+    std::sort(got.begin(), got.end());
+    if (got != std::vector<long>(bad, bad + 3)) fail_msg("set aside: %s", out.dump().c_str());
+    assert_int_equal(r[1]["data"]["positions"].get<int>(), 845 - 3);
+    assert_true(sorted_names(r[1]["recommended"]["effects"]) == std::vector<std::string>{"exit_pulley"});
+    assert_true(r[1]["recommended"]["explained"].get<bool>());
+    if (r[1]["verdict"].get<std::string>().find("Set aside as outliers: 3 of 845 positions") == std::string::npos)
+        fail_msg("the verdict does not name the outliers: %s", r[1]["verdict"].dump().c_str());
+    // The jig tolerance: the clean file's to its sampling error (~5 %, as
+    // in clean_data_is_explained); kept, the outliers inflate it.
+    const double j0 = r[0]["jig_tolerance_mm"]["value"].get<double>(), j1 = r[1]["jig_tolerance_mm"]["value"].get<double>(),
+                 j2 = r[2]["jig_tolerance_mm"]["value"].get<double>();
+    if (std::fabs(j1 - j0) > 0.05 * j0) fail_msg("jig tolerance %g without the outliers, %g in the clean file", j1, j0);
+    if (!(j2 > 1.1 * j0)) fail_msg("kept, the outliers leave the jig tolerance at %g (clean %g)", j2, j0);
+    assert_int_equal(r[2]["data"]["outliers"]["count"].get<int>(), 0);
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(per_sample_statistics_without_samples),
@@ -647,6 +698,7 @@ int main(void) {
         cmocka_unit_test(plate_is_named_as_the_jig),
         cmocka_unit_test(smooth_repeat_is_not_the_plate),
         cmocka_unit_test(spikes_change_nothing_but_their_count),
+        cmocka_unit_test(misplaced_positions_are_set_aside),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

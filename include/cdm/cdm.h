@@ -529,8 +529,9 @@ CDM_API int cdm_diagnose(const char *data_csv_path, const char *device_json_path
  * *result_json (free with cdm_free_string): {"effects": [{"name", "params":
  * {p: {value, std, unit}}}], "fit": {converged, chi2, dof, n_free,
  * evaluations, seconds, algorithm, message}, "jig_tolerance_mm": [x,y,z],
- * "nominal_error_mm" and "error_mm": {x,y,z} x {mean,std,rms,max}}.
- * Errors as cdm_diagnose's. Any thread. */
+ * "nominal_error_mm" and "error_mm": {x,y,z} x {mean,std,rms,max},
+ * "glitches": the samples set aside as the file was read, as the
+ * diagnosis' data.glitches}. Errors as cdm_diagnose's. Any thread. */
 CDM_API int cdm_fit(const char *data_csv_path, const char *device_json_path, const char *options_json,
                     cdm_progress_fn progress, void *user, char **result_json);
 

@@ -4,6 +4,7 @@
 
 #include "api/errors.h"
 #include "api/jobs.h"
+#include "calib/diagnose.h"
 #include "calib/fit_calibration.h"
 #include "cdm/cdm.h"
 #include "model/effect.h"
@@ -12,7 +13,7 @@ namespace {
 
 using nlohmann::json;
 
-json result_json(const cdm::CalibrationFit &cf) {
+json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data) {
     json eff = json::array();
     for (size_t k = 0; k < cf.model.effect_count(); ++k) {
         const auto &d = cf.model.effect_desc(k);
@@ -33,7 +34,9 @@ json result_json(const cdm::CalibrationFit &cf) {
               {"algorithm", cf.report.algorithm}, {"message", cf.report.message}}},
             {"jig_tolerance_mm", {cf.jig(0), cf.jig(1), cf.jig(2)}},
             {"nominal_error_mm", cdm::diag::stats3(cf.nominal.err)},
-            {"error_mm", cdm::diag::stats3(cf.fitted.err)}};
+            {"error_mm", cdm::diag::stats3(cf.fitted.err)},
+            // The samples the dataset's screen set aside (the diagnosis' data.glitches).
+            {"glitches", cdm::diag::glitches_json(data)}};
 }
 
 } // namespace
@@ -57,7 +60,7 @@ extern "C" int cdm_fit(const char *data_csv_path, const char *device_json_path, 
         cdm::CalibrationFit cf(in.geometry);
         std::string err;
         if (!cdm::fit_calibration(in.data, in.geometry, opt, cf, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
-        const json out = result_json(cf);
+        const json out = result_json(cf, in.data);
         if (int rc = cdm::api::commit_calibration(in, cf.model, data_csv_path, out["error_mm"])) return rc;
         return cdm::api::return_json(out, "cdm_fit", result_json_out);
     });

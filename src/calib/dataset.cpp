@@ -384,13 +384,13 @@ bool screen_glitches(Dataset &d, Parser &p, std::string &err) {
     d.glitch_z = s.z;
     std::copy(std::begin(s.scale), std::end(s.scale), d.glitch_scale);
     if (!s.any()) return true;
-    std::vector<ScreenSample> samples;
+    GlitchJudge judge(d, s);
     const Tap collect = [&](size_t g, size_t row, size_t line, const double *l) {
         if (!s.suspect[g]) return;
         ScreenSample x;
         x.g = g, x.row = row, x.line = line;
         std::copy(l, l + 4, x.l);
-        samples.push_back(x);
+        judge.add(x);
     };
     {
         Dataset again;
@@ -399,7 +399,9 @@ bool screen_glitches(Dataset &d, Parser &p, std::string &err) {
     }
     std::vector<DatasetGlitch> glitches;
     std::vector<size_t> rows;
-    glitch_flags(d, s, samples, glitches, rows);
+    judge.finish(glitches, rows);
+    d.glitch_held = judge.peak_samples();
+    if (judge.abandoned()) d.glitch_z = 0; // gave up (kGlitchMaxHeld): not screened
     if (rows.empty()) return true;
     Dataset clean;
     Parser p3(d.path, clean, nullptr, nullptr, &rows);
@@ -408,6 +410,7 @@ bool screen_glitches(Dataset &d, Parser &p, std::string &err) {
     clean.glitches = std::move(glitches);
     clean.excluded_rows = std::move(rows);
     clean.glitch_z = d.glitch_z;
+    clean.glitch_held = d.glitch_held;
     std::copy(std::begin(d.glitch_scale), std::end(d.glitch_scale), clean.glitch_scale);
     d = std::move(clean);
     return true;
@@ -492,6 +495,7 @@ bool without_points(const Dataset &d, const std::vector<long> &points, Dataset &
     again.glitches = d.glitches;
     again.excluded_rows = d.excluded_rows;
     again.glitch_z = d.glitch_z;
+    again.glitch_held = d.glitch_held;
     std::copy(std::begin(d.glitch_scale), std::end(d.glitch_scale), again.glitch_scale);
     again.excluded_points = std::move(skip);
     out = std::move(again);

@@ -72,6 +72,7 @@ struct Dataset {
     std::vector<size_t> excluded_rows;
     double glitch_z = 0;         // the screen's threshold (robust sd), 0 when it did not run
     double glitch_scale[4] = {}; // the cables' pooled noise scale it used (mm)
+    size_t glitch_held = 0;      // most samples the screen held at once (one position's in a jig file)
     // Points left out whole (without_points: the diagnosis' outliers),
     // sorted; their rows are still counted in `rows`.
     std::vector<long> excluded_points;

@@ -4,14 +4,15 @@
 #include <algorithm>
 #include <cmath>
 
+#include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/normal.hpp>
 
 namespace cdm {
 
 namespace {
 
-// Median of chi-square(k) / k (Wilson-Hilferty; within 0.3 % for k >= 2).
-double chi2_median_ratio(double k) { return std::pow(1 - 2 / (9 * k), 3); }
+// Median of chi-square(k) / k.
+double chi2_median_ratio(double k) { return boost::math::median(boost::math::chi_squared(k)) / k; }
 
 double median(std::vector<double> &v) {
     const size_t h = v.size() / 2;
@@ -23,6 +24,7 @@ double median(std::vector<double> &v) {
 
 constexpr double kScreenAlpha = 0.01;   // family-wise, over every reading
 constexpr int kScreenMinSamples = 3;    // a median needs three
+constexpr size_t kScreenMinPositions = 10; // for the pooled noise scale
 constexpr double kMadToSd = 1.4826;     // Gaussian consistency of the MAD
 
 } // namespace
@@ -36,7 +38,7 @@ GlitchScreen glitch_suspects(const Dataset &d, const std::vector<ReadingRange> &
         std::vector<double> v;
         for (auto &p : d.pos)
             if (p.n >= kScreenMinSamples) v.push_back(p.cov[c][c] / chi2_median_ratio(p.n - 1));
-        if (v.size() < 3) return GlitchScreen{}; // too few positions to know the noise
+        if (v.size() < kScreenMinPositions) return GlitchScreen{}; // too few positions to know the noise
         s.scale[c] = std::max(std::sqrt(std::max(0.0, median(v))), d.resolution[c]);
     }
     s.z = boost::math::quantile(boost::math::complement(boost::math::normal(), kScreenAlpha / (8.0 * double(d.rows))));
@@ -49,58 +51,88 @@ GlitchScreen glitch_suspects(const Dataset &d, const std::vector<ReadingRange> &
     return s;
 }
 
-void glitch_flags(const Dataset &d, const GlitchScreen &s, std::vector<ScreenSample> &samples,
-                  std::vector<DatasetGlitch> &glitches, std::vector<size_t> &rows) {
-    std::stable_sort(samples.begin(), samples.end(),
-                     [](const ScreenSample &a, const ScreenSample &b) { return a.g < b.g; });
+void GlitchJudge::add(const ScreenSample &x) {
+    if (abandoned_) return;
+    if (open_.empty()) open_.resize(d_.pos.size());
+    if (held_ >= kGlitchMaxHeld) {
+        // An interleaved file (or one enormous position): its suspects'
+        // samples would pile up; the screen gives up rather than the memory.
+        abandoned_ = true;
+        std::vector<std::vector<ScreenSample>>().swap(open_);
+        held_ = 0;
+        return;
+    }
+    auto &v = open_[x.g];
+    v.push_back(x);
+    peak_ = std::max(peak_, ++held_);
+    if (v.size() < size_t(d_.pos[x.g].n)) return;
+    judge(v);
+    held_ -= v.size();
+    std::vector<ScreenSample>().swap(v);
+}
+
+void GlitchJudge::judge(std::vector<ScreenSample> &samples) {
+    const size_t n = samples.size();
     std::vector<double> v;
+    double med[4], sd[4];
+    // The median is itself estimated (variance pi/2 sigma^2/n for Gaussian
+    // noise): a reading's distance to it has sd sigma * sqrt(1 + pi/(2n)),
+    // without which 3 samples a position would lose a clean one in about
+    // one dataset of twelve instead of one of a hundred.
+    const double inflate = std::sqrt(1 + 1.5707963267948966 / double(n));
+    for (int c = 0; c < 4; ++c) {
+        v.clear();
+        for (auto &x : samples) v.push_back(x.l[c]);
+        med[c] = median(v);
+        for (auto &y : v) y = std::fabs(y - med[c]);
+        sd[c] = inflate * std::max(s_.scale[c], kMadToSd * median(v));
+    }
     std::vector<DatasetGlitch> here;
     std::vector<size_t> here_rows;
-    for (size_t b = 0; b < samples.size();) {
-        size_t e = b;
-        while (e < samples.size() && samples[e].g == samples[b].g) ++e;
-        const size_t n = e - b;
-        double med[4], sd[4];
+    for (auto &x : samples) {
+        int worst = -1;
+        double zmax = 0;
         for (int c = 0; c < 4; ++c) {
-            v.clear();
-            for (size_t k = b; k < e; ++k) v.push_back(samples[k].l[c]);
-            med[c] = median(v);
-            for (auto &x : v) x = std::fabs(x - med[c]);
-            sd[c] = std::max(s.scale[c], kMadToSd * median(v));
+            if (!(sd[c] > 0)) continue;
+            const double z = std::fabs(x.l[c] - med[c]) / sd[c];
+            if (z > zmax) zmax = z, worst = c;
         }
-        here.clear();
-        here_rows.clear();
-        for (size_t k = b; k < e; ++k) {
-            int worst = -1;
-            double zmax = 0;
-            for (int c = 0; c < 4; ++c) {
-                if (!(sd[c] > 0)) continue;
-                const double z = std::fabs(samples[k].l[c] - med[c]) / sd[c];
-                if (z > zmax) zmax = z, worst = c;
-            }
-            if (zmax > s.z) {
-                DatasetGlitch gl;
-                gl.line = samples[k].line;
-                gl.point = d.pos[samples[k].g].point;
-                gl.cable = worst + 1;
-                gl.reading = samples[k].l[worst];
-                gl.median = med[worst];
-                gl.z = zmax;
-                here.push_back(gl);
-                here_rows.push_back(samples[k].row);
-            }
+        if (zmax > s_.z) {
+            DatasetGlitch gl;
+            gl.line = x.line;
+            gl.point = d_.pos[x.g].point;
+            gl.cable = worst + 1;
+            gl.reading = x.l[worst];
+            gl.median = med[worst];
+            gl.z = zmax;
+            here.push_back(gl);
+            here_rows.push_back(x.row);
         }
-        // Glitches are rare; a quarter of a position's samples apart is two
-        // populations, not glitches (dataset_glitches.h).
-        if (!here.empty() && here.size() <= std::max<size_t>(1, n / 4)) {
-            glitches.insert(glitches.end(), here.begin(), here.end());
-            rows.insert(rows.end(), here_rows.begin(), here_rows.end());
-        }
-        b = e;
     }
-    std::sort(glitches.begin(), glitches.end(),
+    // Glitches are rare; a quarter of a position's samples apart is two
+    // populations, not glitches (dataset_glitches.h).
+    if (!here.empty() && here.size() <= std::max<size_t>(1, n / 4)) {
+        glitches_.insert(glitches_.end(), here.begin(), here.end());
+        rows_.insert(rows_.end(), here_rows.begin(), here_rows.end());
+    }
+}
+
+void GlitchJudge::finish(std::vector<DatasetGlitch> &glitches, std::vector<size_t> &rows) {
+    if (abandoned_) {
+        glitches.clear();
+        rows.clear();
+        return;
+    }
+    // Every suspect position is complete after a whole pass; what is still
+    // open would be a file that changed, which the pass itself refuses.
+    for (auto &v : open_)
+        if (!v.empty()) judge(v);
+    open_.clear();
+    std::sort(glitches_.begin(), glitches_.end(),
               [](const DatasetGlitch &a, const DatasetGlitch &b) { return a.line < b.line; });
-    std::sort(rows.begin(), rows.end());
+    std::sort(rows_.begin(), rows_.end());
+    glitches = std::move(glitches_);
+    rows = std::move(rows_);
 }
 
 } // namespace cdm

@@ -13,12 +13,14 @@
 //   s = max(the cable's pooled noise sd, the position's own 1.4826 * MAD),
 //   z = the two-sided Gaussian quantile at 0.01 / (4 * rows) (Bonferroni
 //       over every reading: on clean Gaussian data the screen sets aside a
-//       sample in one dataset of a hundred).
+//       sample in one dataset of a hundred), times sqrt(1 + pi / (2n)) for
+//       the median's own uncertainty with n samples.
 //
 // The pooled sd is robust: the median over positions of their sample
 // variances, each divided by the median of chi-square(n-1)/(n-1), so that
 // the glitches themselves (which inflate some positions' variances without
-// bound) do not widen it. The position's own MAD keeps a position that is
+// bound) do not widen it; it needs 10 positions of 3 samples or more, else
+// nothing is screened. The position's own MAD keeps a position that is
 // really noisier (a worn track) from being clipped: its samples are judged
 // against its own spread. The floor is the readings' resolution (one ADC
 // step is never a glitch). A position with fewer than 3 samples has no
@@ -29,6 +31,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <cstddef>
 #include <vector>
 
@@ -61,9 +64,33 @@ using ReadingRange = std::array<double, 8>;
 // a glitch: the range is at least any reading's distance to the median).
 GlitchScreen glitch_suspects(const Dataset &d, const std::vector<ReadingRange> &range);
 
-// From the suspects' samples (reordered here): the glitches, by line, and
-// their data rows, sorted.
-void glitch_flags(const Dataset &d, const GlitchScreen &s, std::vector<ScreenSample> &samples,
-                  std::vector<DatasetGlitch> &glitches, std::vector<size_t> &rows);
+// At most this many samples held at once (56 MiB); beyond, the screen gives
+// up and sets nothing aside (Dataset::glitch_z = 0 says it did not run).
+constexpr size_t kGlitchMaxHeld = size_t(1) << 20;
+
+// The screen's second pass: fed each suspect position's samples as the
+// rows come, it judges a position as soon as it holds all of them (their
+// count is known from the first pass) and lets them go, so a file written
+// position by position (a jig session) holds one position's samples at a
+// time; an interleaved file holds those of the positions still open.
+class GlitchJudge {
+public:
+    GlitchJudge(const Dataset &d, const GlitchScreen &s) : d_(d), s_(s) {}
+    void add(const ScreenSample &x);
+    // The glitches, by line, and their data rows, sorted.
+    void finish(std::vector<DatasetGlitch> &glitches, std::vector<size_t> &rows);
+    size_t peak_samples() const { return peak_; } // most samples held at once
+    bool abandoned() const { return abandoned_; }   // kGlitchMaxHeld reached: nothing set aside
+
+private:
+    void judge(std::vector<ScreenSample> &samples);
+    const Dataset &d_;
+    const GlitchScreen &s_;
+    std::vector<std::vector<ScreenSample>> open_; // per position, until complete
+    size_t held_ = 0, peak_ = 0;
+    bool abandoned_ = false;
+    std::vector<DatasetGlitch> glitches_;
+    std::vector<size_t> rows_;
+};
 
 } // namespace cdm

@@ -48,8 +48,9 @@ Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free);
 // missing effect would leave. A mis-seated probe, a wrong hole, a bump
 // during the samples. More than kOutlierMaxFraction of the positions are
 // not "a few bad positions" but a worse jig or a wrong model, and none is
-// returned: the verdict judges them. Nor against a model far from the data
-// (kOutlierBulkRatio below).
+// returned: the verdict judges them (diagnose() also caps the total over
+// its rounds at this fraction of the positions read). Nor against a model
+// far from the data (kOutlierBulkRatio below).
 constexpr double kOutlierMaxFraction = 0.02;
 // Only against a model that fits the bulk of the positions: the median
 // position's chi-square at most this many times chi-square(3)'s median.

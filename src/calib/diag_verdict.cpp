@@ -6,6 +6,7 @@
 #include <set>
 
 #include "calib/diag_findings.h"
+#include "calib/diagnose.h"
 
 namespace cdm {
 namespace diag {
@@ -80,12 +81,15 @@ nlohmann::json glitches_json(const Dataset &d) {
             list.push_back({{"line", g.line}, {"point", g.point}, {"cable", g.cable}, {"reading_mm", g.reading},
                             {"median_mm", g.median}, {"sd", g.z}});
     }
-    return {{"count", d.glitches.size()},
+    return {{"screened", d.glitch_z > 0},
+            {"count", d.glitches.size()},
             {"positions", points.size()},
             {"threshold_sd", d.glitch_z},
             {"noise_sd_mm", std::vector<double>(d.glitch_scale, d.glitch_scale + 4)},
             {"test", "|reading - position median| > threshold_sd * max(cable's pooled noise sd, position's 1.4826 MAD); "
-                     "threshold: two-sided Gaussian, Bonferroni 0.01 over every reading"},
+                     "threshold: two-sided Gaussian, Bonferroni 0.01 over every reading, times sqrt(1 + pi/(2n)) for the "
+                     "median of n samples; not screened (screened: false) with fewer than 10 positions of 3 samples or "
+                     "when the suspects' samples would exceed 2^20 held at once"},
             {"samples", list}};
 }
 
@@ -104,14 +108,19 @@ std::string glitches_words(const Dataset &d) {
     std::string cables;
     for (int c = 0; c < 4; ++c)
         if (per_cable[c]) cables += (cables.empty() ? "" : ", ") + std::to_string(per_cable[c]) + " on cable " + std::to_string(c + 1);
+    const bool one = d.glitches.size() == 1;
+    const std::string off = one ? fmt_num(worst->z, 0) : fmt_num(lo, 0) + " to " + fmt_num(worst->z, 0);
     return "The data as read: " + std::to_string(d.glitches.size()) + " of " + std::to_string(d.rows) +
-           " samples, at " + std::to_string(points.size()) + " positions, were set aside as glitches (" + cables +
-           "): one reading off its position's median by " + fmt_num(lo, 0) + " to " + fmt_num(worst->z, 0) +
-           " times the noise (beyond " + fmt_num(d.glitch_z, 1) + ", the level at which clean data has one such reading "
-           "in a hundred datasets); the largest, " + fmt_num(std::fabs(worst->reading - worst->median), 2) +
-           " mm on cable " + std::to_string(worst->cable) + " at line " + std::to_string(worst->line) + " (point " +
-           std::to_string(worst->point) + "). Spikes like these come from a wiper or a connector: check the pots' wiring. "
-           "Every number here is without them.";
+           (one ? " samples was set aside as a glitch (" : " samples, at " + std::to_string(points.size()) +
+                                                          (points.size() == 1 ? " position" : " positions") +
+                                                          ", were set aside as glitches (") +
+           cables + "): one reading off its position's median by " + off +
+           " times the noise (the threshold: " + fmt_num(d.glitch_z, 1) +
+           ", where clean Gaussian data loses one reading in a hundred datasets); " + (one ? "it is " : "the largest, ") +
+           fmt_num(std::fabs(worst->reading - worst->median), 2) + " mm on cable " + std::to_string(worst->cable) +
+           " at line " + std::to_string(worst->line) + " (point " + std::to_string(worst->point) +
+           "). Spikes like these come from a wiper or a connector: check the pots' wiring. The statistics above are "
+           "without " + (one ? "it." : "them.");
 }
 
 std::string outliers_words(const nlohmann::json &set_aside, size_t read) {
@@ -137,7 +146,7 @@ std::string outliers_words(const nlohmann::json &set_aside, size_t read) {
            " mm where the mean of their neighbours is within " + fmt_num(nb, 3) +
            " mm of the model (each beyond the 1 % family-wise chi-square against the noise and the jig, and against its "
            "neighbours): a mis-seated probe, a wrong hole or a bump during the samples, not the device; re-measure " +
-           (one ? "it" : "them") + ". Every number here is without " + (one ? "it" : "them") + ".";
+           (one ? "it" : "them") + ". The statistics above are without " + (one ? "it" : "them") + ".";
 }
 
 } // namespace diag

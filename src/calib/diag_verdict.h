@@ -34,11 +34,9 @@ struct Judgement {
 Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candidate> *cands,
                       const nlohmann::json *findings, const V3 &noise);
 
-// The samples the dataset's glitch screen set aside (calib/dataset_glitches.h):
-// the JSON of data.glitches (the count, the test, the first
-// kGlitchesListed by line) and a sentence for the verdict ("" when none).
-constexpr size_t kGlitchesListed = 100;
-nlohmann::json glitches_json(const Dataset &d);
+// The samples the dataset's glitch screen set aside (calib/dataset_glitches.h)
+// as a sentence for the verdict ("" when none); their JSON is
+// glitches_json (calib/diagnose.h).
 std::string glitches_words(const Dataset &d);
 // The positions diagnose() set aside as outliers (data.outliers.set_aside),
 // of `read` positions, as a sentence for the verdict.

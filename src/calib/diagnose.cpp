@@ -361,6 +361,11 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
                    {"heights", data.heights},
                    {"ignored_columns", data.ignored_columns},
                    {"out_of_workspace_samples", nom.bad_samples},
+                   {"samples_used", [&] {
+                        size_t n = 0;
+                        for (auto &p : data.pos) n += size_t(p.n);
+                        return n;
+                    }()},
                    {"glitches", glitches_json(data)}};
     out["device"] = io::device_to_json(g);
     json mlist = json::array();
@@ -470,7 +475,10 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
 
 // Outliers: the diagnosis is run again without the positions it set aside
 // (their pull on the jig's tolerance and on the fits gone, more can show:
-// at most kOutlierRounds rounds), and says which they were.
+// at most kOutlierRounds diagnoses), and says which they were. At most
+// kOutlierMaxFraction of the positions read, over all rounds (so none below
+// 50 positions: a small jig has no position to spare, and the fit needs its
+// positions).
 bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOptions &opt, json &out, Model &fitted,
               std::string &err) {
     constexpr int kOutlierRounds = 3;
@@ -478,9 +486,11 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     if (!diagnose_data(data, g, opt, out, fitted, err, found)) return false;
     json set_aside = json::array();
     const size_t P0 = data.pos.size();
+    const size_t budget = size_t(std::floor(kOutlierMaxFraction * double(P0)));
     Dataset kept;
     const Dataset *cur = &data;
-    for (int round = 1; round < kOutlierRounds && !found.empty(); ++round) {
+    for (int round = 1; round < kOutlierRounds && !found.empty() && set_aside.size() + found.size() <= budget;
+         ++round) {
         std::vector<long> ids;
         for (auto &o : found) {
             const JigHole &h = cur->pos[o.j];
@@ -500,13 +510,14 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
         found.clear();
         if (!diagnose_data(*cur, g, opt, out, fitted, err, found)) return false;
     }
-    out["data"]["outliers"] = {{"count", set_aside.size()},
+    out["data"]["outliers"] = {{"enabled", opt.outliers},
+                               {"count", set_aside.size()},
                                {"positions_read", P0},
                                {"test", "chi-square (3 dof) of the residual against the noise and the jig's tolerance, "
                                         "and of its difference from the mean residual of its neighbours on the plate, "
                                         "both beyond the 1 % family-wise level (Bonferroni over the positions); only when "
                                         "the median position's chi-square is within twice chi2(3)'s median, and at most "
-                                        "2 % of the positions, else none"},
+                                        "2 % of the positions read over all rounds (none below 50 positions), else none"},
                                {"set_aside", set_aside}};
     if (!set_aside.empty()) out["verdict"] = out["verdict"].get<std::string>() + " " + outliers_words(set_aside, P0);
     return true;

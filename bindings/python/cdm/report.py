@@ -666,7 +666,8 @@ def _outlier_words(o):
     """The positions the diagnosis set aside as outliers, for the Data line ('' when none)."""
     if not isinstance(o, dict) or not _finite(o.get("count")) or o["count"] <= 0:
         return ""
-    pts = [str(x.get("point")) for x in o.get("set_aside", []) if isinstance(x, dict)][:8]
+    sa = o.get("set_aside")
+    pts = [str(x.get("point")) for x in (sa if isinstance(sa, list) else []) if isinstance(x, dict)][:8]
     return (f"; {int(o['count'])} of {fmt_g(o.get('positions_read'))} positions set aside as outliers "
             f"(points {_e(', '.join(pts))}{', ...' if o['count'] > 8 else ''})")
 

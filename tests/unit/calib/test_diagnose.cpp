@@ -602,12 +602,15 @@ static void spikes_change_nothing_but_their_count(void **) {
     assert_true(truth.add_effect("exit_pulley", {{"radius_mm", 1.0}}, err));
     std::vector<std::string> lines = test::simulated_lines(small_jig(31), truth);
     nlohmann::json r[2];
+    int injected = 0;
     for (int spiky = 0; spiky < 2; ++spiky) {
         if (spiky) {
             std::mt19937_64 rng(9);
             for (size_t k = 1; k < lines.size(); ++k)
-                if (rng() % 500 == 0)
+                if (rng() % 500 == 0) {
                     test::spike(lines, k, int(rng() % 4), (rng() % 2 ? 1 : -1) * (2 + double(rng() % 81) / 10));
+                    ++injected;
+                }
         }
         Dataset d;
         assert_true(parse_dataset(test::join(lines), spiky ? "spiky.csv" : "clean.csv", d, err));
@@ -620,7 +623,10 @@ static void spikes_change_nothing_but_their_count(void **) {
     }
     const auto &clean = r[0]["recommended"], &spiky = r[1]["recommended"];
     assert_int_equal(r[0]["data"]["glitches"]["count"].get<int>(), 0);
-    assert_true(r[1]["data"]["glitches"]["count"].get<int>() > 20);
+    // Every spike is 2-10 mm, 40-200 times the 0.05 mm noise: each one is
+    // set aside, and nothing else.
+    assert_true(injected > 20);
+    assert_int_equal(r[1]["data"]["glitches"]["count"].get<int>(), injected);
     if (sorted_names(spiky["effects"]) != std::vector<std::string>{"cable_gain", "exit_pulley"})
         fail_msg("spiky data: recommended %s", spiky["effects"].dump().c_str());
     assert_true(sorted_names(clean["effects"]) == sorted_names(spiky["effects"]));
@@ -680,6 +686,23 @@ static void misplaced_positions_are_set_aside(void **) {
     if (std::fabs(j1 - j0) > 0.05 * j0) fail_msg("jig tolerance %g without the outliers, %g in the clean file", j1, j0);
     if (!(j2 > 1.1 * j0)) fail_msg("kept, the outliers leave the jig tolerance at %g (clean %g)", j2, j0);
     assert_int_equal(r[2]["data"]["outliers"]["count"].get<int>(), 0);
+
+    // A jig of 48 positions has none to spare (2 % of them is less than
+    // one): the misplaced point stays, and the diagnosis still runs.
+    JigSimOptions tiny = small_jig(43);
+    tiny.n = 4;
+    tiny.heights = {30, 50, 70};
+    std::vector<std::string> few = test::simulated_lines(tiny, truth);
+    test::misplace(few, 5, 1.0, 1.0);
+    Dataset d;
+    assert_true(parse_dataset(test::join(few), "tiny.csv", d, err));
+    DiagnoseOptions o;
+    o.validation = false;
+    nlohmann::json t;
+    Model fitted{DeviceGeometry{}};
+    if (!diagnose(d, truth.geometry(), o, t, fitted, err)) fail_msg("diagnose failed: %s", err.c_str());
+    assert_int_equal(t["data"]["outliers"]["count"].get<int>(), 0);
+    assert_int_equal(t["data"]["positions"].get<int>(), 48);
 }
 
 int main(void) {

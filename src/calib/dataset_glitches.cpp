@@ -29,6 +29,8 @@ constexpr double kMadToSd = 1.4826;     // Gaussian consistency of the MAD
 
 } // namespace
 
+double glitch_inflation(int n) { return std::sqrt(1 + 1.5707963267948966 / double(n)); }
+
 bool GlitchScreen::any() const { return std::find(suspect.begin(), suspect.end(), 1) != suspect.end(); }
 
 GlitchScreen glitch_suspects(const Dataset &d, const std::vector<ReadingRange> &range) {
@@ -44,9 +46,22 @@ GlitchScreen glitch_suspects(const Dataset &d, const std::vector<ReadingRange> &
     s.z = boost::math::quantile(boost::math::complement(boost::math::normal(), kScreenAlpha / (8.0 * double(d.rows))));
     s.suspect.assign(d.pos.size(), 0);
     for (size_t g = 0; g < d.pos.size(); ++g) {
-        if (d.pos[g].n < kScreenMinSamples) continue;
-        for (int c = 0; c < 4; ++c)
-            if (s.scale[c] > 0 && range[g][4 + size_t(c)] - range[g][size_t(c)] > s.z * s.scale[c]) s.suspect[g] = 1;
+        const JigHole &p = d.pos[g];
+        if (p.n < kScreenMinSamples) continue;
+        // A reading is set aside only when |reading - median| > t, t at
+        // least z * inflate * scale; then the extreme on its side is as far
+        // from the median, and the median is within the readings'
+        // (population) sd of their mean, for any distribution (Hotelling and
+        // Solomons). So a position can hold a glitch only when an extreme
+        // is more than t - sd from the mean: on clean data about one
+        // position in a thousand, where the range alone let through 40 %.
+        const double t = s.z * glitch_inflation(p.n);
+        for (int c = 0; c < 4; ++c) {
+            if (!(s.scale[c] > 0)) continue;
+            const double sd = std::sqrt(std::max(0.0, p.cov[c][c]) * double(p.n - 1) / double(p.n));
+            const double room = t * s.scale[c] - sd;
+            if (range[g][4 + size_t(c)] - p.mean[c] > room || p.mean[c] - range[g][size_t(c)] > room) s.suspect[g] = 1;
+        }
     }
     return s;
 }
@@ -79,7 +94,7 @@ void GlitchJudge::judge(std::vector<ScreenSample> &samples) {
     // noise): a reading's distance to it has sd sigma * sqrt(1 + pi/(2n)),
     // without which 3 samples a position would lose a clean one in about
     // one dataset of twelve instead of one of a hundred.
-    const double inflate = std::sqrt(1 + 1.5707963267948966 / double(n));
+    const double inflate = glitch_inflation(int(n));
     for (int c = 0; c < 4; ++c) {
         v.clear();
         for (auto &x : samples) v.push_back(x.l[c]);

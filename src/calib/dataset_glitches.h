@@ -59,9 +59,13 @@ struct GlitchScreen {
 // lo in [0, 4), hi in [4, 8).
 using ReadingRange = std::array<double, 8>;
 
+// The threshold's factor for the median's own error with n samples,
+// sqrt(1 + pi / (2n)).
+double glitch_inflation(int n);
+
 // From the first pass's statistics: the threshold, the scales, and the
-// positions whose range exceeds z * scale on some cable (only they can hold
-// a glitch: the range is at least any reading's distance to the median).
+// positions that can hold a glitch (an extreme reading further from the
+// mean than the threshold, less the readings' sd: see the .cpp).
 GlitchScreen glitch_suspects(const Dataset &d, const std::vector<ReadingRange> &range);
 
 // At most this many samples held at once (56 MiB); beyond, the screen gives

@@ -27,20 +27,38 @@ Grid make_grid(const std::vector<PreparedPos> &pos, const std::vector<double> &h
                     best = int(h);
             G.height_index[j] = best;
         }
-    // pitch: the smallest positive spacing in y or z among positions
+    // pitch: the smallest positive spacing between the plate's columns, the
+    // y values that two positions or more share (a column of holes, at every
+    // height). A position whose reference is off the plate's grid (a
+    // misplaced probe: the outliers below) has a y of its own and must not
+    // set the pitch (0.57 mm instead of 5, and no position would find its
+    // neighbours). Scattered positions share none: then every y counts.
     double pitch = INFINITY;
     std::vector<double> ys;
     for (auto &p : pos) ys.push_back(p.ref(1));
     std::sort(ys.begin(), ys.end());
+    std::vector<double> shared;
     for (size_t k = 1; k < ys.size(); ++k)
-        if (ys[k] - ys[k - 1] > 1e-6) pitch = std::min(pitch, ys[k] - ys[k - 1]);
+        if (ys[k] - ys[k - 1] <= 1e-6 && (shared.empty() || ys[k] - shared.back() > 1e-6)) shared.push_back(ys[k]);
+    const std::vector<double> &cols = shared.size() >= 2 ? shared : ys;
+    for (size_t k = 1; k < cols.size(); ++k)
+        if (cols[k] - cols[k - 1] > 1e-6) pitch = std::min(pitch, cols[k] - cols[k - 1]);
     if (!std::isfinite(pitch)) pitch = 5;
     G.pitch = pitch;
     std::map<std::array<long, 3>, int> key;
     auto K = [&](int hi, double y, double z) {
         return std::array<long, 3>{hi, std::lround(y / pitch), std::lround(z / pitch)};
     };
-    for (size_t j = 0; j < P; ++j) key[K(G.height_index[j], pos[j].ref(1), pos[j].ref(2))] = int(j);
+    // Two positions on one grid node (a misplaced probe beside a hole): the
+    // node is the one nearer to it.
+    auto off_node = [&](size_t j) {
+        return std::fabs(pos[j].ref(1) - pitch * std::round(pos[j].ref(1) / pitch)) +
+               std::fabs(pos[j].ref(2) - pitch * std::round(pos[j].ref(2) / pitch));
+    };
+    for (size_t j = 0; j < P; ++j) {
+        auto ins = key.emplace(K(G.height_index[j], pos[j].ref(1), pos[j].ref(2)), int(j));
+        if (!ins.second && off_node(j) < off_node(size_t(ins.first->second))) ins.first->second = int(j);
+    }
     auto find = [&](int hi, double y, double z) {
         auto it = key.find(K(hi, y, z));
         return it == key.end() ? -1 : it->second;

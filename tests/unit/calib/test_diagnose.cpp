@@ -20,6 +20,7 @@
 #include <cfloat>
 
 #include "calib/diag_eval.h"
+#include "calib/diag_spatial.h"
 #include "calib/diagnose.h"
 #include "calib/fit.h"
 #include "calib/simulate.h"
@@ -705,6 +706,31 @@ static void misplaced_positions_are_set_aside(void **) {
     assert_int_equal(t["data"]["positions"].get<int>(), 48);
 }
 
+// A reference off the plate's grid (a misplaced probe) does not set the
+// plate's pitch: the smallest spacing of the y values that columns of
+// holes share is 10 mm, not the 0.57 mm between the misplaced y and its
+// column (with which no position found a neighbour, and the jig's
+// tolerance, Moran's I and the outliers' neighbour test went blind).
+static void grid_ignores_a_misplaced_reference(void **) {
+    std::vector<PreparedPos> pos;
+    for (int h = 0; h < 2; ++h)
+        for (int y = -2; y <= 2; ++y)
+            for (int z = -2; z <= 2; ++z) {
+                PreparedPos p;
+                p.ref = Eigen::Vector3d(30 + 20 * h, 10.0 * y, 10.0 * z);
+                p.mean.setZero();
+                p.var_mean.setZero();
+                p.cov.setZero();
+                pos.push_back(p);
+            }
+    pos[7].ref += Eigen::Vector3d(0, 0.57, -0.4);
+    const diag::Grid G = diag::make_grid(pos, {30, 50});
+    assert_true(std::fabs(G.pitch - 10) < 1e-9);
+    for (size_t j = 0; j < pos.size(); ++j)
+        if (G.nb[j].size() < 2) fail_msg("position %zu has %zu neighbours", j, G.nb[j].size());
+    assert_int_equal(G.nb[12].size(), 4); // the centre of the first plate, beside the moved one
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(per_sample_statistics_without_samples),
@@ -722,6 +748,7 @@ int main(void) {
         cmocka_unit_test(smooth_repeat_is_not_the_plate),
         cmocka_unit_test(spikes_change_nothing_but_their_count),
         cmocka_unit_test(misplaced_positions_are_set_aside),
+        cmocka_unit_test(grid_ignores_a_misplaced_reference),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

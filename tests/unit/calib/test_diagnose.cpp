@@ -197,41 +197,55 @@ static std::vector<std::string> sorted_names(const nlohmann::json &a) {
     return v;
 }
 
+// Hidden effects, each with its magnitudes (empty: random ones from the seed).
+using Truth = std::vector<std::pair<std::string, ParamValues>>;
+
+// The true model, and the names of its effects, sorted, into `want`.
+static Model make_truth(const Truth &t, uint64_t seed, std::vector<std::string> &want) {
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    want.clear();
+    for (auto &e : t) {
+        if (e.second.empty())
+            assert_true(truth.add_effect_random(e.first, seed, err));
+        else
+            assert_true(truth.add_effect(e.first, e.second, err));
+        want.push_back(e.first);
+    }
+    std::sort(want.begin(), want.end());
+    return truth;
+}
+
+// The search lands on `want`: the recommended model, or one the data cannot
+// tell from it (an alternative).
+static void assert_lands_on(const nlohmann::json &r, const std::vector<std::string> &want) {
+    const auto &rec = r["recommended"];
+    bool found = sorted_names(rec["effects"]) == want;
+    for (auto &alt : rec["alternatives"]) found = found || sorted_names(alt) == want;
+    if (!found) fail_msg("hidden %s: recommended %s, alternatives %s", nlohmann::json(want).dump().c_str(),
+                         rec["effects"].dump().c_str(), rec["alternatives"].dump().c_str());
+}
+
 // Several effects hidden at once, small ones among them: following the
 // recommendation lands on them (or on a set the data cannot tell from them,
 // listed as an alternative), at the noise floor, with nothing extra.
 static void search_lands_on_hidden_effects(void **) {
-    struct Case {
-        std::vector<std::pair<std::string, ParamValues>> truth;
-    };
-    const std::vector<Case> cases = {
-        {{{"cable_gain", {{"g1", 0.002}, {"g2", -0.0015}, {"g3", 0.001}, {"g4", -0.002}}},
-          {"exit_pulley", {{"radius_mm", 1.0}}}}},
-        {{{"cable_offset", {{"o1", 0.3}, {"o2", -0.2}, {"o3", 0.25}, {"o4", -0.3}}},
-          {"jig_misalignment", {}}}},
-        {{{"exit_pulley", {{"radius_mm", 3.0}}},
-          {"drum_eccentricity", {{"period", 94.2}, {"a1", 0.15}, {"a2", 0.15}, {"a3", 0.15}, {"a4", 0.15}}}}},
+    const std::vector<Truth> cases = {
+        {{"cable_gain", {{"g1", 0.002}, {"g2", -0.0015}, {"g3", 0.001}, {"g4", -0.002}}},
+         {"exit_pulley", {{"radius_mm", 1.0}}}},
+        {{"cable_offset", {{"o1", 0.3}, {"o2", -0.2}, {"o3", 0.25}, {"o4", -0.3}}},
+         {"jig_misalignment", {}}},
+        {{"exit_pulley", {{"radius_mm", 3.0}}},
+         {"drum_eccentricity", {{"period", 94.2}, {"a1", 0.15}, {"a2", 0.15}, {"a3", 0.15}, {"a4", 0.15}}}},
     };
     uint64_t seed = 400;
     for (auto &c : cases) {
-        Model truth{DeviceGeometry{}};
-        std::string err;
         std::vector<std::string> want;
-        for (auto &e : c.truth) {
-            if (e.second.empty())
-                assert_true(truth.add_effect_random(e.first, seed, err));
-            else
-                assert_true(truth.add_effect(e.first, e.second, err));
-            want.push_back(e.first);
-        }
-        std::sort(want.begin(), want.end());
+        const Model truth = make_truth(c, seed, want);
         auto r = run(truth, ++seed, {}, true);
         check_consistent(r);
+        assert_lands_on(r, want);
         const auto &rec = r["recommended"];
-        bool found = sorted_names(rec["effects"]) == want;
-        for (auto &alt : rec["alternatives"]) found = found || sorted_names(alt) == want;
-        if (!found) fail_msg("hidden %s: recommended %s, alternatives %s", nlohmann::json(want).dump().c_str(),
-                             rec["effects"].dump().c_str(), rec["alternatives"].dump().c_str());
         if (!rec["explained"].get<bool>() && !rec["negligible_only"].get<bool>())
             fail_msg("recommended model not explained: %s", r["verdict"].dump().c_str());
         // At the noise floor: within the ~3 % a sampled RMS allows.
@@ -250,24 +264,16 @@ static void search_lands_on_hidden_effects(void **) {
 // data must come out explained with nothing added; two hidden effects must
 // be found (or an inseparable equivalent), explained.
 static void sparse_noisy_jig(void **) {
-    struct Case {
-        std::vector<std::pair<std::string, ParamValues>> truth;
-    };
-    const std::vector<Case> cases = {
-        {{}},
-        {{{"cable_gain", {{"g1", 0.002}, {"g2", -0.0015}, {"g3", 0.001}, {"g4", -0.002}}},
-          {"exit_pulley", {{"radius_mm", 1.0}}}}},
+    const std::vector<Truth> cases = {
+        {},
+        {{"cable_gain", {{"g1", 0.002}, {"g2", -0.0015}, {"g3", 0.001}, {"g4", -0.002}}},
+         {"exit_pulley", {{"radius_mm", 1.0}}}},
     };
     uint64_t seed = 700;
     for (auto &c : cases) {
-        Model truth{DeviceGeometry{}};
-        std::string err;
         std::vector<std::string> want;
-        for (auto &e : c.truth) {
-            assert_true(truth.add_effect(e.first, e.second, err));
-            want.push_back(e.first);
-        }
-        std::sort(want.begin(), want.end());
+        const Model truth = make_truth(c, seed, want);
+        std::string err;
         JigSimOptions so = small_jig(++seed);
         so.heights = {30, 50, 70};
         so.samples = 10;
@@ -281,11 +287,8 @@ static void sparse_noisy_jig(void **) {
         Model fitted{DeviceGeometry{}};
         if (!diagnose(d, truth.geometry(), o, r, fitted, err)) fail_msg("diagnose failed: %s", err.c_str());
         check_consistent(r);
+        assert_lands_on(r, want);
         const auto &rec = r["recommended"];
-        bool found = sorted_names(rec["effects"]) == want;
-        for (auto &alt : rec["alternatives"]) found = found || sorted_names(alt) == want;
-        if (!found) fail_msg("hidden %s: recommended %s, alternatives %s", nlohmann::json(want).dump().c_str(),
-                             rec["effects"].dump().c_str(), rec["alternatives"].dump().c_str());
         if (!rec["explained"].get<bool>())
             fail_msg("sparse jig, recommended model not explained: %s", r["verdict"].dump().c_str());
     }

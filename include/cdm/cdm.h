@@ -525,13 +525,17 @@ CDM_API int cdm_diagnose(const char *data_csv_path, const char *device_json_path
  * data, without the diagnosis's candidates, review or validation (what
  * `cdm calib fit` needs). options_json: {"effects": [...] (required, not
  * empty: CDM_ERR_INVALID_ARG otherwise), "jig_tolerance_mm": mm (default:
- * estimated from the data), "calibration_out": path (written atomically)}.
+ * estimated from the data), "outliers": true (default; false keeps every
+ * position), "calibration_out": path (written atomically)}.
  * *result_json (free with cdm_free_string): {"effects": [{"name", "params":
  * {p: {value, std, unit}}}], "fit": {converged, chi2, dof, n_free,
  * evaluations, seconds, algorithm, message}, "jig_tolerance_mm": [x,y,z],
  * "nominal_error_mm" and "error_mm": {x,y,z} x {mean,std,rms,max},
  * "glitches": the samples set aside as the file was read, as the
- * diagnosis' data.glitches}. Errors as cdm_diagnose's. Any thread. */
+ * diagnosis' data.glitches, "outliers": the positions the fitted model
+ * and their neighbours both disown, set aside and the fit run again
+ * without them, as the diagnosis' data.outliers}. Errors as
+ * cdm_diagnose's. Any thread. */
 CDM_API int cdm_fit(const char *data_csv_path, const char *device_json_path, const char *options_json,
                     cdm_progress_fn progress, void *user, char **result_json);
 

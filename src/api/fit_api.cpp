@@ -6,6 +6,7 @@
 #include "api/jobs.h"
 #include "calib/diagnose.h"
 #include "calib/fit_calibration.h"
+#include "calib/fit_outliers.h"
 #include "cdm/cdm.h"
 #include "model/effect.h"
 
@@ -13,7 +14,7 @@ namespace {
 
 using nlohmann::json;
 
-json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data) {
+json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const json &outliers) {
     json eff = json::array();
     for (size_t k = 0; k < cf.model.effect_count(); ++k) {
         const auto &d = cf.model.effect_desc(k);
@@ -36,7 +37,9 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data) {
             {"nominal_error_mm", cdm::diag::stats3(cf.nominal.err)},
             {"error_mm", cdm::diag::stats3(cf.fitted.err)},
             // The samples the dataset's screen set aside (the diagnosis' data.glitches).
-            {"glitches", cdm::diag::glitches_json(data)}};
+            {"glitches", cdm::diag::glitches_json(data)},
+            // The positions set aside (the diagnosis' data.outliers, the same test).
+            {"outliers", outliers}};
 }
 
 } // namespace
@@ -59,8 +62,16 @@ extern "C" int cdm_fit(const char *data_csv_path, const char *device_json_path, 
         if (int rc = cdm::api::open_job(data_csv_path, device_json_path, a, in)) return rc;
         cdm::CalibrationFit cf(in.geometry);
         std::string err;
-        if (!cdm::fit_calibration(in.data, in.geometry, opt, cf, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
-        const json out = result_json(cf, in.data);
+        auto round = [&](const cdm::Dataset &d, std::vector<cdm::diag::Outlier> &found, std::string &e) {
+            cf = cdm::CalibrationFit(in.geometry);
+            if (!cdm::fit_calibration(d, in.geometry, opt, cf, e)) return false;
+            if (a.outliers) found = cdm::calibration_outliers(cf);
+            return true;
+        };
+        json outliers;
+        if (!cdm::run_setting_aside_outliers(in.data, a.outliers, round, outliers, err))
+            return cdm::fail(CDM_ERR_INVALID_ARG, err);
+        const json out = result_json(cf, in.data, outliers);
         if (int rc = cdm::api::commit_calibration(in, cf.model, data_csv_path, out["error_mm"])) return rc;
         return cdm::api::return_json(out, "cdm_fit", result_json_out);
     });

@@ -54,7 +54,7 @@ int load_device(const char *path, cdm::DeviceGeometry &g) {
 
 int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs &a) {
     const char *known = diagnosis ? "effects, jig_tolerance_mm, candidates, search, validation, per_position, outliers, calibration_out"
-                                  : "effects, jig_tolerance_mm, calibration_out";
+                                  : "effects, jig_tolerance_mm, outliers, calibration_out";
     if (!text || !*text) {
         if (diagnosis) return CDM_OK;
         return cdm::fail(CDM_ERR_INVALID_ARG, std::string(fn) + ": options with a non-empty \"effects\" list are required");
@@ -82,8 +82,8 @@ int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs 
             if (v.type != J::Number || !(v.number >= 0) || v.number > cdm::kDatasetMaxRefMm)
                 return bad(v, k, "a number of mm in 0..5000");
             a.jig_tolerance_mm = v.number;
-        } else if (diagnosis && (k == "candidates" || k == "search" || k == "validation" || k == "per_position" ||
-                                 k == "outliers")) {
+        } else if (k == "outliers" ||
+                   (diagnosis && (k == "candidates" || k == "search" || k == "validation" || k == "per_position"))) {
             if (v.type != J::Bool) return bad(v, k, "true or false");
             (k == "candidates" ? a.candidates
              : k == "search"   ? a.search

@@ -23,8 +23,8 @@ struct JobArgs {
 };
 
 // Parses `text` (NULL or empty: defaults). `diagnosis`: the diagnosis's own
-// options (candidates, search, validation, per_position, outliers) are accepted; cdm_fit
-// refuses them and requires a non-empty "effects".
+// options (candidates, search, validation, per_position) are accepted; cdm_fit
+// refuses them and requires a non-empty "effects". Both take "outliers".
 int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs &out);
 
 struct JobInputs {

@@ -1,6 +1,8 @@
 // See diag_eval.h.
 #include "calib/diag_eval.h"
 
+#include <cmath>
+
 #include <limits>
 
 namespace cdm {
@@ -156,6 +158,15 @@ Ellipsoid ellipsoid_on(const Eval &E, const std::vector<PreparedPos> &pos) {
             w.push_back(pos[j].n);
         }
     return fit_ellipsoid(y, z, x, w);
+}
+
+V3 noise_floor(const Eval &E, const V3 &jig) {
+    V3 n;
+    for (int a = 0; a < 3; ++a) {
+        const double w = E.within[a].n > 1 ? E.within[a].ss / E.within[a].n : 0;
+        n(a) = std::sqrt(w + jig(a) * jig(a));
+    }
+    return n;
 }
 
 } // namespace diag

@@ -53,5 +53,9 @@ bool evaluate_seed(const DeviceGeometry &g, const Dataset &d, const std::vector<
                    const Ellipsoid *ell, Eval &out, std::string &err);
 Ellipsoid ellipsoid_on(const Eval &E, const std::vector<PreparedPos> &pos);
 
+// Per axis: the samples' scatter about their position mean, through the
+// model's own Jacobian, and the jig's tolerance.
+V3 noise_floor(const Eval &E, const V3 &jig);
+
 } // namespace diag
 } // namespace cdm

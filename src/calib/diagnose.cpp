@@ -23,6 +23,7 @@
 #include "calib/diag_validation.h"
 #include "calib/diag_verdict.h"
 #include "calib/fit_calibration.h"
+#include "calib/fit_outliers.h"
 #include "cdm/cdm.h"
 #include "io/device_json.h"
 #include "model/effect.h"
@@ -46,17 +47,6 @@ int usable_cores() {
 }
 
 json vec3(const V3 &v) { return json::array({v(0), v(1), v(2)}); }
-
-// Per axis: the samples' scatter about their position mean, through the
-// model's own Jacobian, and the jig's tolerance.
-V3 noise_floor(const Eval &E, const V3 &jig) {
-    V3 n;
-    for (int a = 0; a < 3; ++a) {
-        const double w = E.within[a].n > 1 ? E.within[a].ss / E.within[a].n : 0;
-        n(a) = std::sqrt(w + jig(a) * jig(a));
-    }
-    return n;
-}
 
 std::string join(const std::vector<std::string> &v, const char *sep, const std::string &none) {
     if (v.empty()) return none;
@@ -473,53 +463,18 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     return true;
 }
 
-// Outliers: the diagnosis is run again without the positions it set aside
-// (their pull on the jig's tolerance and on the fits gone, more can show:
-// at most kOutlierRounds diagnoses), and says which they were. At most
-// kOutlierMaxFraction of the positions read, over all rounds (so none below
-// 50 positions: a small jig has no position to spare, and the fit needs its
-// positions).
+// Outliers (fit_outliers.h): the diagnosis is run again without the
+// positions it set aside, and says which they were.
 bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOptions &opt, json &out, Model &fitted,
               std::string &err) {
-    constexpr int kOutlierRounds = 3;
-    std::vector<Outlier> found;
-    if (!diagnose_data(data, g, opt, out, fitted, err, found)) return false;
-    json set_aside = json::array();
-    const size_t P0 = data.pos.size();
-    const size_t budget = size_t(std::floor(kOutlierMaxFraction * double(P0)));
-    Dataset kept;
-    const Dataset *cur = &data;
-    for (int round = 1; round < kOutlierRounds && !found.empty() && set_aside.size() + found.size() <= budget;
-         ++round) {
-        std::vector<long> ids;
-        for (auto &o : found) {
-            const JigHole &h = cur->pos[o.j];
-            ids.push_back(h.point);
-            set_aside.push_back({{"point", h.point},
-                                 {"ref", {h.ref[0], h.ref[1], h.ref[2]}},
-                                 {"residual_mm", {o.res(0), o.res(1), o.res(2)}},
-                                 {"neighbours_mm", {o.nb(0), o.nb(1), o.nb(2)}},
-                                 {"chi2", o.chi2},
-                                 {"chi2_neighbours", o.chi2_nb},
-                                 {"round", round}});
-        }
-        Dataset next;
-        if (!without_points(*cur, ids, next, err)) return false;
-        kept = std::move(next);
-        cur = &kept;
-        found.clear();
-        if (!diagnose_data(*cur, g, opt, out, fitted, err, found)) return false;
-    }
-    out["data"]["outliers"] = {{"enabled", opt.outliers},
-                               {"count", set_aside.size()},
-                               {"positions_read", P0},
-                               {"test", "chi-square (3 dof) of the residual against the noise and the jig's tolerance, "
-                                        "and of its difference from the mean residual of its neighbours on the plate, "
-                                        "both beyond the 1 % family-wise level (Bonferroni over the positions); only when "
-                                        "the median position's chi-square is within twice chi2(3)'s median, and at most "
-                                        "2 % of the positions read over all rounds (none below 50 positions), else none"},
-                               {"set_aside", set_aside}};
-    if (!set_aside.empty()) out["verdict"] = out["verdict"].get<std::string>() + " " + outliers_words(set_aside, P0);
+    json outliers;
+    auto round = [&](const Dataset &d, std::vector<Outlier> &found, std::string &e) {
+        return diagnose_data(d, g, opt, out, fitted, e, found);
+    };
+    if (!run_setting_aside_outliers(data, opt.outliers, round, outliers, err)) return false;
+    out["data"]["outliers"] = outliers;
+    if (outliers["count"].get<size_t>() > 0)
+        out["verdict"] = out["verdict"].get<std::string>() + " " + outliers_words(outliers["set_aside"], data.pos.size());
     return true;
 }
 

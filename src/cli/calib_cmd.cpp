@@ -202,7 +202,7 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     if (!a.calib_out.empty()) o["calibration_out"] = a.calib_out;
     if (!fit_only && a.no_candidates) o["candidates"] = false;
     if (!fit_only && a.no_search) o["search"] = false;
-    if (!fit_only && a.keep_outliers) o["outliers"] = false;
+    if (a.keep_outliers) o["outliers"] = false;
     char *res = nullptr;
     // fit: cdm_fit, the fit alone (no candidates, review or validation)
     const int rc = (fit_only ? cdm_fit : cdm_diagnose)(a.data.c_str(), device.c_str(), o.dump().c_str(),
@@ -214,6 +214,18 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
         std::printf("fitted %s on %s: x rms %.4f y %.4f z %.4f mm (jig tolerance x %.4f mm)\n", a.effects.c_str(),
                     a.data.c_str(), r["error_mm"]["x"]["rms"].get<double>(), r["error_mm"]["y"]["rms"].get<double>(),
                     r["error_mm"]["z"]["rms"].get<double>(), r["jig_tolerance_mm"][0].get<double>());
+        const auto &out = r["outliers"];
+        if (out["count"].get<size_t>() > 0) {
+            std::string pts;
+            for (auto &x : out["set_aside"]) pts += (pts.empty() ? "" : ", ") + std::to_string(x["point"].get<long>());
+            std::printf("outliers set aside: %zu of %zu positions, points %s (the model and their neighbours on the "
+                        "plate both disown them; --keep-outliers keeps them)\n",
+                        out["count"].get<size_t>(), out["positions_read"].get<size_t>(), pts.c_str());
+        }
+        if (r["glitches"]["count"].get<size_t>() > 0)
+            std::printf("glitches set aside: %zu samples at %zu positions (beyond %.1f sd)\n",
+                        r["glitches"]["count"].get<size_t>(), r["glitches"]["positions"].get<size_t>(),
+                        r["glitches"]["threshold_sd"].get<double>());
         std::printf("calibration written to %s\n", a.calib_out.c_str());
     } else {
         print_summary(r);
@@ -365,6 +377,9 @@ void add_calib_commands(CLI::App &app) {
         ->required();
     fit->add_option("--out", f.calib_out, "Calibration JSON to write")->required();
     fit->add_option("--json", f.json_out, "Also write the fit statistics JSON");
+    fit->add_flag("--keep-outliers", f.keep_outliers,
+                  "Keep every position: by default positions that the fitted model and their neighbours on the "
+                  "plate both disown (a mis-seated probe, a wrong hole) are set aside and the fit run again");
     fit->callback([] { select_command([] { return cmd_diagnose(f, true); }); });
 
     add_simulate(calib);

@@ -108,13 +108,15 @@ def diagnose(data_csv: PathLike, device_json: PathLike, effects: Optional[Union[
 
 def fit(data_csv: PathLike, device_json: PathLike, effects: Union[str, Iterable[str]],
         jig_tolerance_mm: Optional[float] = None, calibration_out: Optional[PathLike] = None,
-        progress: Optional[Progress] = None) -> Dict[str, Any]:
+        progress: Optional[Progress] = None, outliers: bool = True) -> Dict[str, Any]:
     """Runs cdm_fit (experimental, since 1.1): the calibration fit alone,
     without the diagnosis's candidates, review and validation. Returns
     {"effects": [{"name", "params": {p: {value, std, unit}}}], "fit": {...},
-    "jig_tolerance_mm", "nominal_error_mm", "error_mm"}; writes the
-    calibration atomically to calibration_out when given."""
-    options: Dict[str, Any] = {}
+    "jig_tolerance_mm", "nominal_error_mm", "error_mm", "glitches",
+    "outliers"}; writes the calibration atomically to calibration_out when
+    given. outliers=False keeps the positions the fitted model and their
+    neighbours both disown (by default set aside, and the fit run again)."""
+    options: Dict[str, Any] = {"outliers": bool(outliers)}
     if calibration_out is not None:
         options["calibration_out"] = os.fspath(calibration_out)
     return _run("cdm_fit", data_csv, device_json, effects, jig_tolerance_mm, progress, options)

@@ -62,10 +62,11 @@ extern "C" int cdm_fit(const char *data_csv_path, const char *device_json_path, 
         if (int rc = cdm::api::open_job(data_csv_path, device_json_path, a, in)) return rc;
         cdm::CalibrationFit cf(in.geometry);
         std::string err;
-        auto round = [&](const cdm::Dataset &d, std::vector<cdm::diag::Outlier> &found, std::string &e) {
+        auto round = [&](const cdm::Dataset &d, size_t already, size_t read, std::vector<cdm::diag::Outlier> &found,
+                         std::string &e) {
             cf = cdm::CalibrationFit(in.geometry);
             if (!cdm::fit_calibration(d, in.geometry, opt, cf, e)) return false;
-            if (a.outliers) found = cdm::calibration_outliers(cf);
+            if (a.outliers) found = cdm::calibration_outliers(cf, already, read);
             return true;
         };
         json outliers;

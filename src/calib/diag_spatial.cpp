@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <random>
 
 namespace cdm {
 namespace diag {
@@ -232,7 +233,56 @@ Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free) {
     return v;
 }
 
-std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig) {
+double one_cable_chi2(const Eval &E, size_t j, const V3 &d, const V3 &jig) {
+    V3 w;
+    for (int a = 0; a < 3; ++a) w(a) = 1.0 / (E.var_mean[j](a) + jig(a) * jig(a));
+    const double dd = (d.array().square() * w.array()).sum();
+    double best = dd;
+    for (int i = 0; i < 4; ++i) {
+        const V3 c = E.Jp[j].col(i); // the position's move per mm of cable i's reading
+        const double cd = (c.array() * d.array() * w.array()).sum(), cc = (c.array().square() * w.array()).sum();
+        if (cc > 0) best = std::min(best, dd - cd * cd / cc);
+    }
+    return best;
+}
+
+double join_count_p(const Grid &G, const std::vector<char> &ok, const std::vector<char> &mark) {
+    const size_t P = ok.size();
+    std::vector<int> usable;
+    size_t m = 0;
+    for (size_t j = 0; j < P; ++j)
+        if (ok[j]) {
+            usable.push_back(int(j));
+            if (mark[j]) ++m;
+        }
+    auto joins = [&](const std::vector<char> &mk) {
+        size_t n = 0;
+        for (int j : usable)
+            if (mk[size_t(j)])
+                for (int k : G.nb[size_t(j)])
+                    if (k > j && ok[size_t(k)] && mk[size_t(k)]) ++n;
+        return n;
+    };
+    const size_t observed = joins(mark);
+    if (observed == 0) return 1.0;
+    std::mt19937_64 rng(20261123);
+    std::vector<char> mk(P, 0);
+    int at_least = 0;
+    constexpr int kRelabelings = 999;
+    for (int r = 0; r < kRelabelings; ++r) {
+        // m of the usable positions, uniformly (a partial Fisher-Yates shuffle)
+        std::fill(mk.begin(), mk.end(), 0);
+        for (size_t i = 0; i < m; ++i) {
+            std::uniform_int_distribution<size_t> pick(i, usable.size() - 1);
+            std::swap(usable[i], usable[pick(rng)]);
+            mk[size_t(usable[i])] = 1;
+        }
+        if (joins(mk) >= observed) ++at_least;
+    }
+    return (1.0 + at_least) / (1.0 + kRelabelings);
+}
+
+std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, size_t already, size_t read) {
     const size_t P = E.res.size();
     size_t used = 0;
     for (size_t j = 0; j < P; ++j)
@@ -276,7 +326,25 @@ std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig) 
         o.j = j, o.chi2 = c, o.chi2_nb = cn, o.res = E.res[j], o.nb = mean;
         out.push_back(o);
     }
-    if (double(out.size()) > std::max(1.0, kOutlierMaxFraction * double(used))) out.clear();
+    // A few: set aside. More (up to kOutlierScatteredFraction of the
+    // positions read): only when they look like references off, not like a
+    // reading effect or a local structure.
+    const double base = double(read > 0 ? read : used);
+    const double total = double(already + out.size());
+    if (total <= std::max(1.0, kOutlierMaxFraction * base)) return out;
+    bool references = kOutlierMaxFraction * base >= 1 && total <= kOutlierScatteredFraction * base;
+    if (references) {
+        int one = 0;
+        for (auto &o : out)
+            if (one_cable_chi2(E, o.j, o.res - o.nb, jig) <= chi2_isf(0.01, 2)) ++one;
+        references = 4 * one <= int(out.size());
+    }
+    if (references) {
+        std::vector<char> mark(P, 0);
+        for (auto &o : out) mark[o.j] = 1;
+        references = join_count_p(G, E.ok, mark) >= kOutlierScatterLevel;
+    }
+    if (!references) out.clear();
     return out;
 }
 

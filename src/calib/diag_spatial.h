@@ -48,10 +48,19 @@ Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free);
 // missing effect would leave. A mis-seated probe, a wrong hole, a bump
 // during the samples. More than kOutlierMaxFraction of the positions are
 // not "a few bad positions" but a worse jig or a wrong model, and none is
-// returned: the verdict judges them (diagnose() also caps the total over
-// its rounds at this fraction of the positions read). Nor against a model
-// far from the data (kOutlierBulkRatio below).
+// returned: the verdict judges them (the rounds of fit_outliers.h cap the
+// total the same way, against the positions read). Beyond it, up to
+// kOutlierScatteredFraction, only when they look like references off (a
+// probe in the wrong hole moves the holder any way) and not like a reading
+// effect or a local structure: at most a quarter of them deviate as one
+// cable's reading error would move the position (one_cable_chi2 within
+// chi-square(2)'s 1 % point: a worn spot on a track, a slipping cable), and
+// they are scattered over the plate as chance scatters them (join_count_p
+// at least kOutlierScatterLevel). Nor against a model far from the data
+// (kOutlierBulkRatio below).
 constexpr double kOutlierMaxFraction = 0.02;
+constexpr double kOutlierScatteredFraction = 0.10;
+constexpr double kOutlierScatterLevel = 0.05;
 // Only against a model that fits the bulk of the positions: the median
 // position's chi-square at most this many times chi-square(3)'s median.
 constexpr double kOutlierBulkRatio = 2.0;
@@ -62,8 +71,23 @@ struct Outlier {
     V3 res = V3::Zero();   // its residual (mm)
     V3 nb = V3::Zero();    // the neighbours' mean residual (mm)
 };
-// E: the residual with the jig's own offsets removed; jig: its tolerance.
-std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig);
+// E: the residual with the jig's own offsets removed; jig: its tolerance;
+// already: the positions set aside before (earlier rounds), of `read`
+// (0: the positions of E).
+std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, size_t already = 0, size_t read = 0);
+
+// What is left of position j's deviation d (mm) once the best single
+// cable's reading error is fitted to it (through E.Jp[j], the position's
+// move per mm of each reading), as a chi-square (2 dof) against the noise
+// and the jig's tolerance: small when one cable's reading explains d.
+double one_cable_chi2(const Eval &E, size_t j, const V3 &d, const V3 &jig);
+
+// The join-count test of spatial randomness: the number of neighbouring
+// pairs (G.nb) both marked, against the same count when as many of the
+// usable positions are marked at random (999 relabelings from a fixed seed:
+// the same answer every run). Returns the permutation p-value of at least
+// as many joins, (1 + #{random >= observed}) / 1000; 1 when none is joined.
+double join_count_p(const Grid &G, const std::vector<char> &ok, const std::vector<char> &mark);
 
 } // namespace diag
 } // namespace cdm

@@ -107,7 +107,8 @@ std::string effect_advice(const Model &m, const FitReport &rep, const std::vecto
 // model and their neighbours both disown (find_outliers), for diagnose() to
 // set aside.
 static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const DiagnoseOptions &opt, json &out,
-                          Model &fitted, std::string &err, std::vector<Outlier> &outliers) {
+                          Model &fitted, std::string &err, size_t already, size_t read,
+                          std::vector<Outlier> &outliers) {
     auto t0 = std::chrono::steady_clock::now();
     FitCalibrationOptions fopt;
     fopt.effects = opt.effects;
@@ -210,7 +211,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     Eval bJ = bE;
     for (size_t j = 0; j < P; ++j) bJ.res[j] -= ja.offset[j];
     json findings = residual_findings(pos, shifted(lv, ja.offset), bJ, bjig);
-    if (opt.outliers) outliers = find_outliers(bJ, cf.grid, bjig);
+    if (opt.outliers) outliers = find_outliers(bJ, cf.grid, bjig, already, read);
     if (!jig_report["finding"].is_null()) findings.push_back(jig_report["finding"]);
 
     // --- what needs every sample: the maxima of the reported evaluations and
@@ -468,8 +469,8 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
 bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOptions &opt, json &out, Model &fitted,
               std::string &err) {
     json outliers;
-    auto round = [&](const Dataset &d, std::vector<Outlier> &found, std::string &e) {
-        return diagnose_data(d, g, opt, out, fitted, e, found);
+    auto round = [&](const Dataset &d, size_t already, size_t read, std::vector<Outlier> &found, std::string &e) {
+        return diagnose_data(d, g, opt, out, fitted, e, already, read, found);
     };
     if (!run_setting_aside_outliers(data, opt.outliers, round, outliers, err)) return false;
     out["data"]["outliers"] = outliers;

@@ -12,11 +12,14 @@ using nlohmann::json;
 bool run_setting_aside_outliers(const Dataset &data, bool enabled, const OutlierRound &round, json &report,
                                 std::string &err) {
     std::vector<diag::Outlier> found;
-    if (!round(data, found, err)) return false;
+    const size_t P0 = data.pos.size();
+    if (!round(data, 0, P0, found, err)) return false;
     if (!enabled) found.clear();
     json set_aside = json::array();
-    const size_t P0 = data.pos.size();
-    const size_t budget = size_t(std::floor(diag::kOutlierMaxFraction * double(P0)));
+    // find_outliers keeps the total within 2 % of P0, or 10 % for references off
+    const size_t budget = size_t(std::floor(diag::kOutlierMaxFraction * double(P0))) >= 1
+                              ? size_t(std::floor(diag::kOutlierScatteredFraction * double(P0)))
+                              : 0;
     Dataset kept;
     const Dataset *cur = &data;
     for (int run = 1; run < kOutlierRounds && !found.empty() && set_aside.size() + found.size() <= budget; ++run) {
@@ -37,7 +40,7 @@ bool run_setting_aside_outliers(const Dataset &data, bool enabled, const Outlier
         kept = std::move(next);
         cur = &kept;
         found.clear();
-        if (!round(*cur, found, err)) return false;
+        if (!round(*cur, set_aside.size(), P0, found, err)) return false;
     }
     report = {{"enabled", enabled},
               {"count", set_aside.size()},
@@ -45,18 +48,21 @@ bool run_setting_aside_outliers(const Dataset &data, bool enabled, const Outlier
               {"test", "chi-square (3 dof) of the residual against the noise and the jig's tolerance, "
                        "and of its difference from the mean residual of its neighbours on the plate, "
                        "both beyond the 1 % family-wise level (Bonferroni over the positions); only when "
-                       "the median position's chi-square is within twice chi2(3)'s median, and at most "
-                       "2 % of the positions read over all rounds (none below 50 positions), else none"},
+                       "the median position's chi-square is within twice chi2(3)'s median; at most 2 % of the "
+                       "positions read over all rounds (none below 50 positions), or up to 10 % when at most a "
+                       "quarter of them deviate as one cable's reading error would (chi-square, 2 dof, of the "
+                       "rest within its 1 % point) and they are scattered as chance scatters them (join count of "
+                       "neighbouring pairs against 999 random relabelings, p >= 0.05), else none"},
               {"set_aside", set_aside}};
     return true;
 }
 
-std::vector<diag::Outlier> calibration_outliers(const CalibrationFit &cf) {
+std::vector<diag::Outlier> calibration_outliers(const CalibrationFit &cf, size_t already, size_t read) {
     const diag::JigAnalysis ja =
         diag::jig_analysis(cf.fitted, cf.grid, cf.pos, cf.jig, diag::noise_floor(cf.fitted, cf.jig));
     diag::Eval E = cf.fitted;
     for (size_t j = 0; j < E.res.size(); ++j) E.res[j] -= ja.offset[j];
-    return diag::find_outliers(E, cf.grid, cf.jig);
+    return diag::find_outliers(E, cf.grid, cf.jig, already, read);
 }
 
 } // namespace cdm

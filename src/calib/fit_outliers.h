@@ -5,7 +5,9 @@
 // (their pull on the jig's tolerance and on the fit gone, more can show),
 // at most kOutlierRounds runs, and at most kOutlierMaxFraction of the
 // positions read over all rounds (so none below 50 positions: a small jig
-// has no position to spare, and the fit needs its positions). The last
+// has no position to spare, and the fit needs its positions), or up to
+// kOutlierScatteredFraction when they look like references off
+// (find_outliers decides, told what earlier rounds set aside). The last
 // run's result is the job's.
 #pragma once
 
@@ -24,8 +26,10 @@ namespace cdm {
 constexpr int kOutlierRounds = 3;
 
 // One run of a job on `data`: false + err when the job fails; `found`: the
-// positions (indices into data.pos) to set aside, empty when none.
-using OutlierRound = std::function<bool(const Dataset &data, std::vector<diag::Outlier> &found, std::string &err)>;
+// positions (indices into data.pos) to set aside, empty when none, judged by
+// find_outliers with `already` set aside of `read` (diag_spatial.h).
+using OutlierRound = std::function<bool(const Dataset &data, size_t already, size_t read,
+                                        std::vector<diag::Outlier> &found, std::string &err)>;
 
 // Runs `round` on `data`, then again without what it found while the
 // budget lasts (with `enabled` false, once, whatever it finds). `report`:
@@ -38,6 +42,6 @@ bool run_setting_aside_outliers(const Dataset &data, bool enabled, const Outlier
 // disown, judged as the diagnosis judges them: on the residual with the
 // jig's own per-height and per-hole offsets removed (diag_jig.h), against
 // the noise and the jig's tolerance.
-std::vector<diag::Outlier> calibration_outliers(const CalibrationFit &cf);
+std::vector<diag::Outlier> calibration_outliers(const CalibrationFit &cf, size_t already, size_t read);
 
 } // namespace cdm

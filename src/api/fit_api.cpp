@@ -63,10 +63,10 @@ extern "C" int cdm_fit(const char *data_csv_path, const char *device_json_path, 
         cdm::CalibrationFit cf(in.geometry);
         std::string err;
         auto round = [&](const cdm::Dataset &d, size_t already, size_t read, std::vector<cdm::diag::Outlier> &found,
-                         std::string &e) {
+                         cdm::diag::Declined &declined, std::string &e) {
             cf = cdm::CalibrationFit(in.geometry);
             if (!cdm::fit_calibration(d, in.geometry, opt, cf, e)) return false;
-            if (a.outliers) found = cdm::calibration_outliers(cf, already, read);
+            if (a.outliers) found = cdm::calibration_outliers(cf, already, read, declined);
             return true;
         };
         json outliers;

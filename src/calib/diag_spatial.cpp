@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <map>
 #include <random>
 
@@ -233,38 +234,52 @@ Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free) {
     return v;
 }
 
-double one_cable_chi2(const Eval &E, size_t j, const V3 &d, const V3 &jig) {
-    V3 w;
-    for (int a = 0; a < 3; ++a) w(a) = 1.0 / (E.var_mean[j](a) + jig(a) * jig(a));
+double one_cable_chi2(const Eigen::Matrix<double, 3, 4> &Jp, const V3 &d, const V3 &var) {
+    const V3 w = var.cwiseInverse();
     const double dd = (d.array().square() * w.array()).sum();
     double best = dd;
     for (int i = 0; i < 4; ++i) {
-        const V3 c = E.Jp[j].col(i); // the position's move per mm of cable i's reading
+        const V3 c = Jp.col(i); // the position's move per mm of cable i's reading
         const double cd = (c.array() * d.array() * w.array()).sum(), cc = (c.array().square() * w.array()).sum();
         if (cc > 0) best = std::min(best, dd - cd * cd / cc);
     }
     return best;
 }
 
+namespace {
+// Uniform on [0, n) from the generator's own output (rejection of the
+// incomplete last block): the same draws on every standard library.
+uint64_t below(std::mt19937_64 &rng, uint64_t n) {
+    const uint64_t limit = UINT64_MAX - UINT64_MAX % n;
+    uint64_t x;
+    do x = rng();
+    while (x >= limit);
+    return x % n;
+}
+} // namespace
+
 double join_count_p(const Grid &G, const std::vector<char> &ok, const std::vector<char> &mark) {
     const size_t P = ok.size();
-    std::vector<int> usable;
+    std::vector<size_t> usable;
     size_t m = 0;
-    for (size_t j = 0; j < P; ++j)
-        if (ok[j]) {
-            usable.push_back(int(j));
-            if (mark[j]) ++m;
-        }
-    auto joins = [&](const std::vector<char> &mk) {
+    for (size_t j = 0; j < P; ++j) {
+        if (!ok[j]) continue;
+        int n = 0;
+        for (int k : G.nb[j]) n += ok[size_t(k)] ? 1 : 0;
+        if (n < 2 && !mark[j]) continue; // could never be marked by find_outliers
+        usable.push_back(j);
+        if (mark[j]) ++m;
+    }
+    auto links = [&](const std::vector<char> &mk) {
         size_t n = 0;
-        for (int j : usable)
-            if (mk[size_t(j)])
-                for (int k : G.nb[size_t(j)])
-                    if (k > j && ok[size_t(k)] && mk[size_t(k)]) ++n;
+        for (size_t j : usable)
+            if (mk[j])
+                for (int k : G.nb[j])
+                    if (ok[size_t(k)] && mk[size_t(k)]) ++n;
         return n;
     };
-    const size_t observed = joins(mark);
-    if (observed == 0) return 1.0;
+    const size_t observed = links(mark);
+    if (observed == 0 || m >= usable.size()) return 1.0;
     std::mt19937_64 rng(20261123);
     std::vector<char> mk(P, 0);
     int at_least = 0;
@@ -273,16 +288,16 @@ double join_count_p(const Grid &G, const std::vector<char> &ok, const std::vecto
         // m of the usable positions, uniformly (a partial Fisher-Yates shuffle)
         std::fill(mk.begin(), mk.end(), 0);
         for (size_t i = 0; i < m; ++i) {
-            std::uniform_int_distribution<size_t> pick(i, usable.size() - 1);
-            std::swap(usable[i], usable[pick(rng)]);
-            mk[size_t(usable[i])] = 1;
+            std::swap(usable[i], usable[i + size_t(below(rng, usable.size() - i))]);
+            mk[usable[i]] = 1;
         }
-        if (joins(mk) >= observed) ++at_least;
+        if (links(mk) >= observed) ++at_least;
     }
     return (1.0 + at_least) / (1.0 + kRelabelings);
 }
 
-std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, size_t already, size_t read) {
+std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, size_t already, size_t read,
+                                   Declined *declined) {
     const size_t P = E.res.size();
     size_t used = 0;
     for (size_t j = 0; j < P; ++j)
@@ -323,7 +338,7 @@ std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, 
         const double cn = ((E.res[j] - mean).array().square() / (s2 + var).array()).sum();
         if (!(cn > q)) continue;
         Outlier o;
-        o.j = j, o.chi2 = c, o.chi2_nb = cn, o.res = E.res[j], o.nb = mean;
+        o.j = j, o.chi2 = c, o.chi2_nb = cn, o.res = E.res[j], o.nb = mean, o.var = s2 + var;
         out.push_back(o);
     }
     // A few: set aside. More (up to kOutlierScatteredFraction of the
@@ -332,19 +347,30 @@ std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, 
     const double base = double(read > 0 ? read : used);
     const double total = double(already + out.size());
     if (total <= std::max(1.0, kOutlierMaxFraction * base)) return out;
-    bool references = kOutlierMaxFraction * base >= 1 && total <= kOutlierScatteredFraction * base;
-    if (references) {
+    char why[200] = "";
+    if (!(kOutlierMaxFraction * base >= 1))
+        std::snprintf(why, sizeof why, "a jig of %.0f positions has none to spare", base);
+    else if (total > kOutlierScatteredFraction * base)
+        std::snprintf(why, sizeof why, "%.0f of %.0f positions: more than 10 %% are not a few bad positions", total, base);
+    if (!*why) {
         int one = 0;
         for (auto &o : out)
-            if (one_cable_chi2(E, o.j, o.res - o.nb, jig) <= chi2_isf(0.01, 2)) ++one;
-        references = 4 * one <= int(out.size());
+            if (one_cable_chi2(E.Jp[o.j], o.res - o.nb, o.var) <= chi2_isf(0.01, 2)) ++one;
+        if (4 * one > int(out.size()))
+            std::snprintf(why, sizeof why, "%d of %zu deviate as one cable's reading error would: a reading effect", one,
+                          out.size());
     }
-    if (references) {
+    if (!*why) {
         std::vector<char> mark(P, 0);
         for (auto &o : out) mark[o.j] = 1;
-        references = join_count_p(G, E.ok, mark) >= kOutlierScatterLevel;
+        const double p = join_count_p(G, E.ok, mark);
+        if (p < kOutlierScatterLevel)
+            std::snprintf(why, sizeof why, "they cluster on the plate (join count p = %.3g): a local structure", p);
     }
-    if (!references) out.clear();
+    if (*why) {
+        if (declined) *declined = Declined{out.size(), why};
+        out.clear();
+    }
     return out;
 }
 

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <array>
+#include <string>
 #include <vector>
 
 #include "calib/diag_eval.h"
@@ -50,13 +51,13 @@ Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free);
 // not "a few bad positions" but a worse jig or a wrong model, and none is
 // returned: the verdict judges them (the rounds of fit_outliers.h cap the
 // total the same way, against the positions read). Beyond it, up to
-// kOutlierScatteredFraction, only when they look like references off (a
-// probe in the wrong hole moves the holder any way) and not like a reading
-// effect or a local structure: at most a quarter of them deviate as one
-// cable's reading error would move the position (one_cable_chi2 within
-// chi-square(2)'s 1 % point: a worn spot on a track, a slipping cable), and
-// they are scattered over the plate as chance scatters them (join_count_p
-// at least kOutlierScatterLevel). Nor against a model far from the data
+// kOutlierScatteredFraction, only when those a round finds look like
+// references off (a probe in the wrong hole moves the holder any way) and
+// not like a reading effect or a local structure: at most a quarter of them
+// deviate as one cable's reading error would move the position
+// (one_cable_chi2 within chi-square(2)'s 1 % point: a worn spot on a track,
+// a slipping cable), and they are scattered over the plate as chance
+// scatters them (join_count_p at least kOutlierScatterLevel). Nor against a model far from the data
 // (kOutlierBulkRatio below).
 constexpr double kOutlierMaxFraction = 0.02;
 constexpr double kOutlierScatteredFraction = 0.10;
@@ -70,23 +71,33 @@ struct Outlier {
     double chi2_nb = 0;    // its difference from its neighbours' mean
     V3 res = V3::Zero();   // its residual (mm)
     V3 nb = V3::Zero();    // the neighbours' mean residual (mm)
+    V3 var = V3::Zero();   // the variance of res - nb (mm^2): noise, jig, the neighbours' mean
+};
+// Positions that fail both tests but are kept, and why (empty: none).
+struct Declined {
+    size_t count = 0;
+    std::string why;
 };
 // E: the residual with the jig's own offsets removed; jig: its tolerance;
 // already: the positions set aside before (earlier rounds), of `read`
-// (0: the positions of E).
-std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, size_t already = 0, size_t read = 0);
+// (0: the positions of E). declined (optional): what was found but kept.
+std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, size_t already = 0, size_t read = 0,
+                                   Declined *declined = nullptr);
 
-// What is left of position j's deviation d (mm) once the best single
-// cable's reading error is fitted to it (through E.Jp[j], the position's
-// move per mm of each reading), as a chi-square (2 dof) against the noise
-// and the jig's tolerance: small when one cable's reading explains d.
-double one_cable_chi2(const Eval &E, size_t j, const V3 &d, const V3 &jig);
+// What is left of a position's deviation d (mm, variance var per axis) once
+// the best single cable's reading error is fitted to it (through Jp, the
+// position's move per mm of each reading), as a chi-square (2 dof): small
+// when one cable's reading explains d.
+double one_cable_chi2(const Eigen::Matrix<double, 3, 4> &Jp, const V3 &d, const V3 &var);
 
-// The join-count test of spatial randomness: the number of neighbouring
-// pairs (G.nb) both marked, against the same count when as many of the
-// usable positions are marked at random (999 relabelings from a fixed seed:
-// the same answer every run). Returns the permutation p-value of at least
-// as many joins, (1 + #{random >= observed}) / 1000; 1 when none is joined.
+// The join-count test of spatial randomness: the number of neighbour links
+// (G.nb, as listed) between marked positions, against the same count when
+// as many positions are marked at random among those that could be (usable,
+// with at least two usable neighbours, as find_outliers asks): 999
+// relabelings from a fixed seed, drawn without the standard library's
+// distributions, so the same answer on every platform. Returns the
+// permutation p-value of at least as many links, (1 + #{random >=
+// observed}) / 1000; 1 when no two marked positions are linked.
 double join_count_p(const Grid &G, const std::vector<char> &ok, const std::vector<char> &mark);
 
 } // namespace diag

@@ -108,7 +108,7 @@ std::string effect_advice(const Model &m, const FitReport &rep, const std::vecto
 // set aside.
 static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const DiagnoseOptions &opt, json &out,
                           Model &fitted, std::string &err, size_t already, size_t read,
-                          std::vector<Outlier> &outliers) {
+                          std::vector<Outlier> &outliers, Declined &declined) {
     auto t0 = std::chrono::steady_clock::now();
     FitCalibrationOptions fopt;
     fopt.effects = opt.effects;
@@ -211,7 +211,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     Eval bJ = bE;
     for (size_t j = 0; j < P; ++j) bJ.res[j] -= ja.offset[j];
     json findings = residual_findings(pos, shifted(lv, ja.offset), bJ, bjig);
-    if (opt.outliers) outliers = find_outliers(bJ, cf.grid, bjig, already, read);
+    if (opt.outliers) outliers = find_outliers(bJ, cf.grid, bjig, already, read, &declined);
     if (!jig_report["finding"].is_null()) findings.push_back(jig_report["finding"]);
 
     // --- what needs every sample: the maxima of the reported evaluations and
@@ -469,9 +469,8 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
 bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOptions &opt, json &out, Model &fitted,
               std::string &err) {
     json outliers;
-    auto round = [&](const Dataset &d, size_t already, size_t read, std::vector<Outlier> &found, std::string &e) {
-        return diagnose_data(d, g, opt, out, fitted, e, already, read, found);
-    };
+    auto round = [&](const Dataset &d, size_t already, size_t read, std::vector<Outlier> &found, Declined &declined,
+                     std::string &e) { return diagnose_data(d, g, opt, out, fitted, e, already, read, found, declined); };
     if (!run_setting_aside_outliers(data, opt.outliers, round, outliers, err)) return false;
     out["data"]["outliers"] = outliers;
     if (outliers["count"].get<size_t>() > 0)

@@ -12,9 +12,10 @@ using nlohmann::json;
 bool run_setting_aside_outliers(const Dataset &data, bool enabled, const OutlierRound &round, json &report,
                                 std::string &err) {
     std::vector<diag::Outlier> found;
+    diag::Declined declined;
     const size_t P0 = data.pos.size();
-    if (!round(data, 0, P0, found, err)) return false;
-    if (!enabled) found.clear();
+    if (!round(data, 0, P0, found, declined, err)) return false;
+    if (!enabled) found.clear(), declined = {};
     json set_aside = json::array();
     // find_outliers keeps the total within 2 % of P0, or 10 % for references off
     const size_t budget = size_t(std::floor(diag::kOutlierMaxFraction * double(P0))) >= 1
@@ -22,7 +23,8 @@ bool run_setting_aside_outliers(const Dataset &data, bool enabled, const Outlier
                               : 0;
     Dataset kept;
     const Dataset *cur = &data;
-    for (int run = 1; run < kOutlierRounds && !found.empty() && set_aside.size() + found.size() <= budget; ++run) {
+    int run = 1;
+    for (; run < kOutlierRounds && !found.empty() && set_aside.size() + found.size() <= budget; ++run) {
         std::vector<long> ids;
         for (auto &o : found) {
             const JigHole &h = cur->pos[o.j];
@@ -40,8 +42,15 @@ bool run_setting_aside_outliers(const Dataset &data, bool enabled, const Outlier
         kept = std::move(next);
         cur = &kept;
         found.clear();
-        if (!round(*cur, set_aside.size(), P0, found, err)) return false;
+        declined = {};
+        if (!round(*cur, set_aside.size(), P0, found, declined, err)) return false;
     }
+    // Found, and kept all the same: said, not dropped in silence.
+    if (!found.empty())
+        declined = {found.size(), run >= kOutlierRounds
+                                      ? "found by the last of " + std::to_string(kOutlierRounds) + " runs"
+                                      : budget == 0 ? "a jig of " + std::to_string(P0) + " positions has none to spare"
+                                                    : "beyond 10 % of the positions read with those set aside"};
     report = {{"enabled", enabled},
               {"count", set_aside.size()},
               {"positions_read", P0},
@@ -53,16 +62,18 @@ bool run_setting_aside_outliers(const Dataset &data, bool enabled, const Outlier
                        "quarter of them deviate as one cable's reading error would (chi-square, 2 dof, of the "
                        "rest within its 1 % point) and they are scattered as chance scatters them (join count of "
                        "neighbouring pairs against 999 random relabelings, p >= 0.05), else none"},
-              {"set_aside", set_aside}};
+              {"set_aside", set_aside},
+              {"declined", {{"count", declined.count}, {"why", declined.why}}}};
     return true;
 }
 
-std::vector<diag::Outlier> calibration_outliers(const CalibrationFit &cf, size_t already, size_t read) {
+std::vector<diag::Outlier> calibration_outliers(const CalibrationFit &cf, size_t already, size_t read,
+                                                diag::Declined &declined) {
     const diag::JigAnalysis ja =
         diag::jig_analysis(cf.fitted, cf.grid, cf.pos, cf.jig, diag::noise_floor(cf.fitted, cf.jig));
     diag::Eval E = cf.fitted;
     for (size_t j = 0; j < E.res.size(); ++j) E.res[j] -= ja.offset[j];
-    return diag::find_outliers(E, cf.grid, cf.jig, already, read);
+    return diag::find_outliers(E, cf.grid, cf.jig, already, read, &declined);
 }
 
 } // namespace cdm

@@ -29,12 +29,14 @@ constexpr int kOutlierRounds = 3;
 // positions (indices into data.pos) to set aside, empty when none, judged by
 // find_outliers with `already` set aside of `read` (diag_spatial.h).
 using OutlierRound = std::function<bool(const Dataset &data, size_t already, size_t read,
-                                        std::vector<diag::Outlier> &found, std::string &err)>;
+                                        std::vector<diag::Outlier> &found, diag::Declined &declined,
+                                        std::string &err)>;
 
 // Runs `round` on `data`, then again without what it found while the
 // budget lasts (with `enabled` false, once, whatever it finds). `report`:
 // the JSON block {enabled, count, positions_read, test, set_aside: [{point,
-// ref, residual_mm, neighbours_mm, chi2, chi2_neighbours, round}]}.
+// ref, residual_mm, neighbours_mm, chi2, chi2_neighbours, round}],
+// declined: {count, why}: positions that failed both tests but were kept}.
 bool run_setting_aside_outliers(const Dataset &data, bool enabled, const OutlierRound &round, nlohmann::json &report,
                                 std::string &err);
 
@@ -42,6 +44,7 @@ bool run_setting_aside_outliers(const Dataset &data, bool enabled, const Outlier
 // disown, judged as the diagnosis judges them: on the residual with the
 // jig's own per-height and per-hole offsets removed (diag_jig.h), against
 // the noise and the jig's tolerance.
-std::vector<diag::Outlier> calibration_outliers(const CalibrationFit &cf, size_t already, size_t read);
+std::vector<diag::Outlier> calibration_outliers(const CalibrationFit &cf, size_t already, size_t read,
+                                                diag::Declined &declined);
 
 } // namespace cdm

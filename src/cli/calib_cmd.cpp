@@ -69,6 +69,9 @@ void print_summary(const nlohmann::json &r) {
     if (r["data"].contains("outliers") && r["data"]["outliers"]["count"].get<size_t>() > 0)
         std::printf("  outliers set aside: %zu of %zu positions (the verdict says which)\n",
                     r["data"]["outliers"]["count"].get<size_t>(), r["data"]["outliers"]["positions_read"].get<size_t>());
+    if (r["data"].contains("outliers") && r["data"]["outliers"]["declined"]["count"].get<size_t>() > 0)
+        std::printf("  disowned positions kept: %zu (%s)\n", r["data"]["outliers"]["declined"]["count"].get<size_t>(),
+                    r["data"]["outliers"]["declined"]["why"].get<std::string>().c_str());
     if (r["data"].contains("glitches") && r["data"]["glitches"]["count"].get<size_t>() > 0)
         std::printf("  glitches set aside: %zu samples at %zu positions (beyond %.1f sd; the verdict says more)\n",
                     r["data"]["glitches"]["count"].get<size_t>(), r["data"]["glitches"]["positions"].get<size_t>(),
@@ -222,6 +225,10 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
                         "plate both disown them; --keep-outliers keeps them)\n",
                         out["count"].get<size_t>(), out["positions_read"].get<size_t>(), pts.c_str());
         }
+        if (out["declined"]["count"].get<size_t>() > 0)
+            std::printf("warning: %zu positions that the fitted model and their neighbours both disown were kept (%s): "
+                        "the calibration fits them too; `cdm calib diagnose` says more\n",
+                        out["declined"]["count"].get<size_t>(), out["declined"]["why"].get<std::string>().c_str());
         if (r["glitches"]["count"].get<size_t>() > 0)
             std::printf("glitches set aside: %zu samples at %zu positions (beyond %.1f sd)\n",
                         r["glitches"]["count"].get<size_t>(), r["glitches"]["positions"].get<size_t>(),

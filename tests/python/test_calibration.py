@@ -3,25 +3,21 @@ small simulated jig dataset with a hidden exit-pulley effect (made by `cdm calib
 simulate`, the CLI ctest points CDM_CLI at)."""
 import json
 import os
-import subprocess
 
 import numpy as np
 import pytest
 
 import cdm
+from conftest import simulate_jig
 
 DEVICE_JSON = os.path.join(os.path.dirname(__file__), "..", "..", "docs", "examples", "device.json")
 
 
 @pytest.fixture(scope="module")
 def jig(tmp_path_factory):
-    cli = os.environ.get("CDM_CLI")
-    if not cli:
-        pytest.skip("CDM_CLI (the built `cdm` program) is not set; ctest sets it")
     d = tmp_path_factory.mktemp("jig")
-    subprocess.run([cli, "calib", "simulate", str(d / "ds.csv"), "--effects", "exit_pulley", "--effect-seed", "1",
-                    "--truth-out", str(d / "truth.json"), "--holes", "3", "--heights", "40,60", "--samples", "5"],
-                   check=True, capture_output=True)
+    simulate_jig(d / "ds.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--truth-out", d / "truth.json",
+                 "--holes", "3", "--heights", "40,60", "--samples", "5")
     return d
 
 

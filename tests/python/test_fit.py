@@ -3,13 +3,13 @@ diagnosis. Same fitted parameters as cdm_diagnose's, without its candidates."""
 import ctypes
 import json
 import os
-import subprocess
 import time
 
 import pytest
 
 import cdm
 from cdm import _native
+from conftest import simulate_jig
 
 DEVICE_JSON = os.path.join(os.path.dirname(__file__), "..", "..", "docs", "examples", "device.json")
 CDM_ERR_INVALID_ARG = -1
@@ -17,12 +17,9 @@ CDM_ERR_INVALID_ARG = -1
 
 @pytest.fixture(scope="module")
 def jig(tmp_path_factory):
-    cli = os.environ.get("CDM_CLI")
-    if not cli:
-        pytest.skip("CDM_CLI (the built `cdm` program) is not set; ctest sets it")
     d = tmp_path_factory.mktemp("fitjig")
-    subprocess.run([cli, "calib", "simulate", str(d / "ds.csv"), "--effects", "exit_pulley", "--effect-seed", "1",
-                    "--holes", "5", "--heights", "40,60", "--samples", "5"], check=True, capture_output=True)
+    simulate_jig(d / "ds.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--holes", "5", "--heights", "40,60",
+                 "--samples", "5")
     return d
 
 
@@ -94,12 +91,8 @@ def test_fit_sets_misplaced_positions_aside(tmp_path):
     noise of a position mean): the fit names exactly those three, fits
     without them, and its jig tolerance is the clean file's to its sampling
     error (5 %, as the diagnosis' test); kept, they inflate it."""
-    cli = os.environ.get("CDM_CLI")
-    if not cli:
-        pytest.skip("CDM_CLI (the built `cdm` program) is not set; ctest sets it")
-    clean = tmp_path / "clean.csv"
-    subprocess.run([cli, "calib", "simulate", str(clean), "--effects", "exit_pulley", "--effect-seed", "1",
-                    "--holes", "9", "--heights", "30,50,70", "--samples", "5"], check=True, capture_output=True)
+    clean = simulate_jig(tmp_path / "clean.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--holes", "9",
+                         "--heights", "30,50,70", "--samples", "5")
     bad = tmp_path / "bad.csv"
     shifts = {20: (1.0, 0.0), 100: (0.0, -1.0), 190: (0.7, 0.7)}
     _misplaced(clean, bad, shifts)

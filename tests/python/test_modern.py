@@ -8,6 +8,7 @@ import sys
 import pytest
 
 import cdm
+from conftest import simulate_jig
 
 PKG_DIR = os.path.join(os.path.dirname(__file__), "..", "..", "bindings", "python")
 DEVICE_JSON = os.path.join(os.path.dirname(__file__), "..", "..", "docs", "examples", "device.json")
@@ -43,12 +44,8 @@ def test_errors_are_the_builtins_too(tmp_path):
 
 
 def test_diagnosis_saves_and_loads(tmp_path):
-    cli = os.environ.get("CDM_CLI")
-    if not cli:
-        pytest.skip("CDM_CLI (the built `cdm` program) is not set; ctest sets it")
-    ds = tmp_path / "ds.csv"
-    subprocess.run([cli, "calib", "simulate", str(ds), "--effects", "exit_pulley", "--effect-seed", "1",
-                    "--holes", "5", "--heights", "40,60", "--samples", "5"], check=True, capture_output=True)
+    ds = simulate_jig(tmp_path / "ds.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--holes", "5",
+                      "--heights", "40,60", "--samples", "5")
     d = cdm.diagnose(ds, DEVICE_JSON, effects=["exit_pulley"], candidates=False, validation=False)
     assert isinstance(d, cdm.Diagnosis) and d.verdict
     path = tmp_path / "diag.json"
@@ -94,14 +91,9 @@ except KeyboardInterrupt:
 def test_ctrl_c_cancels_a_diagnosis(tmp_path):
     """SIGINT during cdm.diagnose (a single long C call) cancels it at the
     next fit iteration and raises KeyboardInterrupt; the handler is restored."""
-    cli = os.environ.get("CDM_CLI")
-    if not cli:
-        pytest.skip("CDM_CLI (the built `cdm` program) is not set; ctest sets it")
-    ds = tmp_path / "ds.csv"
     # 62,500 rows: the diagnosis takes over a second here, far beyond the 0.1 s
     # at which the signal arrives.
-    subprocess.run([cli, "calib", "simulate", str(ds), "--effects", "exit_pulley", "--samples", "20"], check=True,
-                   capture_output=True)
+    ds = simulate_jig(tmp_path / "ds.csv", "--effects", "exit_pulley", "--samples", "20")
     r = subprocess.run([sys.executable, "-c", SIGINT_SCRIPT, str(ds), DEVICE_JSON], capture_output=True, text=True,
                        env=dict(os.environ), timeout=120)
     assert r.stdout.strip() == "interrupted", r.stdout + r.stderr

@@ -190,6 +190,22 @@ static void check_consistent(const nlohmann::json &r) {
           same ? &f : nullptr, "the user's model");
 }
 
+// The diagnosis as the scenario tests run it on a dataset (the search on;
+// no validation, no per-position arrays; outliers as asked), checked
+// against its own numbers.
+static nlohmann::json diagnosed(const Dataset &d, const Model &truth, bool outliers = true) {
+    DiagnoseOptions o;
+    o.validation = false;
+    o.per_position = false;
+    o.outliers = outliers;
+    nlohmann::json r;
+    std::string err;
+    Model fitted{DeviceGeometry{}};
+    if (!diagnose(d, truth.geometry(), o, r, fitted, err)) fail_msg("diagnose failed: %s", err.c_str());
+    check_consistent(r);
+    return r;
+}
+
 static std::vector<std::string> sorted_names(const nlohmann::json &a) {
     std::vector<std::string> v;
     for (auto &e : a) v.push_back(e.get<std::string>());
@@ -280,13 +296,7 @@ static void sparse_noisy_jig(void **) {
         so.noise_mm = 0.25;
         Dataset d;
         assert_true(simulate_jig(truth, so, d, err));
-        DiagnoseOptions o;
-        o.validation = false;
-        o.per_position = false;
-        nlohmann::json r;
-        Model fitted{DeviceGeometry{}};
-        if (!diagnose(d, truth.geometry(), o, r, fitted, err)) fail_msg("diagnose failed: %s", err.c_str());
-        check_consistent(r);
+        const nlohmann::json r = diagnosed(d, truth);
         assert_lands_on(r, want);
         const auto &rec = r["recommended"];
         if (!rec["explained"].get<bool>())
@@ -618,12 +628,7 @@ static void spikes_change_nothing_but_their_count(void **) {
         }
         Dataset d;
         assert_true(parse_dataset(test::join(lines), spiky ? "spiky.csv" : "clean.csv", d, err));
-        DiagnoseOptions o;
-        o.validation = false;
-        o.per_position = false;
-        Model fitted{DeviceGeometry{}};
-        if (!diagnose(d, truth.geometry(), o, r[spiky], fitted, err)) fail_msg("diagnose failed: %s", err.c_str());
-        check_consistent(r[spiky]);
+        r[spiky] = diagnosed(d, truth);
     }
     const auto &clean = r[0]["recommended"], &spiky = r[1]["recommended"];
     assert_int_equal(r[0]["data"]["glitches"]["count"].get<int>(), 0);
@@ -664,13 +669,7 @@ static void misplaced_positions_are_set_aside(void **) {
     for (int k = 0; k < 3; ++k) {
         Dataset d;
         assert_true(parse_dataset(test::join(k == 0 ? clean : lines), "jig.csv", d, err));
-        DiagnoseOptions o;
-        o.validation = false;
-        o.per_position = false;
-        o.outliers = k != 2;
-        Model fitted{DeviceGeometry{}};
-        if (!diagnose(d, truth.geometry(), o, r[k], fitted, err)) fail_msg("diagnose failed: %s", err.c_str());
-        check_consistent(r[k]);
+        r[k] = diagnosed(d, truth, k != 2);
     }
     assert_int_equal(r[0]["data"]["outliers"]["count"].get<int>(), 0);
     const auto &out = r[1]["data"]["outliers"];
@@ -733,13 +732,7 @@ static void many_misplaced_positions_are_set_aside(void **) {
     std::sort(bad.begin(), bad.end());
     Dataset d;
     assert_true(parse_dataset(test::join(lines), "jig.csv", d, err));
-    DiagnoseOptions o;
-    o.validation = false;
-    o.per_position = false;
-    nlohmann::json r;
-    Model fitted{DeviceGeometry{}};
-    if (!diagnose(d, truth.geometry(), o, r, fitted, err)) fail_msg("diagnose failed: %s", err.c_str());
-    check_consistent(r);
+    const nlohmann::json r = diagnosed(d, truth);
     std::vector<long> got;
     for (auto &x : r["data"]["outliers"]["set_aside"]) got.push_back(x["point"].get<long>());
     std::sort(got.begin(), got.end());
@@ -771,16 +764,20 @@ static void references_off_are_told_from_structure(void **) {
     const double p_block = diag::join_count_p(G, ok, block), p_spread = diag::join_count_p(G, ok, spread);
     if (!(p_block < 0.01)) fail_msg("a 3 x 3 block: join-count p %g", p_block);
     assert_true(p_spread == 1.0); // no two of them are neighbours
+    // One link by chance among nine spread positions is no cluster: the
+    // relabelings (not the no-link shortcut) must say so.
+    std::vector<char> chance = spread;
+    chance[size_t(13 * 1 + 2)] = 1; // beside (1, 1)
+    chance[size_t(13 * 9 + 9)] = 0;
+    const double p_chance = diag::join_count_p(G, ok, chance);
+    if (!(p_chance >= 0.05)) fail_msg("one chance link: join-count p %g", p_chance);
     // One cable: a deviation along a column of the position's Jacobian is
     // one reading's error (chi-square 0); across all four it is not.
-    diag::Eval E;
-    E.var_mean.assign(1, diag::V3::Constant(1e-4));
     Eigen::Matrix<double, 3, 4> Jp;
     Jp << 1, 0, 0, 1, 0, 1, 0, 1, 0, 0, 1, 1;
-    E.Jp.assign(1, Jp);
-    const diag::V3 jig = diag::V3::Constant(0.03);
-    const double along = diag::one_cable_chi2(E, 0, 0.5 * Jp.col(3), jig);
-    const double across = diag::one_cable_chi2(E, 0, diag::V3(0.5, -0.5, 0), jig);
+    const diag::V3 var = diag::V3::Constant(1e-3);
+    const double along = diag::one_cable_chi2(Jp, 0.5 * Jp.col(3), var);
+    const double across = diag::one_cable_chi2(Jp, diag::V3(0.5, -0.5, 0), var);
     assert_true(along < 1e-9);
     // 0.5 mm across every column: at least 0.25 mm^2 / 0.001 mm^2 per axis left
     if (!(across > 100)) fail_msg("a deviation across the columns leaves chi2 %g", across);

@@ -219,8 +219,12 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
                     r["error_mm"]["z"]["rms"].get<double>(), r["jig_tolerance_mm"][0].get<double>());
         const auto &out = r["outliers"];
         if (out["count"].get<size_t>() > 0) {
+            // The first 20 by name; --json lists every one.
             std::string pts;
-            for (auto &x : out["set_aside"]) pts += (pts.empty() ? "" : ", ") + std::to_string(x["point"].get<long>());
+            size_t shown = 0;
+            for (auto &x : out["set_aside"])
+                if (shown++ < 20) pts += (pts.empty() ? "" : ", ") + std::to_string(x["point"].get<long>());
+            if (shown > 20) pts += " and " + std::to_string(shown - 20) + " more (--json lists them)";
             std::printf("outliers set aside: %zu of %zu positions, points %s (the model and their neighbours on the "
                         "plate both disown them; --keep-outliers keeps them)\n",
                         out["count"].get<size_t>(), out["positions_read"].get<size_t>(), pts.c_str());

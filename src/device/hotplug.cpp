@@ -7,8 +7,6 @@
 
 #include <algorithm>
 #include <cerrno>
-#include <cstdio>
-#include <cstdlib>
 #include <cstring>
 #include <set>
 
@@ -76,55 +74,6 @@ int UdevMonitor::wait(int timeout_ms, std::vector<UdevEvent> *out) {
     }
     return taken;
 }
-
-namespace {
-// The masters' hidraw nodes through libudev, every value checked: the
-// watcher enumerates right after an event, while a device may be half
-// made or half gone, and Debian's hidapi 0.13.1 hid_enumerate() passed a
-// NULL attribute of such a node to strlen (a SIGSEGV, about once in 100-200
-// re-plugs of the emulated master, docs/reliability.md). A node missing any
-// of its parts is left for the next event's enumeration.
-bool udev_master_nodes(std::vector<MasterNode> &out, std::string &err) {
-    out.clear();
-    udev *u = udev_new();
-    if (!u) {
-        err = std::string("udev_new failed: ") + std::strerror(errno);
-        return false;
-    }
-    udev_enumerate *en = udev_enumerate_new(u);
-    if (!en || udev_enumerate_add_match_subsystem(en, "hidraw") < 0 || udev_enumerate_scan_devices(en) < 0) {
-        err = "udev: cannot enumerate hidraw devices";
-        if (en) udev_enumerate_unref(en);
-        udev_unref(u);
-        return false;
-    }
-    for (udev_list_entry *e = udev_enumerate_get_list_entry(en); e; e = udev_list_entry_get_next(e)) {
-        const char *syspath = udev_list_entry_get_name(e);
-        udev_device *raw = syspath ? udev_device_new_from_syspath(u, syspath) : nullptr;
-        if (!raw) continue;
-        const char *node = udev_device_get_devnode(raw);
-        // Parents belong to raw: not unref'd.
-        udev_device *hid = udev_device_get_parent_with_subsystem_devtype(raw, "hid", nullptr);
-        const char *id = hid ? udev_device_get_property_value(hid, "HID_ID") : nullptr;
-        unsigned bus = 0, vid = 0, pid = 0;
-        if (node && id && std::sscanf(id, "%x:%x:%x", &bus, &vid, &pid) == 3 && vid == proto::kVendorId &&
-            pid == proto::kProductId) {
-            MasterNode n;
-            n.path = node;
-            const char *uniq = udev_device_get_property_value(hid, "HID_UNIQ");
-            n.serial = uniq ? uniq : "";
-            udev_device *usb = udev_device_get_parent_with_subsystem_devtype(raw, "usb", "usb_device");
-            const char *bcd = usb ? udev_device_get_sysattr_value(usb, "bcdDevice") : nullptr;
-            n.release = bcd ? uint16_t(std::strtoul(bcd, nullptr, 16)) : 0;
-            out.push_back(std::move(n));
-        }
-        udev_device_unref(raw);
-    }
-    udev_enumerate_unref(en);
-    udev_unref(u);
-    return true;
-}
-} // namespace
 
 int MasterWatcher::start(bool enumerate, Callback cb, std::unique_ptr<MasterWatcher> &out, std::string &err) {
     std::unique_ptr<MasterWatcher> w(new MasterWatcher());
@@ -213,12 +162,13 @@ void MasterWatcher::loop(bool enumerate) {
     }
 }
 
-// Compares hidapi's enumeration with known_: new nodes are arrivals (their
+// Compares the enumeration (device/hidraw_enum.h) with known_: new nodes are arrivals (their
 // full info read from the device), vanished ones departures.
 void MasterWatcher::rescan(bool report) {
     std::vector<MasterNode> nodes;
     std::string err;
-    if (!udev_master_nodes(nodes, err)) log::message(log::kWarning, "watcher: " + err);
+    hid_list_master_nodes(nodes, err);
+    if (!err.empty()) log::message(log::kWarning, "watcher: " + err);
     std::set<std::string> now;
     nodes.erase(std::remove_if(nodes.begin(), nodes.end(),
                                [&](const MasterNode &n) { return removed_.count(n.path) != 0; }),

@@ -18,6 +18,7 @@
 #include "cdm/cdm.h"
 #include "device/device.h"
 #include "device/hidraw_check.h"
+#include "device/hidraw_enum.h"
 #include "device/hotplug.h"
 #include "device/protocol.h"
 #include "device/transport.h"
@@ -52,43 +53,47 @@ std::string hid_err(hid_device *d) {
     return w ? narrow(w) : std::string("unknown hidapi error");
 }
 
-// Every connected master, each node once: the filtered enumeration, then
-// the unfiltered one filtered here. hidapi-hidraw 0.13's filtered path reads
-// <hidraw>/device/uevent by plain open(), the unfiltered one walks the
-// parents through libudev; a sysfs without the class device's `device` link
-// (containers, emulators) hides the master from the former only. Neither
-// `cdm list` nor a reconnection by serial may miss what hidapi can see
-// (docs/testing.md).
-// hid_enumerate is serialised: hidapi 0.13 keeps its error text in a
-// process-wide variable, and enumeration now runs on the watcher's thread
-// too, beside the reader threads' reconnections and the callers' own.
-std::mutex g_enum_mu;
+// The bytes of a udev property as the CLI and the C API show them: printable
+// ASCII kept, anything else '?', as narrow() does to hidapi's wide strings.
+std::string printable(const char *s) {
+    std::string out;
+    for (; s && *s; ++s) out += (*s >= 0x20 && *s < 0x7F) ? *s : '?';
+    return out;
+}
 
-template <class F> void for_each_master(F &&f) {
+// Every connected master's node, each once, through libudev
+// (device/hidraw_enum.h: hidapi's own enumeration crashed on a node being
+// made or removed, which is exactly when a watcher or a reconnection by
+// serial enumerates). err says why nothing could be listed, if so.
+std::vector<MasterNode> master_nodes(std::string &err) {
+    std::vector<MasterNode> out;
     std::set<std::string> seen;
-    std::vector<hid_device_info *> lists;
-    {
-        std::lock_guard<std::mutex> lock(g_enum_mu);
-        lists.push_back(hid_enumerate(proto::kVendorId, proto::kProductId));
-        lists.push_back(hid_enumerate(0, 0));
-    }
-    for (hid_device_info *list : lists) {
-        for (hid_device_info *d = list; d; d = d->next) {
-            if (!d->path || d->vendor_id != proto::kVendorId || d->product_id != proto::kProductId) continue;
-            if (!seen.insert(d->path).second) continue; // one entry per node (several usage pairs)
-            f(*d);
-        }
-    }
-    for (hid_device_info *list : lists) hid_free_enumeration(list);
+    struct Ctx {
+        std::vector<MasterNode> *out;
+        std::set<std::string> *seen;
+    } ctx{&out, &seen};
+    char why[256] = "";
+    const int rc = cdm_hidraw_list_masters(
+        [](void *c, const char *node, const char *serial, unsigned release) {
+            Ctx &x = *static_cast<Ctx *>(c);
+            if (!node || !x.seen->insert(node).second) return; // one entry per node
+            MasterNode n;
+            n.path = node;
+            n.serial = printable(serial);
+            n.release = uint16_t(release);
+            x.out->push_back(std::move(n));
+        },
+        &ctx, why, sizeof why);
+    if (rc != 0) err = why;
+    return out;
 }
 
 // Path of the connected master with this serial number, or "".
 std::string find_by_serial(const std::string &serial) {
-    std::string path;
-    for_each_master([&](const hid_device_info &d) {
-        if (path.empty() && narrow(d.serial_number) == serial) path = d.path;
-    });
-    return path;
+    std::string err;
+    for (const MasterNode &n : master_nodes(err))
+        if (n.serial == serial) return n.path;
+    return "";
 }
 
 // hidapi is handed only a node that passed cdm_hidraw_node_check.
@@ -256,17 +261,7 @@ int open_hid(const Uri &u, TransportPtr &out, std::string &err) {
     return open_path(u.path, u.text, out, err);
 }
 
-void hid_list_master_nodes(std::vector<MasterNode> &out, std::string &err) {
-    out.clear();
-    if (ensure_hid_init(err) != CDM_OK) return;
-    for_each_master([&](const hid_device_info &d) {
-        MasterNode n;
-        n.path = d.path;
-        n.serial = narrow(d.serial_number);
-        n.release = d.release_number;
-        out.push_back(std::move(n));
-    });
-}
+void hid_list_master_nodes(std::vector<MasterNode> &out, std::string &err) { out = master_nodes(err); }
 
 void hid_master_info(const MasterNode &node, cdm_device_info &out) {
     const std::string uri = "hid:" + node.path;
@@ -274,7 +269,7 @@ void hid_master_info(const MasterNode &node, cdm_device_info &out) {
     bool full = false;
     hid_device *h = nullptr;
     std::string why;
-    if (checked_open(node.path, h, why) == CDM_OK) {
+    if (ensure_hid_init(why) == CDM_OK && checked_open(node.path, h, why) == CDM_OK) {
         uint8_t buf[proto::kDeviceInfoReportSize] = {proto::kDeviceInfoReportId};
         const int n = hid_get_feature_report(h, buf, sizeof buf);
         proto::DeviceInfoReport r;

@@ -1,4 +1,5 @@
-// Enumeration of real masters through hidapi (VID/PID of protocol.h).
+// Enumeration of real masters (VID/PID of protocol.h): the nodes through
+// libudev (hidraw_enum.h), their info from the device through hidapi.
 #pragma once
 
 #include <cstdint>

@@ -37,6 +37,7 @@
 #include <vector>
 
 #include "cdm/cdm.h"
+#include "device/hidraw_enum.h"
 #include "device/protocol.h"
 #include "device/sim/firmware.h"
 #include "model/model.h"
@@ -347,8 +348,7 @@ void report_at(uint32_t k, double rate, uint8_t *out) {
 
 extern "C" {
 int __wrap_hid_init(void) { return 0; }
-struct hid_device_info *__wrap_hid_enumerate(unsigned short, unsigned short) { return nullptr; }
-void __wrap_hid_free_enumeration(struct hid_device_info *) {}
+int __wrap_cdm_hidraw_list_masters(cdm_hidraw_master_fn, void *, char *, size_t) { return 0; }
 int __wrap_cdm_hidraw_node_check(const char *, char *, size_t) { return 0; }
 hid_device *__wrap_hid_open_path(const char *) {
     if (!g_hid) return nullptr;

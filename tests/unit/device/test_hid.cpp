@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "cdm/cdm.h"
+#include "device/hidraw_enum.h"
 #include "device/protocol.h"
 #include "device/sim/firmware.h"
 #include "model/model.h"
@@ -85,27 +86,18 @@ extern "C" {
 
 int __wrap_hid_init(void) { return 0; }
 
-struct hid_device_info *__wrap_hid_enumerate(unsigned short vid, unsigned short pid) {
-    std::lock_guard<std::mutex> lock(g_mock->mu);
-    if (!g_mock->plugged || vid != kVendorId || pid != kProductId) return nullptr;
-    auto *d = static_cast<hid_device_info *>(std::calloc(1, sizeof(hid_device_info)));
-    d->path = strdup(g_mock->path.c_str());
-    d->vendor_id = vid;
-    d->product_id = pid;
-    d->serial_number = static_cast<wchar_t *>(std::calloc(g_mock->serial.size() + 1, sizeof(wchar_t)));
-    std::wcscpy(d->serial_number, g_mock->serial.c_str());
-    d->release_number = 0x0201;
-    return d;
-}
-
-void __wrap_hid_free_enumeration(struct hid_device_info *d) {
-    while (d) {
-        hid_device_info *next = d->next;
-        std::free(d->path);
-        std::free(d->serial_number);
-        std::free(d);
-        d = next;
+// The enumeration (device/hidraw_enum.h, libudev in the library): the mock's
+// one master while it is plugged in, with bcdDevice 2.1.
+int __wrap_cdm_hidraw_list_masters(cdm_hidraw_master_fn fn, void *ctx, char *, size_t) {
+    std::string path, serial;
+    {
+        std::lock_guard<std::mutex> lock(g_mock->mu);
+        if (!g_mock->plugged) return 0;
+        path = g_mock->path;
+        serial.assign(g_mock->serial.begin(), g_mock->serial.end()); // ASCII
     }
+    fn(ctx, path.c_str(), serial.c_str(), 0x0201);
+    return 0;
 }
 
 // The mock's /dev/hidraw7 does not exist: the node check (tested on real

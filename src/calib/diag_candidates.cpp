@@ -43,6 +43,94 @@ std::string fit_key(const DiagContext &ctx, const Model &m) {
 }
 } // namespace
 
+namespace {
+// The "period" parameters (mm) of effect `name` in m: {effect, parameter}.
+std::vector<std::pair<size_t, size_t>> period_params(const Model &m, const std::string &name) {
+    std::vector<std::pair<size_t, size_t>> v;
+    for (size_t e = 0; e < m.effect_count(); ++e) {
+        if (m.effect_name(e) != name) continue;
+        const auto &ps = m.effect_desc(e).params;
+        for (size_t q = 0; q < ps.size(); ++q)
+            if (ps[q].name == "period" && (ps[q].unit == "mm" || ps[q].unit.empty())) v.push_back({e, q});
+    }
+    return v;
+}
+
+// A job: one fit, or a seeded one (FitJob): every start with its period
+// held, then one joint fit from the best (and from the next when the
+// period it lands on is not shown in the data).
+bool run_job(const DiagContext &ctx, FitJob &j, const FitOptions &f) {
+    if (j.more_starts.empty() || j.seeded.empty()) return fit_model(j.m, ctx.pos, f, j.rep);
+    std::vector<Model> starts;
+    starts.push_back(j.m);
+    for (auto &m : j.more_starts) starts.push_back(m);
+    int evals = 0;
+    double seconds = 0;
+    std::vector<double> chi2(starts.size());
+    std::vector<char> shown(starts.size());
+    std::vector<Model> held = starts;
+    for (size_t k = 0; k < held.size(); ++k) {
+        FitOptions fh = f;
+        fh.hold = period_params(held[k], j.seeded);
+        FitReport r;
+        if (!fit_model(held[k], ctx.pos, fh, r)) {
+            j.rep = r;
+            return false;
+        }
+        evals += r.evals;
+        seconds += r.seconds;
+        chi2[k] = r.chi2;
+        shown[k] = period_shown(held[k], j.seeded, ctx.pos);
+    }
+    // Shown periods first, then by chi-square; the earlier start on a tie.
+    std::vector<size_t> order(starts.size());
+    for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+        if (shown[a] != shown[b]) return shown[a] > shown[b];
+        return chi2[a] < chi2[b];
+    });
+    bool have = false;
+    for (size_t k : order) {
+        Model m = held[k];
+        FitReport r;
+        FitOptions fj = f;
+        // Weighed as at the start (amplitudes zero), as a fit from there
+        // is: the chi-squares stay comparable with the other models'.
+        fj.weigh_with = &starts[k];
+        if (!fit_model(m, ctx.pos, fj, r)) {
+            j.rep = r;
+            return false;
+        }
+        evals += r.evals;
+        seconds += r.seconds;
+        const bool ok = period_shown(m, j.seeded, ctx.pos);
+        if (!have || ok) {
+            j.m = std::move(m);
+            j.rep = r;
+            have = true;
+        }
+        if (ok) break;
+    }
+    j.rep.evals = evals;
+    j.rep.seconds = seconds;
+    return true;
+}
+} // namespace
+
+FitJob start_job(const Model &from, const std::vector<std::string> &keep, const std::string &add,
+                 const std::vector<ParamValues> &starts, std::string stage) {
+    FitJob j(model_with(from, keep, add, starts.empty() ? ParamValues{} : starts.front()), std::move(stage));
+    if (starts.size() > 1 && j.m.has_effect(add)) {
+        j.seeded = add;
+        for (size_t k = 1; k < starts.size(); ++k) {
+            Model m = model_with(from, keep, add, starts[k]);
+            if (!m.has_effect(add)) continue;
+            j.more_starts.push_back(std::move(m));
+        }
+    }
+    return j;
+}
+
 bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err) {
     // Fits done before (bit-identical start and noise model): their result.
     std::vector<std::string> keys(jobs.size());
@@ -51,6 +139,10 @@ bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err
         std::lock_guard<std::mutex> lk(ctx.cache->mu);
         for (size_t k = 0; k < jobs.size(); ++k) {
             keys[k] = fit_key(ctx, jobs[k].m);
+            if (!jobs[k].seeded.empty()) {
+                keys[k] += "\2seeded " + jobs[k].seeded + '\0';
+                for (auto &m : jobs[k].more_starts) keys[k] += fit_key(ctx, m) + '\3';
+            }
             auto it = ctx.cache->done.find(keys[k]);
             if (it == ctx.cache->done.end()) continue;
             std::string e2;
@@ -72,6 +164,10 @@ bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err
     std::vector<size_t> serial, shared;
     for (size_t k = 0; k < jobs.size(); ++k)
         if (!cached[k]) (has_user(jobs[k].m) ? serial : shared).push_back(k);
+    // The seeded jobs (several fits each) taken first, so that the batch
+    // does not wait for one started last; which thread fits a job changes
+    // nothing in its result.
+    std::stable_partition(shared.begin(), shared.end(), [&](size_t k) { return !jobs[k].more_starts.empty(); });
     std::atomic<bool> cancelled{false};
     auto run = [&](FitJob &j, bool main) {
         FitOptions f = ctx.fo;
@@ -83,7 +179,7 @@ bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err
             };
         else
             f.progress = [&](double) { return !cancelled.load(); };
-        j.ok = fit_model(j.m, ctx.pos, f, j.rep);
+        j.ok = run_job(ctx, j, f);
         if (!j.ok) cancelled = true; // the batch fails: stop the others early
     };
     for (size_t k : serial) {
@@ -203,12 +299,11 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
     for (size_t i = 0; i < list.size(); ++i) {
         const auto &d = list[i];
         span[i].first = jobs.size();
-        if (!base.has_effect(d->name))
-            for (const ParamValues &start : effect_starts(base, d->name, ctx.pos)) {
-                Model m = model_with(base, reading_effects(base), d->name, start);
-                if (!m.has_effect(d->name)) break;
-                jobs.emplace_back(std::move(m), stage + " " + d->name);
-            }
+        if (!base.has_effect(d->name)) {
+            FitJob j = start_job(base, reading_effects(base), d->name, effect_starts(base, d->name, ctx.pos),
+                                 stage + " " + d->name);
+            if (j.m.has_effect(d->name)) jobs.push_back(std::move(j));
+        }
         span[i].second = jobs.size();
     }
     if (!fit_all(ctx, jobs, err)) return false;
@@ -219,8 +314,7 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         if (base.has_effect(d->name)) continue;
         Candidate c(base.geometry());
         c.name = d->name;
-        // An effect entering non-linearly is fitted from each data-seeded
-        // start; the best fit counts.
+        // One job per candidate (a seeded period: its job chose the start).
         bool have = false;
         for (size_t q = span[i].first; q < span[i].second; ++q) {
             const Model &m = jobs[q].m;

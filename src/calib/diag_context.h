@@ -67,12 +67,23 @@ struct DiagContext {
 };
 
 // One fit of a batch: the model is fitted in place from its current values.
+// With `seeded` and `more_starts` (start_job): the effect `seeded` has a
+// period seeded from the data and m is its first start, more_starts the
+// others (the same model, another period). Each start is fitted with its
+// period held (the rest: near-linear, a few evaluations), and one joint
+// fit (period free) is run from the best of them by chi-square; m and rep
+// are that fit's, rep.evals and rep.seconds count every fit of the job.
+// (Three joint fits, one per start, took half of a diagnosis's evaluation
+// work: docs/performance.md.) A joint fit whose period is not shown in the
+// data (period_shown) is followed by one from the next-best start.
 struct FitJob {
     FitJob(Model m_, std::string stage_) : m(std::move(m_)), stage(std::move(stage_)) {}
     Model m;
     std::string stage;
     FitReport rep;
     bool ok = false;
+    std::string seeded;
+    std::vector<Model> more_starts;
 };
 
 // Fits every job, on ctx.threads threads, each job exactly as ctx.fit would
@@ -106,6 +117,12 @@ bool period_shown(const Model &m, const std::string &effect, const std::vector<P
 
 std::vector<ParamValues> effect_starts(const Model &base, const std::string &effect,
                                        const std::vector<PreparedPos> &pos);
+
+// The job fitting `keep` of `from` plus `add` from `starts` (effect_starts:
+// one model per start; with several, a seeded job, see FitJob). The job's
+// m lacks `add` when the effect could not be added.
+FitJob start_job(const Model &from, const std::vector<std::string> &keep, const std::string &add,
+                 const std::vector<ParamValues> &starts, std::string stage);
 
 } // namespace diag
 } // namespace cdm

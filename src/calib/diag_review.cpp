@@ -32,18 +32,14 @@ bool review_model(const DiagContext &ctx, const Model &model, int n_free, double
         // the jig transform beside the anchors, can still replace one).
         for (auto &cd : candidate_effects()) {
             if (model.has_effect(cd->name)) continue;
-            for (const ParamValues &st : effect_starts(model, cd->name, ctx.pos)) {
-                Model swapped = model_with(model, keep, cd->name, st);
-                FitReport rs;
-                if (!ctx.fit(swapped, "reviewing " + name, rs)) {
-                    err = rs.message.empty() ? "fit cancelled" : rs.message;
-                    return false;
-                }
-                const double d = ctx.bic(rs.chi2, rs.n_free) - bic_cur;
-                if (period_shown(swapped, cd->name, ctx.pos) && d < best) {
-                    best = d;
-                    best_name = cd->name;
-                }
+            std::vector<FitJob> job;
+            job.push_back(start_job(model, keep, cd->name, effect_starts(model, cd->name, ctx.pos),
+                                    "reviewing " + name));
+            if (!fit_all(ctx, job, err)) return false;
+            const double d = ctx.bic(job[0].rep.chi2, job[0].rep.n_free) - bic_cur;
+            if (period_shown(job[0].m, cd->name, ctx.pos) && d < best) {
+                best = d;
+                best_name = cd->name;
             }
         }
         // Removing it outright is the simpler fix when it is as good: a

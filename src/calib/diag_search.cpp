@@ -134,11 +134,9 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
                     auto s2 = keep;
                     s2.push_back(d->name);
                     if (seen.count(sorted(s2))) continue;
-                    for (const ParamValues &start : starts[i]) {
-                        jobs.emplace_back(model_with(cur, keep, d->name, start),
-                                          "search step " + std::to_string(step) + " swaps");
-                        sw.push_back({k, d->name, s2});
-                    }
+                    jobs.push_back(start_job(cur, keep, d->name, starts[i],
+                                             "search step " + std::to_string(step) + " swaps"));
+                    sw.push_back({k, d->name, s2});
                 }
             if (!fit_all(ctx, jobs, err)) return false;
             for (size_t q = 0; q < jobs.size(); ++q) {
@@ -211,8 +209,7 @@ bool search_alternatives(const DiagContext &ctx, const SearchResult &r,
                 continue; // fitted by the search: judged above
             Alt a{keep, s, jobs.size(), 0};
             a.set.push_back(d->name);
-            for (const ParamValues &st : effect_starts(r.model, d->name, ctx.pos))
-                jobs.emplace_back(model_with(r.model, keep, d->name, st), "alternatives");
+            jobs.push_back(start_job(r.model, keep, d->name, effect_starts(r.model, d->name, ctx.pos), "alternatives"));
             a.last = jobs.size();
             todo.push_back(std::move(a));
         }

@@ -87,7 +87,17 @@ struct Problem {
         build_gauge();
         for (size_t j = 0; j < pos.size(); ++j)
             if (opt.use.empty() || opt.use[j]) rows.push_back(int(j));
-        compute_weights();
+        if (opt.weigh_with) {
+            Model wm = *opt.weigh_with;
+            FitOptions wo = opt;
+            wo.weigh_with = nullptr;
+            wo.hold.clear();
+            Problem wp(wm, pos, wo); // the same positions (opt.use)
+            w = wp.w;
+            failure = wp.failure;
+        } else {
+            compute_weights();
+        }
     }
     int n_params() const { return ev.size() + F; }
 
@@ -98,7 +108,9 @@ struct Problem {
         for (size_t e = 0; e < m.effect_count(); ++e) {
             if (ev.offset(e) < 0) continue;
             const int o = ev.offset(e);
-            const Eigen::MatrixXd B = effect_gauge_basis(m, e);
+            Eigen::MatrixXd B = effect_gauge_basis(m, e);
+            for (const auto &h : opt.hold)
+                if (h.first == e && h.second < size_t(B.rows())) hold_row(B, int(h.second));
             Q.block(o, col, B.rows(), B.cols()) = B;
             col += int(B.cols());
         }
@@ -110,6 +122,21 @@ struct Problem {
         Q.conservativeResize(n, col);
     }
     int n_fixture_free() const { return F > 0 ? F - 1 : 0; }
+
+    // Restricts the basis B (full = base + B * free) to the directions that
+    // leave parameter r where it is: the column with the largest entry in
+    // row r is eliminated from the others and dropped (exact for any basis,
+    // the identity included; the covariance does not depend on the basis).
+    static void hold_row(Eigen::MatrixXd &B, int r) {
+        if (B.cols() == 0) return;
+        Eigen::Index k = 0;
+        if (B.row(r).cwiseAbs().maxCoeff(&k) == 0) return; // already fixed by the gauge
+        for (Eigen::Index j = 0; j < B.cols(); ++j)
+            if (j != k) B.col(j) -= B(r, j) / B(r, k) * B.col(k);
+        if (k + 1 < B.cols()) B.block(0, k, B.rows(), B.cols() - k - 1) = B.rightCols(B.cols() - k - 1).eval();
+        B.conservativeResize(B.rows(), B.cols() - 1);
+        B.row(r).setZero(); // round-off
+    }
 
     void set_full(const Eigen::VectorXd &full) {
         cur = full.head(ev.size());

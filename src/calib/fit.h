@@ -9,6 +9,7 @@
 #pragma once
 
 #include <functional>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -46,6 +47,17 @@ struct FitOptions {
     int fixture_count = 0;
     int max_evals = 400;
     std::function<bool(double)> progress;        // fraction done; false cancels
+    // Parameters held at their current values (not fitted): {effect index in
+    // the model, parameter index in the effect}. The diagnosis profiles a
+    // seeded period this way (diag::fit_all) before one joint fit.
+    std::vector<std::pair<size_t, size_t>> hold;
+    // The model whose sensitivity to the position maps the jig tolerance
+    // onto the readings' weights (null: the fitted model at its start). A
+    // fit continued from another's result weighs the data as the first did:
+    // a ripple's amplitudes change that sensitivity, so weights taken at a
+    // fitted ripple would give a chi-square on another scale than the same
+    // model fitted from zero amplitudes.
+    const Model *weigh_with = nullptr;
 };
 
 struct FitReport {

@@ -204,6 +204,58 @@ static void apply_failure_is_reported(void **) {
     assert_int_equal(unregister_user_effect("test_fails_far", err), CDM_OK);
 }
 
+// FitOptions::hold keeps a parameter where it is and fits the rest: the
+// diagnosis profiles a ripple's period this way. Noise-free readings of a
+// ripple (period 94.2 mm) at 5 x 13 x 13 positions: held at 90 mm the
+// period stays bit for bit and has no standard error, the amplitudes
+// still move (the chi-square falls); held at the truth the amplitudes are
+// recovered to round-off (the fit is linear in them); a joint fit from the
+// held result finds the period.
+static void held_parameter_stays(void **) {
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    assert_true(truth.add_effect("drum_eccentricity",
+                                 ParamValues{{"period", 94.2}, {"a1", 0.15}, {"b2", 0.1}, {"a3", -0.12}, {"b4", -0.08}},
+                                 err));
+    std::vector<PreparedPos> pos;
+    for (double x = 30; x <= 70; x += 10)
+        for (double y = -60; y <= 60; y += 10)
+            for (double z = -60; z <= 60; z += 10) {
+                PreparedPos pp;
+                pp.ref = Eigen::Vector3d(x, y, z);
+                double r[4];
+                assert_int_equal(truth.readings(pp.ref.data(), r), 0);
+                for (int c = 0; c < 4; ++c) pp.mean(c) = r[c];
+                pp.var_mean.setConstant(1e-4); // 0.01 mm: a position mean's
+                pp.n = 100;
+                pos.push_back(pp);
+            }
+    FitOptions fo;
+    fo.jig_sigma.setZero();
+    fo.hold = {{0, 0}};
+    for (double held : {90.0, 94.2}) {
+        Model m{DeviceGeometry{}};
+        assert_true(m.add_effect("drum_eccentricity", ParamValues{{"period", held}}, err));
+        const double chi0 = model_chi2(m, pos, fo);
+        FitReport rep;
+        assert_true(fit_model(m, pos, fo, rep));
+        assert_true(m.effect_params(0)[0] == held);
+        assert_true(rep.std[0][0] == 0.0);
+        assert_int_equal(rep.n_free, 8);
+        if (!(rep.chi2 < 0.5 * chi0)) fail_msg("held at %g: chi2 %g from %g", held, rep.chi2, chi0);
+        if (held == 94.2) {
+            // Round-off and the weak prior (10x the typical amplitude) only.
+            if (rep.chi2 > 1e-6) fail_msg("held at the truth: chi2 %g", rep.chi2);
+            if (std::fabs(m.effect_params(0)[1] - 0.15) > 1e-6) fail_msg("a1 %g", m.effect_params(0)[1]);
+        } else {
+            FitOptions joint = fo;
+            joint.hold.clear();
+            assert_true(fit_model(m, pos, joint, rep));
+            if (std::fabs(m.effect_params(0)[0] - 94.2) > 1e-4) fail_msg("joint period %g", m.effect_params(0)[0]);
+        }
+    }
+}
+
 // The accessors the JSON codec and the diagnosis use.
 static void effect_accessors(void **) {
     Model m{DeviceGeometry{}};
@@ -272,6 +324,7 @@ int main(void) {
         cmocka_unit_test(pulley_limits),
         cmocka_unit_test(json_round_trip_and_errors),
         cmocka_unit_test(apply_failure_is_reported),
+        cmocka_unit_test(held_parameter_stays),
         cmocka_unit_test(effect_accessors),
         cmocka_unit_test(catalogue_table_matches_docs),
         cmocka_unit_test(driver_path_does_not_allocate),

@@ -39,11 +39,16 @@ extern "C" int cdm_hidraw_list_masters(cdm_hidraw_master_fn fn, void *ctx, char 
     udev *u = udev_new();
     if (!u) return fail("udev_new failed (no udev on this system?)");
     udev_enumerate *en = udev_enumerate_new(u);
-    if (!en || udev_enumerate_add_match_subsystem(en, "hidraw") < 0 || udev_enumerate_scan_devices(en) < 0) {
+    if (!en || udev_enumerate_add_match_subsystem(en, "hidraw") < 0) {
         if (en) udev_enumerate_unref(en);
         udev_unref(u);
         return fail("cannot list the hidraw devices through udev");
     }
+    // A device that changes during the scan makes it return an error, but
+    // the scan goes on and the list holds every other device (systemd 252):
+    // what was listed is told, and the error returned beside it, so that a
+    // caller does not take one changing device for every master gone.
+    const int scan = udev_enumerate_scan_devices(en);
     for (udev_list_entry *e = udev_enumerate_get_list_entry(en); e; e = udev_list_entry_get_next(e)) {
         const char *syspath = udev_list_entry_get_name(e);
         udev_device *raw = syspath ? udev_device_new_from_syspath(u, syspath) : nullptr;
@@ -66,5 +71,9 @@ extern "C" int cdm_hidraw_list_masters(cdm_hidraw_master_fn fn, void *ctx, char 
     }
     udev_enumerate_unref(en);
     udev_unref(u);
+    if (scan < 0) {
+        if (cap) std::snprintf(why, cap, "hidraw enumeration: the udev scan was incomplete (%s)", std::strerror(-scan));
+        return int(CDM_ERR_IO);
+    }
     return 0;
 }

@@ -4,8 +4,9 @@
 // SIGSEGV in the caller's process, about once in 100-200 re-plugs of the
 // emulated master; docs/reliability.md). Enumeration runs exactly then: on
 // the watcher's thread right after a udev event, and on a reader thread
-// reconnecting by serial. A node missing any of its parts is not listed;
-// the next enumeration sees it whole.
+// reconnecting by serial. A node missing any of its parts is not listed
+// (the watcher enumerates again at the node's next udev event; a
+// reconnection, at its next attempt).
 #pragma once
 
 #include <cstddef>
@@ -18,7 +19,9 @@ extern "C" {
 typedef void (*cdm_hidraw_master_fn)(void *ctx, const char *devnode, const char *serial, unsigned release);
 
 // 0 after calling `fn` for every master found (none is not an error);
-// otherwise a CDM_ERR_* code and a NUL-terminated reason in why[0..cap).
+// otherwise a CDM_ERR_* code and a NUL-terminated reason in why[0..cap),
+// and `fn` may still have been called for the masters that were listed (a
+// scan that met a changing device): the list may be incomplete.
 // C linkage so that the hidapi mock test can wrap it
 // (-Wl,--wrap=cdm_hidraw_list_masters): its fake master has no sysfs.
 int cdm_hidraw_list_masters(cdm_hidraw_master_fn fn, void *ctx, char *why, size_t cap);

@@ -168,14 +168,17 @@ void MasterWatcher::rescan(bool report) {
     std::vector<MasterNode> nodes;
     std::string err;
     hid_list_master_nodes(nodes, err);
-    if (!err.empty()) log::message(log::kWarning, "watcher: " + err);
+    // An incomplete enumeration (a device changed during the scan) tells
+    // arrivals but no departures: a master it missed is not gone.
+    const bool complete = err.empty();
+    if (!complete) log::message(log::kWarning, "watcher: " + err);
     std::set<std::string> now;
     nodes.erase(std::remove_if(nodes.begin(), nodes.end(),
                                [&](const MasterNode &n) { return removed_.count(n.path) != 0; }),
                 nodes.end());
     for (const MasterNode &n : nodes) now.insert(n.path);
     for (auto it = known_.begin(); it != known_.end();) {
-        if (now.count(it->first)) {
+        if (now.count(it->first) || !complete) {
             ++it;
             continue;
         }

@@ -88,6 +88,21 @@ std::vector<MasterNode> master_nodes(std::string &err) {
     return out;
 }
 
+// The serial of the master at `path`, as the enumeration knows it, or ""
+// (a path that is not the node's own name, a symlink, gets "": the handle
+// then reconnects by that path). Not hidapi's hid_get_serial_number_string:
+// in 0.13.1 it goes through the same unchecked sysfs reads that crashed
+// hid_enumerate on a node being made or removed (docs/reliability.md), and
+// an open right after an arrival is exactly then. The same source as
+// find_by_serial, so a reconnection compares like with like. (No realpath
+// here: under umockdev's preload, which wraps it, it smashed the stack.)
+std::string serial_of(const std::string &path) {
+    std::string err;
+    for (const MasterNode &n : master_nodes(err))
+        if (n.path == path) return n.serial;
+    return "";
+}
+
 // Path of the connected master with this serial number, or "".
 std::string find_by_serial(const std::string &serial) {
     std::string err;
@@ -104,11 +119,18 @@ int checked_open(const std::string &path, hid_device *&d, std::string &why) {
         why = buf;
         return rc;
     }
-    d = hid_open_path(path.c_str());
-    if (!d) {
-        why = "cannot open " + path + ": " + hid_err(nullptr);
-        return CDM_ERR_NO_DEVICE;
+    {
+        // hid_open_path re-runs hid_init, which frees and resets hidapi's
+        // process-wide error text (0.13.1): opens, and the read of that
+        // text after a failed one, are serialised, or one thread's open
+        // frees the text another is reading. Opens are rare (open,
+        // reconnection, the watcher's info read).
+        static std::mutex open_mu;
+        std::lock_guard<std::mutex> lock(open_mu);
+        d = hid_open_path(path.c_str());
+        if (!d) why = "cannot open " + path + ": " + hid_err(nullptr);
     }
+    if (!d) return CDM_ERR_NO_DEVICE;
     return CDM_OK;
 }
 
@@ -223,10 +245,7 @@ int open_path(const std::string &path, const std::string &uri_text, TransportPtr
         err = "URI \"" + uri_text + "\": " + why + " (is it a master, and may this user open it? see udev/70-cdm.rules)";
         return rc;
     }
-    wchar_t wserial[64] = {0};
-    std::string serial;
-    if (hid_get_serial_number_string(d, wserial, 64) == 0) serial = narrow(wserial);
-    out = std::make_unique<HidTransport>(d, path, serial);
+    out = std::make_unique<HidTransport>(d, path, serial_of(path));
     return CDM_OK;
 }
 

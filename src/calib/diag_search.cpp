@@ -24,7 +24,7 @@ double x_rms(const Eval &E) {
 } // namespace
 
 bool model_search(const DiagContext &ctx, const Model &start, const FitReport &start_rep, double start_chi2,
-                  SearchResult &out, std::string &err) {
+                  bool swaps, SearchResult &out, std::string &err) {
     Model cur = model_with(start, reading_effects(start), "");
     int cur_free = start_rep.n_free;
     // The ellipsoid's three parameters are fitted in position space, not
@@ -104,6 +104,8 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
             st.removed = rm_name;
             st.bic_change = best_rm;
             move_to(rm_model, rm_rep, nullptr);
+        } else if (!swaps) {
+            break; // cands are the candidates on top of cur
         } else {
             // Stuck on additions and removals: a one-effect swap can still
             // lower the criterion (greedy forward steps can take a flexible

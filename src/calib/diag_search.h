@@ -40,8 +40,14 @@ struct SearchResult {
 };
 
 // start: the user's model, fitted (its Position-stage effects are ignored).
+// swaps: when no addition or removal lowers the criterion, try every
+// one-effect swap (the costliest step: effects in the model × catalogue);
+// without, the search stops there. The diagnosis searches without swaps
+// while its noise model is still being re-estimated, and with them once it
+// has settled (a swap judged under a noise model about to change is work
+// thrown away).
 bool model_search(const DiagContext &ctx, const Model &start, const FitReport &start_rep, double start_chi2,
-                  SearchResult &out, std::string &err);
+                  bool swaps, SearchResult &out, std::string &err);
 
 // The models the data cannot tell from the recommended one: every set
 // visited within 10 of its BIC (not a superset of it: those add what the data

@@ -154,7 +154,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     const bool search = opt.search && opt.candidates;
     DiagContext sctx = ctx; // the search's noise model, re-estimated below
     if (search) {
-        if (!model_search(ctx, model, rep, chi2_cur, sr, err)) return false;
+        if (!model_search(ctx, model, rep, chi2_cur, false, sr, err)) return false;
         // The jig tolerance was estimated from the user's model's residual;
         // a model far from the data biases that estimate (its smooth error
         // leaks into the white scatter), and with it every chi-square. When
@@ -173,12 +173,29 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
                 return false;
             }
             SearchResult next(g);
-            if (!model_search(sctx, start, r0, r0.chi2, next, err)) return false;
+            if (!model_search(sctx, start, r0, r0.chi2, false, next, err)) return false;
             for (auto &st : next.path) {
                 st.step += int(sr.path.size());
                 sr.path.push_back(st);
             }
             next.path = sr.path;
+            sr = std::move(next);
+        }
+        // The noise model has settled: the search goes on from where it
+        // stopped, now with the one-effect swaps. Its first step's fits
+        // (the candidates and removals on top of sr.model, from the same
+        // values under the same noise model) are the cache's; the sets
+        // fitted before are kept for the alternatives (same noise model,
+        // so their BICs compare).
+        {
+            SearchResult next(g);
+            if (!model_search(sctx, sr.model, sr.rep, sr.chi2, true, next, err)) return false;
+            for (auto &st : next.path) {
+                st.step += int(sr.path.size());
+                sr.path.push_back(st);
+            }
+            next.path = sr.path;
+            next.visited.insert(next.visited.begin(), sr.visited.begin(), sr.visited.end());
             sr = std::move(next);
         }
         mark_confusions(sr.E, sctx.jig, sr.cands);

@@ -89,7 +89,7 @@ bool run_job(const DiagContext &ctx, FitJob &j, const FitOptions &f) {
         }
         evals += r.evals;
         seconds += r.seconds;
-        chi2[k] = r.chi2;
+        chi2[k] = std::isnan(r.chi2) ? INFINITY : r.chi2; // a strict weak order for the sort below
         shown[k] = period_shown(held[k], j.seeded, ctx.pos);
     }
     // Shown periods first, then by chi-square; the earlier start on a tie.

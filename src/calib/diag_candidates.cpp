@@ -37,6 +37,16 @@ std::string fit_key(const DiagContext &ctx, const Model &m) {
         k += '\1';
     }
     bytes(ctx.fo.jig_sigma.data(), 3 * sizeof(double));
+    if (const Model *w = ctx.fo.weigh_with) { // the weights' model, bit for bit
+        k += "\4weighed ";
+        for (size_t e = 0; e < w->effect_count(); ++e) {
+            k += w->effect_name(e);
+            k += '\0';
+            const auto &v = w->effect_params(e);
+            bytes(v.data(), v.size() * sizeof(double));
+            k += '\1';
+        }
+    }
     bytes(&ctx.fo.max_evals, sizeof ctx.fo.max_evals);
     k.append(ctx.fo.use.begin(), ctx.fo.use.end());
     return k;
@@ -79,7 +89,7 @@ bool run_job(const DiagContext &ctx, FitJob &j, const FitOptions &f) {
         }
         evals += r.evals;
         seconds += r.seconds;
-        chi2[k] = r.chi2;
+        chi2[k] = std::isnan(r.chi2) ? INFINITY : r.chi2; // a strict weak order for the sort below
         shown[k] = period_shown(held[k], j.seeded, ctx.pos);
     }
     // Shown periods first, then by chi-square; the earlier start on a tie.
@@ -96,7 +106,7 @@ bool run_job(const DiagContext &ctx, FitJob &j, const FitOptions &f) {
         FitOptions fj = f;
         // Weighed as at the start (amplitudes zero), as a fit from there
         // is: the chi-squares stay comparable with the other models'.
-        fj.weigh_with = &starts[k];
+        if (!fj.weigh_with) fj.weigh_with = &starts[k];
         if (!fit_model(m, ctx.pos, fj, r)) {
             j.rep = r;
             return false;

@@ -24,18 +24,28 @@ double x_rms(const Eval &E) {
 } // namespace
 
 bool model_search(const DiagContext &ctx, const Model &start, const FitReport &start_rep, double start_chi2,
-                  SearchResult &out, std::string &err) {
+                  bool swaps, SearchResult &out, std::string &err,
+                  const std::set<std::vector<std::string>> *seen_before) {
     Model cur = model_with(start, reading_effects(start), "");
     int cur_free = start_rep.n_free;
     // The ellipsoid's three parameters are fitted in position space, not
     // in this chi-square.
     for (size_t k = 0; k < start.effect_count(); ++k)
         if (start.effect_desc(k).stage == Stage::Position) cur_free -= int(start.effect_desc(k).params.size());
-    double cur_chi2 = start_chi2;
+    // Every chi-square a step compares is weighed as the model it stands
+    // on weighs the data (the jig tolerance mapped through that model's
+    // sensitivity to the position): a fit's weights otherwise come from its
+    // own start, and an effect that changes that sensitivity (a gain, a
+    // stretch) moves the chi-square by a percent or two, hundreds on a full
+    // jig, with no better fit (it kept cable_stretch, which the data does
+    // not need, beside cable_gain). cur_chi2 is cur's own.
+    (void)start_chi2;
+    double cur_chi2 = model_chi2(cur, ctx.pos, ctx.fo);
     FitReport cur_rep = start_rep;
     cur_rep.n_free = cur_free;
     Eval cur_E = evaluate(cur, ctx.pos);
     std::set<std::vector<std::string>> seen{sorted(reading_effects(cur))};
+    if (seen_before) seen.insert(seen_before->begin(), seen_before->end());
     out.visited.push_back({reading_effects(cur), ctx.bic(cur_chi2, cur_free)});
     // The search moves to model m, fitted as r (E: its evaluation, or
     // evaluated here when the move's fit did not make one).
@@ -43,12 +53,14 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
         cur = m;
         cur_rep = r;
         cur_free = r.n_free;
-        cur_chi2 = r.chi2;
+        cur_chi2 = model_chi2(cur, ctx.pos, ctx.fo);
         cur_E = E ? *E : evaluate(cur, ctx.pos);
     };
     std::vector<Candidate> cands;
     for (int step = 1; step <= 12; ++step) {
-        if (!score_candidates(ctx, cur, cur_free, cur_chi2, cur_E, "search step " + std::to_string(step), cands, err))
+        DiagContext sc = ctx; // this step's fits, weighed as cur weighs
+        sc.fo.weigh_with = &cur;
+        if (!score_candidates(sc, cur, cur_free, cur_chi2, cur_E, "search step " + std::to_string(step), cands, err))
             return false;
         for (auto &c : cands) {
             auto s = reading_effects(c.m);
@@ -81,7 +93,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
                 keeps.push_back(keep);
                 which.push_back(k);
             }
-            if (!fit_all(ctx, jobs, err)) return false;
+            if (!fit_all(sc, jobs, err)) return false;
             for (size_t q = 0; q < jobs.size(); ++q) {
                 const FitReport &r = jobs[q].rep;
                 const double d = ctx.bic(r.chi2, r.n_free) - ctx.bic(cur_chi2, cur_free);
@@ -104,6 +116,8 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
             st.removed = rm_name;
             st.bic_change = best_rm;
             move_to(rm_model, rm_rep, nullptr);
+        } else if (!swaps) {
+            break; // cands are the candidates on top of cur
         } else {
             // Stuck on additions and removals: a one-effect swap can still
             // lower the criterion (greedy forward steps can take a flexible
@@ -138,7 +152,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
                                              "search step " + std::to_string(step) + " swaps"));
                     sw.push_back({k, d->name, s2});
                 }
-            if (!fit_all(ctx, jobs, err)) return false;
+            if (!fit_all(sc, jobs, err)) return false;
             for (size_t q = 0; q < jobs.size(); ++q) {
                 const FitReport &r = jobs[q].rep;
                 if (!period_shown(jobs[q].m, sw[q].in, ctx.pos)) continue;
@@ -171,6 +185,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
     out.bic = ctx.bic(cur_chi2, cur_free);
     out.E = std::move(cur_E);
     out.cands = std::move(cands);
+    out.seen = std::move(seen);
     return true;
 }
 
@@ -213,7 +228,9 @@ bool search_alternatives(const DiagContext &ctx, const SearchResult &r,
             a.last = jobs.size();
             todo.push_back(std::move(a));
         }
-    if (!fit_all(ctx, jobs, err)) return false;
+    DiagContext ac = ctx; // weighed as the recommended model weighs (r.bic: its own)
+    ac.fo.weigh_with = &r.model;
+    if (!fit_all(ac, jobs, err)) return false;
     for (auto &a : todo) {
         double best = INFINITY;
         const std::string &in = a.set.back();

@@ -9,6 +9,7 @@
 // one-effect swap that does; a set once visited is not visited again.
 #pragma once
 
+#include <set>
 #include <string>
 #include <vector>
 
@@ -37,11 +38,26 @@ struct SearchResult {
     std::vector<Candidate> cands;
     // Every set fitted on the way: its effects and BIC (for the alternatives).
     std::vector<std::pair<std::vector<std::string>, double>> visited;
+    // Every set the search stood on (sorted names), those of seen_before
+    // included.
+    std::set<std::vector<std::string>> seen;
 };
 
 // start: the user's model, fitted (its Position-stage effects are ignored).
+// swaps: when no addition or removal lowers the criterion, try every
+// one-effect swap (the costliest step: effects in the model × catalogue);
+// without, the search stops there. The diagnosis searches without swaps
+// while its noise model is still being re-estimated, and with them once it
+// has settled (a swap judged under a noise model about to change is work
+// thrown away).
+// seen_before: sets an earlier search under the same noise model stood on,
+// not stood on again. Each move lowers the BIC as the model it leaves
+// weighs the data, and those weights differ from model to model, so two
+// models could each be preferred from the other: a search that went on
+// from another's end without its sets could go back and forth.
 bool model_search(const DiagContext &ctx, const Model &start, const FitReport &start_rep, double start_chi2,
-                  SearchResult &out, std::string &err);
+                  bool swaps, SearchResult &out, std::string &err,
+                  const std::set<std::vector<std::string>> *seen_before = nullptr);
 
 // The models the data cannot tell from the recommended one: every set
 // visited within 10 of its BIC (not a superset of it: those add what the data

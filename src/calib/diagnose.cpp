@@ -142,9 +142,13 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     const V3 noise = noise_floor(cur, jig);
 
     // --- candidates on top of the user's model
+    // Their fits, and the review's, weighed as the user's model weighs the
+    // data, as chi2_cur is (diag_search.cpp says why).
+    DiagContext uc = ctx;
+    uc.fo.weigh_with = &model;
     std::vector<Candidate> cands;
     if (opt.candidates) {
-        if (!score_candidates(ctx, model, model_free, chi2_cur, cur, "candidates", cands, err)) return false;
+        if (!score_candidates(uc, model, model_free, chi2_cur, cur, "candidates", cands, err)) return false;
         mark_confusions(cur, jig, cands);
     }
 
@@ -154,32 +158,56 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     const bool search = opt.search && opt.candidates;
     DiagContext sctx = ctx; // the search's noise model, re-estimated below
     if (search) {
-        if (!model_search(ctx, model, rep, chi2_cur, sr, err)) return false;
-        // The jig tolerance was estimated from the user's model's residual;
-        // a model far from the data biases that estimate (its smooth error
-        // leaks into the white scatter), and with it every chi-square. When
-        // the recommended model's own estimate differs by more than 5 %,
-        // the search goes on from there with that noise model, until the
-        // estimate settles (at most three rounds).
-        for (int round = 0; round < 3 && !user_jig; ++round) {
-            const V3 j2 = sctx.own_jig(sr.E);
-            if (((j2 - sctx.jig).array().abs() <= 0.05 * sctx.jig.array().abs().max(1e-6)).all()) break;
-            sctx.jig = j2;
-            sctx.fo.jig_sigma = j2;
-            Model start = sr.model;
-            FitReport r0;
-            if (!sctx.fit(start, "search (noise model re-estimated)", r0)) {
-                err = r0.message.empty() ? "fit cancelled" : r0.message;
-                return false;
-            }
-            SearchResult next(g);
-            if (!model_search(sctx, start, r0, r0.chi2, next, err)) return false;
+        if (!model_search(ctx, model, rep, chi2_cur, false, sr, err)) return false;
+        // The search's steps appended to sr's path; the sets it fitted
+        // replace sr's, or join them when fitted under the same noise model
+        // (their BICs compare: the alternatives read them).
+        auto take = [&](SearchResult &next, bool same_noise) {
             for (auto &st : next.path) {
                 st.step += int(sr.path.size());
                 sr.path.push_back(st);
             }
             next.path = sr.path;
+            if (same_noise) next.visited.insert(next.visited.begin(), sr.visited.begin(), sr.visited.end());
             sr = std::move(next);
+        };
+        // The jig tolerance was estimated from the user's model's residual;
+        // a model far from the data biases that estimate (its smooth error
+        // leaks into the white scatter), and with it every chi-square. When
+        // the recommended model's own estimate differs by more than 5 %,
+        // the search goes on from there with that noise model, until the
+        // estimate settles (at most three re-estimations). Once it has
+        // settled, the search goes on with the one-effect swaps (its first
+        // step's fits are the cache's: the same start, the same noise
+        // model); a swap that moves the model sends its estimate to the
+        // same check.
+        int rounds = 0;
+        // Bounded: three re-estimations, and a swap search after each
+        // and after the first search, at most.
+        for (int pass = 0; pass < 4 + 3; ++pass) {
+            if (!user_jig && rounds < 3) {
+                const V3 j2 = sctx.own_jig(sr.E);
+                if (!((j2 - sctx.jig).array().abs() <= 0.05 * sctx.jig.array().abs().max(1e-6)).all()) {
+                    ++rounds;
+                    sctx.jig = j2;
+                    sctx.fo.jig_sigma = j2;
+                    Model start = sr.model;
+                    FitReport r0;
+                    if (!sctx.fit(start, "search (noise model re-estimated)", r0)) {
+                        err = r0.message.empty() ? "fit cancelled" : r0.message;
+                        return false;
+                    }
+                    SearchResult next(g);
+                    if (!model_search(sctx, start, r0, r0.chi2, false, next, err)) return false;
+                    take(next, false);
+                    continue;
+                }
+            }
+            SearchResult next(g);
+            if (!model_search(sctx, sr.model, sr.rep, sr.chi2, true, next, err, &sr.seen)) return false;
+            const bool moved = !next.path.empty();
+            take(next, true);
+            if (!moved || user_jig || rounds >= 3) break;
         }
         mark_confusions(sr.E, sctx.jig, sr.cands);
         if (!search_alternatives(sctx, sr, alts, err)) return false;
@@ -187,7 +215,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
 
     // --- model review
     json review = json::array();
-    if (!review_model(ctx, model, model_free, chi2_cur, review, err)) return false;
+    if (!review_model(uc, model, model_free, chi2_cur, review, err)) return false;
 
     // --- leave-one-height-out validation
     json validation = nullptr;

@@ -272,6 +272,30 @@ static void search_lands_on_hidden_effects(void **) {
     }
 }
 
+// `cdm calib simulate --effects cable_gain,exit_pulley` (effect seed 1: gains
+// of 0.6-0.9 %, a 6.9 mm pulley) on the small jig, noise seed 1: the search
+// recommended cable_stretch beside the two, because each fit weighed the
+// data as its own start did and a stretch changes that weighting; the
+// review of the same three effects said to drop it. Every chi-square a step
+// compares is now weighed as the model it stands on: exactly the two.
+static void realistic_gain_and_pulley_nothing_extra(void **) {
+    std::vector<std::string> want;
+    const Model truth = make_truth({{"exit_pulley", {{"radius_mm", 6.933110955199806}}},
+                                    {"cable_gain",
+                                     {{"g1", 0.006412970711184978},
+                                      {"g2", 0.009026368482865109},
+                                      {"g3", 0.00828023776738099},
+                                      {"g4", 0.00891012159831646}}}},
+                                   1, want);
+    auto r = run(truth, 1, {}, true);
+    check_consistent(r);
+    const auto &rec = r["recommended"];
+    if (sorted_names(rec["effects"]) != want)
+        fail_msg("recommended %s, hidden %s; path %s", rec["effects"].dump().c_str(), nlohmann::json(want).dump().c_str(),
+                 rec["path"].dump().c_str());
+    assert_true(rec["explained"].get<bool>());
+}
+
 // The sparse, noisy jig (3 heights, 10 mm pitch, 13 x 13 holes, 10
 // samples, pot noise 0.25 mm, the default 0.03 mm seating error): the per-
 // position noise estimate from 10 samples is poor, and a chi-square that
@@ -820,6 +844,7 @@ int main(void) {
         cmocka_unit_test(sparse_noisy_jig),
         cmocka_unit_test(noisier_positions_keep_their_variance),
         cmocka_unit_test(ripple_period_is_fitted),
+        cmocka_unit_test(realistic_gain_and_pulley_nothing_extra),
         cmocka_unit_test(drift_is_named),
         cmocka_unit_test(plate_is_named_as_the_jig),
         cmocka_unit_test(smooth_repeat_is_not_the_plate),

@@ -35,6 +35,7 @@ bool review_model(const DiagContext &ctx, const Model &model, int n_free, double
             std::vector<FitJob> job;
             job.push_back(start_job(model, keep, cd->name, effect_starts(model, cd->name, ctx.pos),
                                     "reviewing " + name));
+            if (!job[0].m.has_effect(cd->name)) continue; // it could not be added: no swap
             if (!fit_all(ctx, job, err)) return false;
             const double d = ctx.bic(job[0].rep.chi2, job[0].rep.n_free) - bic_cur;
             if (period_shown(job[0].m, cd->name, ctx.pos) && d < best) {

@@ -23,7 +23,7 @@ double x_rms(const Eval &E) {
 
 } // namespace
 
-bool model_search(const DiagContext &ctx, const Model &start, const FitReport &start_rep, double start_chi2,
+bool model_search(const DiagContext &ctx, const Model &start, const FitReport &start_rep,
                   bool swaps, SearchResult &out, std::string &err,
                   const std::set<std::vector<std::string>> *seen_before) {
     Model cur = model_with(start, reading_effects(start), "");
@@ -39,7 +39,6 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
     // stretch) moves the chi-square by a percent or two, hundreds on a full
     // jig, with no better fit (it kept cable_stretch, which the data does
     // not need, beside cable_gain). cur_chi2 is cur's own.
-    (void)start_chi2;
     double cur_chi2 = model_chi2(cur, ctx.pos, ctx.fo);
     FitReport cur_rep = start_rep;
     cur_rep.n_free = cur_free;
@@ -148,8 +147,9 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
                     auto s2 = keep;
                     s2.push_back(d->name);
                     if (seen.count(sorted(s2))) continue;
-                    jobs.push_back(start_job(cur, keep, d->name, starts[i],
-                                             "search step " + std::to_string(step) + " swaps"));
+                    FitJob j = start_job(cur, keep, d->name, starts[i], "search step " + std::to_string(step) + " swaps");
+                    if (!j.m.has_effect(d->name)) continue; // it could not be added: no swap
+                    jobs.push_back(std::move(j));
                     sw.push_back({k, d->name, s2});
                 }
             if (!fit_all(sc, jobs, err)) return false;
@@ -224,7 +224,9 @@ bool search_alternatives(const DiagContext &ctx, const SearchResult &r,
                 continue; // fitted by the search: judged above
             Alt a{keep, s, jobs.size(), 0};
             a.set.push_back(d->name);
-            jobs.push_back(start_job(r.model, keep, d->name, effect_starts(r.model, d->name, ctx.pos), "alternatives"));
+            FitJob j = start_job(r.model, keep, d->name, effect_starts(r.model, d->name, ctx.pos), "alternatives");
+            if (!j.m.has_effect(d->name)) continue; // it could not be added: no alternative
+            jobs.push_back(std::move(j));
             a.last = jobs.size();
             todo.push_back(std::move(a));
         }

@@ -55,7 +55,7 @@ struct SearchResult {
 // weighs the data, and those weights differ from model to model, so two
 // models could each be preferred from the other: a search that went on
 // from another's end without its sets could go back and forth.
-bool model_search(const DiagContext &ctx, const Model &start, const FitReport &start_rep, double start_chi2,
+bool model_search(const DiagContext &ctx, const Model &start, const FitReport &start_rep,
                   bool swaps, SearchResult &out, std::string &err,
                   const std::set<std::vector<std::string>> *seen_before = nullptr);
 

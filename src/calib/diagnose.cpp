@@ -158,7 +158,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     const bool search = opt.search && opt.candidates;
     DiagContext sctx = ctx; // the search's noise model, re-estimated below
     if (search) {
-        if (!model_search(ctx, model, rep, chi2_cur, false, sr, err)) return false;
+        if (!model_search(ctx, model, rep, false, sr, err)) return false;
         // The search's steps appended to sr's path; the sets it fitted
         // replace sr's, or join them when fitted under the same noise model
         // (their BICs compare: the alternatives read them).
@@ -198,13 +198,13 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
                         return false;
                     }
                     SearchResult next(g);
-                    if (!model_search(sctx, start, r0, r0.chi2, false, next, err)) return false;
+                    if (!model_search(sctx, start, r0, false, next, err)) return false;
                     take(next, false);
                     continue;
                 }
             }
             SearchResult next(g);
-            if (!model_search(sctx, sr.model, sr.rep, sr.chi2, true, next, err, &sr.seen)) return false;
+            if (!model_search(sctx, sr.model, sr.rep, true, next, err, &sr.seen)) return false;
             const bool moved = !next.path.empty();
             take(next, true);
             if (!moved || user_jig || rounds >= 3) break;

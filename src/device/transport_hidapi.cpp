@@ -64,7 +64,8 @@ std::string printable(const char *s) {
 // Every connected master's node, each once, through libudev
 // (device/hidraw_enum.h: hidapi's own enumeration crashed on a node being
 // made or removed, which is exactly when a watcher or a reconnection by
-// serial enumerates). err says why nothing could be listed, if so.
+// serial enumerates). err says why the list may be incomplete (a scan that
+// met a changing device), or why nothing could be listed.
 std::vector<MasterNode> master_nodes(std::string &err) {
     std::vector<MasterNode> out;
     std::set<std::string> seen;

@@ -11,7 +11,7 @@
 namespace cdm {
 // Every connected master, with its full device info when it answers the
 // device-info feature report (else what enumeration alone knows). An empty
-// list is not an error; err says why hidapi could not enumerate, if so.
+// list is not an error; err says why the list may be incomplete, or empty, if so.
 void hid_list_masters(std::vector<cdm_device_info> &out, std::string &err);
 
 // A master's node as enumeration alone knows it (nothing opened).

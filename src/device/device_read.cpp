@@ -137,7 +137,7 @@ void cdm_device::get_stats(cdm_stats &out) const {
     cdm_stats s{};
     s.struct_size = sizeof s;
     s.reports = n_reports_.load(std::memory_order_relaxed);
-    s.malformed = n_malformed_.load(std::memory_order_relaxed);
+    s.malformed = n_malformed_.load(std::memory_order_acquire);
     s.dropped = n_dropped_.load(std::memory_order_relaxed);
     s.out_of_workspace = n_oow_.load(std::memory_order_relaxed);
     s.reconnects = n_reconnects_.load(std::memory_order_relaxed);

@@ -21,13 +21,14 @@ std::string at(const std::string &src, size_t line, size_t col) {
 // Splits one CSV line (no quoting in this format; fields are numbers).
 void split(const char *b, const char *e, std::vector<std::pair<const char *, const char *>> &f) {
     f.clear();
-    const char *s = b;
-    for (const char *p = b;; ++p) {
-        if (p == e || *p == ',') {
-            f.emplace_back(s, p);
-            if (p == e) break;
-            s = p + 1;
+    for (const char *s = b;;) {
+        const char *p = static_cast<const char *>(std::memchr(s, ',', size_t(e - s)));
+        if (!p) {
+            f.emplace_back(s, e);
+            return;
         }
+        f.emplace_back(s, p);
+        s = p + 1;
     }
 }
 

@@ -81,6 +81,7 @@ PeriodPeak length_period(const LengthView &v) {
     // Oversampled 5x against the natural resolution 1/span, so that the
     // grid's own step is no part of the period's error.
     const int nf = std::max(200, std::min(20000, int(5 * span * (fmax - fmin))));
+    const double df = (fmax - fmin) / (nf - 1);
     std::vector<double> freqs;
     for (int k = 0; k < nf; ++k) freqs.push_back(fmin + (fmax - fmin) * k / (nf - 1));
     std::vector<double> pooled(freqs.size(), 0);
@@ -95,7 +96,7 @@ PeriodPeak length_period(const LengthView &v) {
         // A smooth trend in length (gain, non-linearity) would swamp the
         // low frequencies: take a quadratic out first.
         detrend_quadratic(t, y);
-        auto pw = lomb(t, y, freqs);
+        auto pw = lomb(t, y, fmin, df, freqs.size());
         for (size_t f = 0; f < freqs.size(); ++f) pooled[f] += pw[f];
     }
     size_t bf = size_t(std::max_element(pooled.begin(), pooled.end()) - pooled.begin());

@@ -2,13 +2,15 @@
 // periodic errors and polynomial trends against physical variables.
 #pragma once
 
+#include <cstddef>
 #include <vector>
 
 namespace cdm {
 namespace diag {
 
-// Lomb-Scargle periodogram of y(t) (mean removed), normalised by the variance.
-std::vector<double> lomb(const std::vector<double> &t, const std::vector<double> &y, const std::vector<double> &freqs);
+// Lomb-Scargle periodogram of y(t) (mean removed), normalised by the variance,
+// at the nf frequencies f0 + k df (k = 0..nf-1, cycles per unit of t).
+std::vector<double> lomb(const std::vector<double> &t, const std::vector<double> &y, double f0, double df, size_t nf);
 // y minus its least-squares quadratic in t.
 void detrend_quadratic(const std::vector<double> &t, std::vector<double> &y);
 

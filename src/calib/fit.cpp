@@ -28,6 +28,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 
 #include <nlopt.h>
 
@@ -289,6 +290,13 @@ struct Whitened {
     double best = INFINITY;
     Eigen::VectorXd best_full;
     nlopt_opt opt = nullptr; // the running optimiser, for nlopt_force_stop
+    // The residual and Jacobian at best_full when that evaluation asked for
+    // the gradient (most of SLSQP's do): the next pass starts there, and the
+    // final statistics are taken there, without evaluating the point again.
+    Eigen::VectorXd best_res = Eigen::VectorXd();
+    Eigen::MatrixXd best_J = Eigen::MatrixXd();
+    bool best_has_J = false;
+    Eigen::MatrixXd scratch_J = Eigen::MatrixXd();
 };
 
 double objective(unsigned n, const double *z, double *grad, void *data) {
@@ -299,6 +307,7 @@ double objective(unsigned n, const double *z, double *grad, void *data) {
     pb.set_full(full);
     Eigen::VectorXd res;
     Eigen::MatrixXd J;
+    if (grad) std::swap(J, W->scratch_J); // reuse the last call's storage
     if (!pb.residuals(res, grad ? &J : nullptr)) {
         // A user effect failed: stop (a NULL handle would be refused, and
         // SLSQP would call the failing effect until max_evals); fit_model
@@ -318,7 +327,13 @@ double objective(unsigned n, const double *z, double *grad, void *data) {
     if (f < W->best) {
         W->best = f;
         W->best_full = full;
+        W->best_has_J = grad != nullptr;
+        if (grad) {
+            std::swap(W->best_res, res);
+            std::swap(W->best_J, J); // the previous best's storage is reused
+        }
     }
+    if (grad && J.size()) std::swap(J, W->scratch_J);
     if (pb.opt.progress && pb.evals % 5 == 0 && !pb.opt.progress(std::min(1.0, pb.evals / double(pb.opt.max_evals))))
         pb.cancelled = true;
     if (pb.cancelled && W->opt) nlopt_force_stop(W->opt);
@@ -373,12 +388,28 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
     double prev = INFINITY;
     bool ok = true;
     Eigen::MatrixXd Hfree;
+    // The last residual and Jacobian evaluated, and where: a pass starts at
+    // the previous pass's best point, whose evaluation SLSQP already made
+    // (with the gradient), and the statistics below are taken at the point
+    // the fit ends on; neither is evaluated again when it is the same point
+    // bit for bit (the evaluation is a pure function of the parameters).
+    Eigen::VectorXd have_at, have_res;
+    Eigen::MatrixXd have_J;
+    auto take = [&](const Eigen::VectorXd &at, Eigen::VectorXd &res, Eigen::MatrixXd &J) {
+        if (have_at.size() != at.size() || have_at.size() == 0 ||
+            std::memcmp(have_at.data(), at.data(), sizeof(double) * size_t(at.size())) != 0)
+            return pb.residuals(res, &J);
+        res = std::move(have_res);
+        J = std::move(have_J);
+        have_at.resize(0);
+        return true;
+    };
     for (int pass = 0; pass < 4 && pb.evals < opt.max_evals; ++pass) {
         Eigen::VectorXd full = pb.get_full();
         pb.set_full(full);
         Eigen::VectorXd res;
         Eigen::MatrixXd J;
-        if (!pb.residuals(res, &J)) return fail();
+        if (!take(full, res, J)) return fail();
         Eigen::MatrixXd JQ = J * pb.Q;
         Hfree = JQ.transpose() * JQ;
         for (int a = 0; a < int(full.size()); ++a) {
@@ -403,6 +434,9 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
             const Eigen::VectorXd gz = W.T.transpose() * (-J.transpose() * res + 0.5 * pg);
             if (std::isfinite(f0) && 0.5 * gz.squaredNorm() <= 1e-12 * std::fabs(f0)) {
                 rep.converged = true;
+                have_at = full;
+                have_res = std::move(res);
+                have_J = std::move(J);
                 break;
             }
         }
@@ -430,6 +464,11 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         nlopt_destroy(o);
         pb.set_full(W.best_full);
         if (!pb.failure.empty()) return fail();
+        if (W.best_has_J) {
+            have_at = W.best_full;
+            have_res = std::move(W.best_res);
+            have_J = std::move(W.best_J);
+        }
         if (pb.cancelled) {
             rep.message = "fit cancelled";
             ok = false;
@@ -449,15 +488,14 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
     pb.fx = pb.fx.cwiseMax(-kFixtureMaxMm).cwiseMin(kFixtureMaxMm);
     rep.fixture_mm.assign(pb.fx.data(), pb.fx.data() + pb.fx.size());
     Eigen::VectorXd res;
-    if (!pb.residuals(res, nullptr)) return fail();
+    Eigen::MatrixXd J;
+    if (!take(pb.get_full(), res, J)) return fail();
     rep.chi2 = res.squaredNorm();
     rep.evals = pb.evals;
     if (!rep.converged && rep.message.empty()) rep.message = "evaluation budget spent before convergence";
     // Parameter std from the Gauss-Newton covariance, inflated by chi2/dof
     // when the residual is larger than the weights claim.
     {
-        Eigen::MatrixXd J;
-        if (!pb.residuals(res, &J)) return fail();
         Eigen::MatrixXd JQ = J * pb.Q;
         Eigen::MatrixXd H = JQ.transpose() * JQ;
         for (int a = 0; a < pb.n_params(); ++a) {

@@ -256,6 +256,68 @@ static void held_parameter_stays(void **) {
     }
 }
 
+// FitOptions::weigh_with: each reading's weight holds the jig tolerance
+// mapped through a model's sensitivity to the position, and the model named
+// there is the one whose sensitivity is used (the search compares every fit
+// of a step on the weights of the model the step stands on). A ripple's
+// amplitudes change that sensitivity by up to 2 pi A / T (3 % here) with a
+// sign that follows the ripple's phase, so weighed as the truth (0.5 mm
+// ripple) or as the model at its start (no ripple) the same residual gives
+// chi-squares apart by 1e-4 to 1e-3 relative (the signs partly cancel: 8e-4
+// seen at the start, 9e-5 after the fit);
+// a difference above 1e-5 is the option at work, round-off (a sum of 3,380
+// terms, ~1e-13) is eight orders below. Weighed as itself a model gives, bit
+// for bit, what it gives without weigh_with (the same arithmetic). The
+// fit's reported chi-square is on the named model's weights: it equals
+// model_chi2 with the same option to round-off (1e-9) and differs from the
+// one on its own weights.
+static void weights_from_the_named_model(void **) {
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    assert_true(truth.add_effect("drum_eccentricity",
+                                 ParamValues{{"period", 94.2}, {"a1", 0.5}, {"b2", 0.4}, {"a3", -0.45}, {"b4", -0.3}},
+                                 err));
+    std::vector<PreparedPos> pos;
+    for (double x = 30; x <= 70; x += 10)
+        for (double y = -60; y <= 60; y += 10)
+            for (double z = -60; z <= 60; z += 10) {
+                PreparedPos pp;
+                pp.ref = Eigen::Vector3d(x, y, z);
+                double r[4];
+                assert_int_equal(truth.readings(pp.ref.data(), r), 0);
+                for (int c = 0; c < 4; ++c) pp.mean(c) = r[c];
+                pp.var_mean.setConstant(1e-4);
+                pp.n = 100;
+                pos.push_back(pp);
+            }
+    FitOptions own; // the jig tolerance at its default, 0.03 mm per axis
+    Model start{DeviceGeometry{}};
+    assert_true(start.add_effect("drum_eccentricity", ParamValues{{"period", 92.0}}, err));
+    FitOptions as_self = own, as_truth = own;
+    as_self.weigh_with = &start;
+    as_truth.weigh_with = &truth;
+    const double c_own = model_chi2(start, pos, own);
+    assert_true(model_chi2(start, pos, as_self) == c_own);
+    const double c_truth = model_chi2(start, pos, as_truth);
+    if (!(std::fabs(c_truth - c_own) > 1e-5 * c_own)) fail_msg("weighed as the truth %.12g, as itself %.12g", c_truth, c_own);
+    // A fit weighed as its own start is the fit without the option.
+    Model m1 = start, m2 = start;
+    FitReport r1, r2;
+    assert_true(fit_model(m1, pos, own, r1));
+    assert_true(fit_model(m2, pos, as_self, r2));
+    assert_true(r1.chi2 == r2.chi2);
+    for (size_t k = 0; k < m1.effect_params(0).size(); ++k) assert_true(m1.effect_params(0)[k] == m2.effect_params(0)[k]);
+    // Weighed as another model: its chi-square is on that model's weights.
+    FitOptions held = as_truth;
+    held.hold = {{0, 0}}; // the period held off the truth: a residual is left
+    Model m3 = start;
+    FitReport r3;
+    assert_true(fit_model(m3, pos, held, r3));
+    const double named = model_chi2(m3, pos, as_truth), mine = model_chi2(m3, pos, own);
+    if (!(std::fabs(r3.chi2 - named) <= 1e-9 * named)) fail_msg("fit %.15g, weighed as the truth %.15g", r3.chi2, named);
+    if (!(std::fabs(mine - named) > 1e-5 * named)) fail_msg("own weights %.12g, the truth's %.12g", mine, named);
+}
+
 // The accessors the JSON codec and the diagnosis use.
 static void effect_accessors(void **) {
     Model m{DeviceGeometry{}};
@@ -325,6 +387,7 @@ int main(void) {
         cmocka_unit_test(json_round_trip_and_errors),
         cmocka_unit_test(apply_failure_is_reported),
         cmocka_unit_test(held_parameter_stays),
+        cmocka_unit_test(weights_from_the_named_model),
         cmocka_unit_test(effect_accessors),
         cmocka_unit_test(catalogue_table_matches_docs),
         cmocka_unit_test(driver_path_does_not_allocate),

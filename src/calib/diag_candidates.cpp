@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstdio>
 #include <exception>
+#include <functional>
+#include <cstdint>
 #include <thread>
 
 #include "calib/diag_findings.h"
@@ -141,6 +143,14 @@ FitJob start_job(const Model &from, const std::vector<std::string> &keep, const 
     return j;
 }
 
+namespace {
+bool has_user_effect(const Model &m) {
+    for (size_t k = 0; k < m.effect_count(); ++k)
+        if (m.effect_desc(k).stage == Stage::User) return true;
+    return false;
+}
+} // namespace
+
 bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err) {
     // Fits done before (bit-identical start and noise model): their result.
     std::vector<std::string> keys(jobs.size());
@@ -165,15 +175,10 @@ bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err
             cached[k] = 1;
         }
     }
-    auto has_user = [](const Model &m) {
-        for (size_t k = 0; k < m.effect_count(); ++k)
-            if (m.effect_desc(k).stage == Stage::User) return true;
-        return false;
-    };
     // Jobs with a user effect: on the calling thread, before the others.
     std::vector<size_t> serial, shared;
     for (size_t k = 0; k < jobs.size(); ++k)
-        if (!cached[k]) (has_user(jobs[k].m) ? serial : shared).push_back(k);
+        if (!cached[k]) (has_user_effect(jobs[k].m) ? serial : shared).push_back(k);
     // The seeded jobs (several fits each) taken first, so that the batch
     // does not wait for one started last; which thread fits a job changes
     // nothing in its result.
@@ -295,6 +300,38 @@ bool period_shown(const Model &m, const std::string &effect, const std::vector<P
     return true;
 }
 
+namespace {
+// work(k) for k < n, on ctx.threads threads; the k whose serial(k) is true
+// on the calling thread first (a user effect's callback need not be
+// reentrant). Each k writes only its own results, so which thread runs it
+// changes nothing. An exception from any is rethrown here.
+void for_each_parallel(const DiagContext &ctx, size_t n, const std::function<bool(size_t)> &serial,
+                       const std::function<void(size_t)> &work) {
+    std::vector<size_t> shared;
+    for (size_t k = 0; k < n; ++k)
+        if (serial(k)) work(k);
+        else shared.push_back(k);
+    std::atomic<size_t> next{0};
+    std::atomic<bool> failed{false};
+    std::exception_ptr failure;
+    auto run = [&] {
+        for (size_t i; !failed && (i = next++) < shared.size();) {
+            try {
+                work(shared[i]);
+            } catch (...) {
+                if (!failed.exchange(true)) failure = std::current_exception();
+            }
+        }
+    };
+    const size_t nt = std::min<size_t>(size_t(std::max(1, ctx.threads)), shared.size());
+    std::vector<std::thread> pool;
+    for (size_t t = 1; t < nt; ++t) pool.emplace_back(run);
+    run();
+    for (auto &t : pool) t.join();
+    if (failure) std::rethrow_exception(failure);
+}
+} // namespace
+
 bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
                       const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,
                       std::string &err) {
@@ -317,10 +354,13 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         span[i].second = jobs.size();
     }
     if (!fit_all(ctx, jobs, err)) return false;
-    size_t done = 0;
+    // Each candidate's best start, then (in parallel: independent, each
+    // writes its own) what it overlaps in the model and its position
+    // errors; then judged in the catalogue's order.
+    std::vector<Candidate> picked;
+    std::vector<size_t> picked_of(list.size(), SIZE_MAX);
     for (size_t i = 0; i < list.size(); ++i) {
         const auto &d = list[i];
-        ++done;
         if (base.has_effect(d->name)) continue;
         Candidate c(base.geometry());
         c.name = d->name;
@@ -338,20 +378,33 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         }
         if (!have) continue;
         c.k = c.rep.n_free - base_free;
-        // What the model already does that this effect would: an effect
-        // the model's own effects reproduce cannot be told from them.
-        if (n_base > 0) {
-            Overlap ov = effect_overlap(c.m, ctx.pos, ctx.fo, d->name);
-            for (auto &pe : ov.per_effect)
-                if (pe.second > 0.99) c.in_model.push_back(pe.first);
-            if (c.in_model.empty() && ov.all > 0.99)
-                for (auto &pe : ov.per_effect) c.in_model.push_back(pe.first);
-        }
         if (c.k <= 0) continue; // nothing left to fit after the gauge: indistinguishable from the model
+        picked_of[i] = picked.size();
+        picked.push_back(std::move(c));
+    }
+    for_each_parallel(
+        ctx, picked.size(), [&](size_t q) { return has_user_effect(picked[q].m); },
+        [&](size_t q) {
+            Candidate &c = picked[q];
+            // What the model already does that this effect would: an effect
+            // the model's own effects reproduce cannot be told from them.
+            if (n_base > 0) {
+                Overlap ov = effect_overlap(c.m, ctx.pos, ctx.fo, c.name);
+                for (auto &pe : ov.per_effect)
+                    if (pe.second > 0.99) c.in_model.push_back(pe.first);
+                if (c.in_model.empty() && ov.all > 0.99)
+                    for (auto &pe : ov.per_effect) c.in_model.push_back(pe.first);
+            }
+            c.E = evaluate(c.m, ctx.pos);
+        });
+    size_t done = 0;
+    for (size_t i = 0; i < list.size(); ++i) {
+        ++done;
+        if (picked_of[i] == SIZE_MAX) continue;
+        Candidate &c = picked[picked_of[i]];
         c.dchi2 = base_chi2 - c.rep.chi2;
         c.bic = -c.dchi2 + c.k * std::log(ctx.n_obs);
         c.p = chi2_sf(std::max(0.0, c.dchi2), c.k);
-        c.E = evaluate(c.m, ctx.pos);
         c.v = judge(c.E, ctx.G, ctx.own_jig(c.E), c.rep.n_free);
         c.fp.resize(P);
         double sxy = 0, sxx = 0, syy = 0, ss = 0;

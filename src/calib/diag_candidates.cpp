@@ -143,13 +143,11 @@ FitJob start_job(const Model &from, const std::vector<std::string> &keep, const 
     return j;
 }
 
-namespace {
 bool has_user_effect(const Model &m) {
     for (size_t k = 0; k < m.effect_count(); ++k)
         if (m.effect_desc(k).stage == Stage::User) return true;
     return false;
 }
-} // namespace
 
 bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err) {
     // Fits done before (bit-identical start and noise model): their result.
@@ -300,11 +298,6 @@ bool period_shown(const Model &m, const std::string &effect, const std::vector<P
     return true;
 }
 
-namespace {
-// work(k) for k < n, on ctx.threads threads; the k whose serial(k) is true
-// on the calling thread first (a user effect's callback need not be
-// reentrant). Each k writes only its own results, so which thread runs it
-// changes nothing. An exception from any is rethrown here.
 void for_each_parallel(const DiagContext &ctx, size_t n, const std::function<bool(size_t)> &serial,
                        const std::function<void(size_t)> &work) {
     std::vector<size_t> shared;
@@ -330,7 +323,6 @@ void for_each_parallel(const DiagContext &ctx, size_t n, const std::function<boo
     for (auto &t : pool) t.join();
     if (failure) std::rethrow_exception(failure);
 }
-} // namespace
 
 bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
                       const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,

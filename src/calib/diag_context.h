@@ -95,6 +95,17 @@ struct FitJob {
 // message, in job order) when a fit fails or is cancelled.
 bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err);
 
+// True when the model holds a user effect (its callback need not be
+// reentrant: such a model is fitted and evaluated on the calling thread).
+bool has_user_effect(const Model &m);
+
+// work(k) for k < n on ctx.threads threads; the k whose serial(k) is true
+// on the calling thread first. Each k must write only its own results (then
+// which thread runs it changes nothing). An exception from any is rethrown
+// here, after the others have stopped taking work.
+void for_each_parallel(const DiagContext &ctx, size_t n, const std::function<bool(size_t)> &serial,
+                       const std::function<void(size_t)> &work);
+
 // A copy of `from` keeping only its reading-space effects named in `keep`
 // (with their fitted values), plus `add` (if not empty) at `add_init`.
 Model model_with(const Model &from, const std::vector<std::string> &keep, const std::string &add,

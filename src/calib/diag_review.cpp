@@ -1,6 +1,9 @@
 // See diag_review.h.
 #include "calib/diag_review.h"
 
+#include <string>
+#include <vector>
+
 #include "calib/diag_candidates.h"
 #include "model/effect.h"
 
@@ -13,34 +16,47 @@ bool review_model(const DiagContext &ctx, const Model &model, int n_free, double
     out = json::array();
     const double bic_cur = ctx.bic(chi2, n_free);
     const auto names = reading_effects(model);
-    for (const std::string &name : names) {
+    // Each effect's removal, and its swap for every catalogued effect not
+    // in the model (not only the ranked candidates: one that adds no free
+    // parameter to the model, like the jig transform beside the anchors,
+    // can still replace one): independent fits, fitted as one batch on
+    // ctx.threads threads, then read in the model's and the catalogue's
+    // order (fit_all: nothing depends on the threads).
+    struct Swap {
+        size_t job;
+        std::string name;
+    };
+    std::vector<FitJob> jobs;
+    std::vector<size_t> removal(names.size());
+    std::vector<std::vector<Swap>> swaps(names.size());
+    for (size_t i = 0; i < names.size(); ++i) {
+        const std::string &name = names[i];
         std::vector<std::string> keep;
         for (auto &e : names)
             if (e != name) keep.push_back(e);
-        Model without = model_with(model, keep, "");
-        FitReport rw;
-        if (!ctx.fit(without, "reviewing " + name, rw)) {
-            err = rw.message.empty() ? "fit cancelled" : rw.message;
-            return false;
-        }
-        const double d_rm = ctx.bic(rw.chi2, rw.n_free) - bic_cur;
-        json item = {{"effect", name}, {"bic_change_if_removed", d_rm}, {"redundant", d_rm < 10}};
-        double best = 0;
-        std::string best_name;
-        // Every catalogued effect not in the model (not only the ranked
-        // candidates: one that adds no free parameter to the model, like
-        // the jig transform beside the anchors, can still replace one).
+        removal[i] = jobs.size();
+        jobs.emplace_back(model_with(model, keep, ""), "reviewing " + name);
         for (auto &cd : candidate_effects()) {
             if (model.has_effect(cd->name)) continue;
-            std::vector<FitJob> job;
-            job.push_back(start_job(model, keep, cd->name, effect_starts(model, cd->name, ctx.pos),
-                                    "reviewing " + name));
-            if (!job[0].m.has_effect(cd->name)) continue; // it could not be added: no swap
-            if (!fit_all(ctx, job, err)) return false;
-            const double d = ctx.bic(job[0].rep.chi2, job[0].rep.n_free) - bic_cur;
-            if (period_shown(job[0].m, cd->name, ctx.pos) && d < best) {
+            FitJob j = start_job(model, keep, cd->name, effect_starts(model, cd->name, ctx.pos), "reviewing " + name);
+            if (!j.m.has_effect(cd->name)) continue; // it could not be added: no swap
+            swaps[i].push_back({jobs.size(), cd->name});
+            jobs.push_back(std::move(j));
+        }
+    }
+    if (!fit_all(ctx, jobs, err)) return false;
+    for (size_t i = 0; i < names.size(); ++i) {
+        const FitReport &rw = jobs[removal[i]].rep;
+        const double d_rm = ctx.bic(rw.chi2, rw.n_free) - bic_cur;
+        json item = {{"effect", names[i]}, {"bic_change_if_removed", d_rm}, {"redundant", d_rm < 10}};
+        double best = 0;
+        std::string best_name;
+        for (const Swap &sw : swaps[i]) {
+            const FitJob &j = jobs[sw.job];
+            const double d = ctx.bic(j.rep.chi2, j.rep.n_free) - bic_cur;
+            if (period_shown(j.m, sw.name, ctx.pos) && d < best) {
                 best = d;
-                best_name = cd->name;
+                best_name = sw.name;
             }
         }
         // Removing it outright is the simpler fix when it is as good: a

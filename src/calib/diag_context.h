@@ -91,7 +91,8 @@ struct FitJob {
 // number of threads or on which thread took a job). Only the calling
 // thread reports progress; the others stop when it is cancelled. Models
 // with a user effect are fitted in turn on the calling thread (a user's
-// callback need not be reentrant). False + err (the first failed job's
+// callback need not be reentrant), and so is every job when the model the
+// fits are weighed with (ctx.fo.weigh_with) holds one. False + err (the first failed job's
 // message, in job order) when a fit fails or is cancelled.
 bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err);
 
@@ -100,7 +101,8 @@ bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err
 bool has_user_effect(const Model &m);
 
 // work(k) for k < n on ctx.threads threads; the k whose serial(k) is true
-// on the calling thread first. Each k must write only its own results (then
+// on the calling thread first (all of them when ctx.fo.weigh_with holds a
+// user effect: a fit or an overlap evaluates that model too). Each k must write only its own results (then
 // which thread runs it changes nothing). An exception from any is rethrown
 // here, after the others have stopped taking work.
 void for_each_parallel(const DiagContext &ctx, size_t n, const std::function<bool(size_t)> &serial,

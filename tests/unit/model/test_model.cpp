@@ -204,6 +204,25 @@ static void apply_failure_is_reported(void **) {
     assert_int_equal(unregister_user_effect("test_fails_far", err), CDM_OK);
 }
 
+// Noise-free position means of `truth` at 5 x 13 x 13 jig positions, each
+// with the variance of a 100-sample mean of 0.1 mm noise (0.01 mm).
+static std::vector<PreparedPos> noise_free_jig(const Model &truth) {
+    std::vector<PreparedPos> pos;
+    for (double x = 30; x <= 70; x += 10)
+        for (double y = -60; y <= 60; y += 10)
+            for (double z = -60; z <= 60; z += 10) {
+                PreparedPos pp;
+                pp.ref = Eigen::Vector3d(x, y, z);
+                double r[4];
+                assert_int_equal(truth.readings(pp.ref.data(), r), 0);
+                for (int c = 0; c < 4; ++c) pp.mean(c) = r[c];
+                pp.var_mean.setConstant(1e-4);
+                pp.n = 100;
+                pos.push_back(pp);
+            }
+    return pos;
+}
+
 // FitOptions::hold keeps a parameter where it is and fits the rest: the
 // diagnosis profiles a ripple's period this way. Noise-free readings of a
 // ripple (period 94.2 mm) at 5 x 13 x 13 positions: held at 90 mm the
@@ -217,19 +236,7 @@ static void held_parameter_stays(void **) {
     assert_true(truth.add_effect("drum_eccentricity",
                                  ParamValues{{"period", 94.2}, {"a1", 0.15}, {"b2", 0.1}, {"a3", -0.12}, {"b4", -0.08}},
                                  err));
-    std::vector<PreparedPos> pos;
-    for (double x = 30; x <= 70; x += 10)
-        for (double y = -60; y <= 60; y += 10)
-            for (double z = -60; z <= 60; z += 10) {
-                PreparedPos pp;
-                pp.ref = Eigen::Vector3d(x, y, z);
-                double r[4];
-                assert_int_equal(truth.readings(pp.ref.data(), r), 0);
-                for (int c = 0; c < 4; ++c) pp.mean(c) = r[c];
-                pp.var_mean.setConstant(1e-4); // 0.01 mm: a position mean's
-                pp.n = 100;
-                pos.push_back(pp);
-            }
+    const std::vector<PreparedPos> pos = noise_free_jig(truth);
     FitOptions fo;
     fo.jig_sigma.setZero();
     fo.hold = {{0, 0}};
@@ -277,19 +284,7 @@ static void weights_from_the_named_model(void **) {
     assert_true(truth.add_effect("drum_eccentricity",
                                  ParamValues{{"period", 94.2}, {"a1", 0.5}, {"b2", 0.4}, {"a3", -0.45}, {"b4", -0.3}},
                                  err));
-    std::vector<PreparedPos> pos;
-    for (double x = 30; x <= 70; x += 10)
-        for (double y = -60; y <= 60; y += 10)
-            for (double z = -60; z <= 60; z += 10) {
-                PreparedPos pp;
-                pp.ref = Eigen::Vector3d(x, y, z);
-                double r[4];
-                assert_int_equal(truth.readings(pp.ref.data(), r), 0);
-                for (int c = 0; c < 4; ++c) pp.mean(c) = r[c];
-                pp.var_mean.setConstant(1e-4);
-                pp.n = 100;
-                pos.push_back(pp);
-            }
+    const std::vector<PreparedPos> pos = noise_free_jig(truth);
     FitOptions own; // the jig tolerance at its default, 0.03 mm per axis
     Model start{DeviceGeometry{}};
     assert_true(start.add_effect("drum_eccentricity", ParamValues{{"period", 92.0}}, err));

@@ -4,10 +4,10 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <exception>
 #include <functional>
-#include <cstdint>
 #include <thread>
 
 #include "calib/diag_findings.h"

@@ -26,6 +26,12 @@ bool review_model(const DiagContext &ctx, const Model &model, int n_free, double
         size_t job;
         std::string name;
     };
+    // A swap's start depends on the model and the effect only (a period
+    // from the model's residual): once per effect, not once per removal.
+    const auto cands = candidate_effects();
+    std::vector<std::vector<ParamValues>> starts(cands.size());
+    for (size_t c = 0; c < cands.size(); ++c)
+        if (!model.has_effect(cands[c]->name)) starts[c] = effect_starts(model, cands[c]->name, ctx.pos);
     std::vector<FitJob> jobs;
     std::vector<size_t> removal(names.size());
     std::vector<std::vector<Swap>> swaps(names.size());
@@ -36,11 +42,12 @@ bool review_model(const DiagContext &ctx, const Model &model, int n_free, double
             if (e != name) keep.push_back(e);
         removal[i] = jobs.size();
         jobs.emplace_back(model_with(model, keep, ""), "reviewing " + name);
-        for (auto &cd : candidate_effects()) {
-            if (model.has_effect(cd->name)) continue;
-            FitJob j = start_job(model, keep, cd->name, effect_starts(model, cd->name, ctx.pos), "reviewing " + name);
-            if (!j.m.has_effect(cd->name)) continue; // it could not be added: no swap
-            swaps[i].push_back({jobs.size(), cd->name});
+        for (size_t c = 0; c < cands.size(); ++c) {
+            const std::string &cn = cands[c]->name;
+            if (model.has_effect(cn)) continue;
+            FitJob j = start_job(model, keep, cn, starts[c], "reviewing " + name);
+            if (!j.m.has_effect(cn)) continue; // it could not be added: no swap
+            swaps[i].push_back({jobs.size(), cn});
             jobs.push_back(std::move(j));
         }
     }

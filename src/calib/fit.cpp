@@ -8,7 +8,10 @@
 // converges in few evaluations even when parameters are strongly correlated
 // (anchor positions against pot offsets); parameters in mm, rad and 1/mm
 // need no hand scaling. The whitening is redone at the solution and the fit
-// repeated until the objective stops falling (usually two passes).
+// repeated until the objective stops falling (usually two passes). A pass
+// ends early once SLSQP's line search only probes round-off (kStallF below),
+// and its first evaluation, at the whitening point, is the one the pass
+// start already made.
 // Derivatives: model/evaluator.h (forward-mode automatic differentiation of
 // the templated kernel generated from effects/list.h, seeded on the position
 // and each cable's own parameters and scattered into the full Jacobian;
@@ -297,7 +300,24 @@ struct Whitened {
     Eigen::MatrixXd best_J = Eigen::MatrixXd();
     bool best_has_J = false;
     Eigen::MatrixXd scratch_J = Eigen::MatrixXd();
+    // The residual and Jacobian at `base` (zeta = 0), which the pass start
+    // already has: SLSQP's first call asks for exactly that point.
+    Eigen::VectorXd seed_res = Eigen::VectorXd();
+    Eigen::MatrixXd seed_J = Eigen::MatrixXd();
+    bool seeded = false;
+    // Successive evaluations within kStallF of the best so far (see objective).
+    int stall = 0;
+    bool stalled = false;
 };
+
+// SLSQP checks convergence only when a line search completes. At a minimum
+// its backtracking line search can go on for ten or more evaluations whose
+// objective differs from the best only by round-off (a fifth to a third of
+// a diagnosis's evaluations were such). Three successive evaluations within kStallF of the
+// best objective (chi-square / 2) end the pass: a chi-square known to 2e-4,
+// where the tests compare differences of order one and print tenths.
+constexpr double kStallF = 1e-4;
+constexpr int kStallEvals = 3;
 
 double objective(unsigned n, const double *z, double *grad, void *data) {
     auto *W = static_cast<Whitened *>(data);
@@ -307,8 +327,17 @@ double objective(unsigned n, const double *z, double *grad, void *data) {
     pb.set_full(full);
     Eigen::VectorXd res;
     Eigen::MatrixXd J;
-    if (grad) std::swap(J, W->scratch_J); // reuse the last call's storage
-    if (!pb.residuals(res, grad ? &J : nullptr)) {
+    bool from_seed = false;
+    if (W->seeded && std::all_of(z, z + n, [](double v) { return v == 0.0; })) {
+        // base + T * 0 is base: the pass start's own evaluation.
+        W->seeded = false;
+        res = std::move(W->seed_res);
+        if (grad) J = std::move(W->seed_J);
+        from_seed = true;
+    } else if (grad) {
+        std::swap(J, W->scratch_J); // reuse the last call's storage
+    }
+    if (!from_seed && !pb.residuals(res, grad ? &J : nullptr)) {
         // A user effect failed: stop (a NULL handle would be refused, and
         // SLSQP would call the failing effect until max_evals); fit_model
         // reports it.
@@ -324,6 +353,14 @@ double objective(unsigned n, const double *z, double *grad, void *data) {
         Eigen::Map<Eigen::VectorXd>(grad, n) = W->T.transpose() * gfull;
     }
     ++pb.evals;
+    if (std::fabs(f - W->best) <= kStallF) {
+        if (++W->stall >= kStallEvals && W->opt) {
+            W->stalled = true;
+            nlopt_force_stop(W->opt);
+        }
+    } else {
+        W->stall = 0;
+    }
     if (f < W->best) {
         W->best = f;
         W->best_full = full;
@@ -440,6 +477,9 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
                 break;
             }
         }
+        W.seed_res = std::move(res);
+        W.seed_J = std::move(J);
+        W.seeded = true;
         nlopt_opt o = nlopt_create(NLOPT_LD_SLSQP, unsigned(nfree));
         W.opt = o;
         nlopt_set_min_objective(o, objective, &W);
@@ -474,7 +514,7 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
             ok = false;
             break;
         }
-        if (r < 0 && r != NLOPT_ROUNDOFF_LIMITED) {
+        if (r < 0 && r != NLOPT_ROUNDOFF_LIMITED && !(r == NLOPT_FORCED_STOP && W.stalled)) {
             rep.message = std::string("NLopt stopped: ") + nlopt_result_to_string(r);
         }
         if (prev - W.best <= 1e-9 * std::fabs(W.best) + 1e-9) {

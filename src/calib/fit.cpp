@@ -227,7 +227,7 @@ struct Problem {
         const int n = n_params();
         res.resize(4 * int(rows.size()));
         if (J) J->resize(4 * int(rows.size()), n);
-        if (J) J->setZero();
+        if (J && F > 0) J->rightCols(F).setZero(); // the rest is written below
         Eigen::Matrix<double, 4, Eigen::Dynamic> Jp(4, ev.size());
         Eigen::Matrix<double, 4, 3> dP;
         const bool batched = ev.has_batch();
@@ -243,15 +243,18 @@ struct Problem {
             } else if (!eval_position(j, y, J ? &Jp : nullptr, J && F > 0 ? &dP : nullptr)) {
                 return false;
             }
+            Eigen::Array4d sw;
             for (int c = 0; c < 4; ++c) {
-                const double sw = std::sqrt(w(4 * r + c));
-                res(4 * r + c) = sw * (pp.mean(c) - y(c));
-                if (!J) continue;
-                J->row(4 * r + c).head(ev.size()) = sw * Jp.row(c);
-                // d y / d (jig-frame x): the device-frame x derivative; the
-                // jig's rotation (a few mrad) is left out of this column.
-                if (F > 0) (*J)(4 * r + c, ev.size() + opt.fixture[j]) = sw * dP(c, 0);
+                sw(c) = std::sqrt(w(4 * r + c));
+                res(4 * r + c) = sw(c) * (pp.mean(c) - y(c));
             }
+            if (!J) continue;
+            // The position's four rows at once: each column's four entries
+            // are adjacent in the column-major J.
+            J->block(4 * long(r), 0, 4, ev.size()) = Jp.array().colwise() * sw;
+            // d y / d (jig-frame x): the device-frame x derivative; the
+            // jig's rotation (a few mrad) is left out of this column.
+            if (F > 0) J->block<4, 1>(4 * long(r), ev.size() + opt.fixture[j]) = sw * dP.col(0).array();
         }
         return true;
     }

@@ -87,6 +87,20 @@ Eigen::AutoDiffScalar<D> kernel_atan2(const Eigen::AutoDiffScalar<D> &y, const E
     return Eigen::AutoDiffScalar<D>(std::atan2(yv, xv), D((y.derivatives() * xv - x.derivatives() * yv) / den));
 }
 
+// sin and cos of one angle: for a differentiated angle each needs both of
+// the value's sin and cos, so the pair shares them (std::sin and std::cos
+// separately would evaluate them twice).
+inline void kernel_sincos(double a, double &s, double &c) {
+    s = std::sin(a);
+    c = std::cos(a);
+}
+template <class D>
+void kernel_sincos(const Eigen::AutoDiffScalar<D> &a, Eigen::AutoDiffScalar<D> &s, Eigen::AutoDiffScalar<D> &c) {
+    const double sv = std::sin(a.value()), cv = std::cos(a.value());
+    s = Eigen::AutoDiffScalar<D>(sv, D(a.derivatives() * cv));
+    c = Eigen::AutoDiffScalar<D>(cv, D(a.derivatives() * -sv));
+}
+
 // Rotation by a rotation vector (Rodrigues).
 template <class T> void rotvec_apply(const T w[3], const T x[3], T out[3]) {
     using std::cos;

@@ -36,10 +36,10 @@ struct DrumEccentricity : EffectBase {
         idx[2] = 2 + 2 * cable;
     }
     template <class T> static void transfer(const T *q, int, const Sample<T> &, TransferState<T> &st) {
-        using std::cos;
-        using std::sin;
         const T ph = T(2 * M_PI) * st.length / q[0];
-        st.reading = st.reading + q[1] * sin(ph) + q[2] * cos(ph);
+        T s, c;
+        kernel_sincos(ph, s, c);
+        st.reading = st.reading + q[1] * s + q[2] * c;
     }
 };
 } // namespace cdm

@@ -176,11 +176,11 @@ struct Problem {
         ref[2] = pp.ref(2);
     }
     bool eval_position(size_t j, Eigen::Vector4d &y, Eigen::Matrix<double, 4, Eigen::Dynamic> *J,
-                       Eigen::Matrix<double, 4, 3> *dydP) {
+                       Eigen::Matrix<double, 4, 3> *dydP, int dydP_cols = 3) {
         double ref[3];
         reference(j, ref);
         std::string err;
-        if (ev.eval(cur, ref, pos[j].t_s, y, J, dydP, &err)) return true;
+        if (ev.eval(cur, ref, pos[j].t_s, y, J, dydP, &err, dydP_cols)) return true;
         if (failure.empty()) failure = err;
         return false;
     }
@@ -240,7 +240,7 @@ struct Problem {
                 y = batch.y[r];
                 if (J) Jp = batch.J[r];
                 if (J && F > 0) dP = batch.dydP[r];
-            } else if (!eval_position(j, y, J ? &Jp : nullptr, J && F > 0 ? &dP : nullptr)) {
+            } else if (!eval_position(j, y, J ? &Jp : nullptr, J && F > 0 ? &dP : nullptr, 1)) {
                 return false;
             }
             Eigen::Array4d sw;

@@ -1,8 +1,9 @@
 // See evaluator.h.
 #include "model/evaluator.h"
 
-#include <cstdio>
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 #include "model/model_impl.h"
@@ -104,9 +105,10 @@ struct ReadingEvaluator::Impl {
     // The built-in effects' part of eval: the device-frame position P (and
     // dPdj), the readings y, and when `values_only` is false J (if given)
     // and dP.
+    // npos: the position derivatives the caller wants in dP (0, 1: x, or 3).
     void builtin(const Eigen::VectorXd &full, const double ref[3], double t_s, double P[3], DPdj &dPdj,
                  Eigen::Vector4d &y, Eigen::Matrix<double, 4, Eigen::Dynamic> *J, Eigen::Matrix<double, 4, 3> &dP,
-                 bool values_only) const;
+                 bool values_only, int npos = 3) const;
     // User effect e at one position: the outputs of its user_calls calls
     // (apply, or apply_batch on one row). False on a non-zero return.
     bool user_one(size_t e, const Eigen::VectorXd &full, const double P[3], const Eigen::Vector4d &y, bool deriv,
@@ -132,37 +134,40 @@ Eigen::VectorXd ReadingEvaluator::current() const {
 }
 
 namespace {
-// The cable kernel with derivatives of a fixed length N >= 3 + the model's
-// cable slots (the rest stay zero): Eigen then keeps each derivative vector
-// in registers and on the stack, where a dynamically sized one (even with a
-// fixed maximum) copies through memcpy on every temporary and loops over a
-// run-time length. The values and derivatives are those of the dynamic form
-// (the padding entries only ever hold zeros).
+// The cable kernel with derivatives of a fixed length N >= np + the
+// model's cable slots (the rest stay zero): Eigen then keeps each derivative
+// vector in registers and on the stack, where a dynamically sized one (even
+// with a fixed maximum) copies through memcpy on every temporary and loops
+// over a run-time length. The derivative vector holds the first np
+// position coordinates (0, 1 or 3: only those asked for are carried), then
+// the cable's parameters. Each entry is computed on its own (forward mode
+// is element-wise), so the values and derivatives are those of the
+// dynamic form whatever N and np (the padding entries only ever hold zeros).
 template <int N>
 void cable_jacobians(const Model &m, const ModelLayout &lay, const std::array<std::array<int, kMaxCableSlots>, 4> &col,
-                     const Eigen::VectorXd &full, const double P[3], double t_s, Eigen::Vector4d &y,
+                     const Eigen::VectorXd &full, const double P[3], double t_s, int np, Eigen::Vector4d &y,
                      Eigen::Matrix<double, 4, 3> &dP, Eigen::Matrix<double, 4, kMaxCableSlots> &dq) {
     using AD = Eigen::AutoDiffScalar<Eigen::Matrix<double, N, 1>>;
-    static_assert(N >= 3, "position derivatives need 3 entries");
     Sample<AD> s;
-    for (int k = 0; k < 3; ++k) s.P[k] = AD(P[k], N, k);
+    for (int k = 0; k < 3; ++k) s.P[k] = k < np ? AD(P[k], N, k) : AD(P[k], Eigen::Matrix<double, N, 1>::Zero());
     s.t_s = t_s;
     AD q[kMaxCableSlots > 0 ? kMaxCableSlots : 1];
     const int ns = lay.cable.nslots;
+    dP.setZero();
     for (int i = 0; i < 4; ++i) {
-        for (int sl = 0; sl < ns; ++sl) q[sl] = AD(full(col[size_t(i)][size_t(sl)]), N, 3 + sl);
+        for (int sl = 0; sl < ns; ++sl) q[sl] = AD(full(col[size_t(i)][size_t(sl)]), N, np + sl);
         const AD r = cable_reading<AD>(m.geometry(), i, s, lay.cable, q);
         y(i) = r.value();
         const auto &d = r.derivatives();
-        dP.row(i) = d.template head<3>().transpose();
-        for (int sl = 0; sl < ns; ++sl) dq(i, sl) = d(3 + sl);
+        for (int k = 0; k < np; ++k) dP(i, k) = d(k);
+        for (int sl = 0; sl < ns; ++sl) dq(i, sl) = d(np + sl);
     }
 }
 } // namespace
 
 void ReadingEvaluator::Impl::builtin(const Eigen::VectorXd &full, const double ref[3], double t_s, double P[3],
                                      DPdj &dPdj, Eigen::Vector4d &y, Eigen::Matrix<double, 4, Eigen::Dynamic> *J,
-                                     Eigen::Matrix<double, 4, 3> &dP, bool values_only) const {
+                                     Eigen::Matrix<double, 4, 3> &dP, bool values_only, int npos) const {
     jig_position(full, ref, P, dPdj);
     if (J) J->setZero(4, n);
     if (values_only) {
@@ -178,18 +183,26 @@ void ReadingEvaluator::Impl::builtin(const Eigen::VectorXd &full, const double r
         }
         return;
     }
-    const int nloc = 3 + lay.cable.nslots;
+    // The position derivatives the caller and the chain need: all three
+    // for a Jig-stage effect's chain rule or a user effect's, else those
+    // asked for.
+    const int npd = (njig > 0 || lay.has_user) ? 3 : npos;
+    const int nloc = npd + lay.cable.nslots;
     Eigen::Matrix<double, 4, kMaxCableSlots> dq;
-    if (nloc <= 4)
-        cable_jacobians<4>(m, lay, col, full, P, t_s, y, dP, dq);
+    if (nloc <= 2)
+        cable_jacobians<2>(m, lay, col, full, P, t_s, npd, y, dP, dq);
+    else if (nloc <= 4)
+        cable_jacobians<4>(m, lay, col, full, P, t_s, npd, y, dP, dq);
+    else if (nloc <= 6)
+        cable_jacobians<6>(m, lay, col, full, P, t_s, npd, y, dP, dq);
     else if (nloc <= 8)
-        cable_jacobians<8>(m, lay, col, full, P, t_s, y, dP, dq);
+        cable_jacobians<8>(m, lay, col, full, P, t_s, npd, y, dP, dq);
     else if (nloc <= 12)
-        cable_jacobians<12>(m, lay, col, full, P, t_s, y, dP, dq);
+        cable_jacobians<12>(m, lay, col, full, P, t_s, npd, y, dP, dq);
     else if (nloc <= 16)
-        cable_jacobians<16>(m, lay, col, full, P, t_s, y, dP, dq);
+        cable_jacobians<16>(m, lay, col, full, P, t_s, npd, y, dP, dq);
     else
-        cable_jacobians<kMaxLocal>(m, lay, col, full, P, t_s, y, dP, dq);
+        cable_jacobians<kMaxLocal>(m, lay, col, full, P, t_s, npd, y, dP, dq);
     if (J) {
         for (int i = 0; i < 4; ++i) {
             for (auto [e, first] : jig) {
@@ -203,12 +216,13 @@ void ReadingEvaluator::Impl::builtin(const Eigen::VectorXd &full, const double r
 
 bool ReadingEvaluator::eval(const Eigen::VectorXd &full, const double ref[3], double t_s, Eigen::Vector4d &y,
                             Eigen::Matrix<double, 4, Eigen::Dynamic> *J, Eigen::Matrix<double, 4, 3> *dydP,
-                            std::string *err) const {
+                            std::string *err, int dydP_cols) const {
     const Impl &I = *impl_;
     double P[3];
     DPdj dPdj;
     Eigen::Matrix<double, 4, 3> dP;
-    I.builtin(full, ref, t_s, P, dPdj, y, J, dP, !J && !dydP && !I.lay.has_user);
+    I.builtin(full, ref, t_s, P, dPdj, y, J, dP, !J && !dydP && !I.lay.has_user,
+              dydP ? std::clamp(dydP_cols, 1, 3) : 0);
     if (I.lay.has_user) {
         Eigen::Vector4d out[15 + 2 * kMaxUserParams]; // the most calls one user effect needs
         for (size_t e = 0; e < I.desc.size(); ++e) {

@@ -39,11 +39,13 @@ public:
 
     // Readings at jig reference position `ref` (mapped through the Jig
     // effects) at acquisition time t_s, with the parameters `full`. J
-    // (4 x size()): d y / d full; dydP: d y / d device-frame position.
+    // (4 x size()): d y / d full; dydP: d y / d device-frame position, its
+    // first dydP_cols columns (1: x only, the others then zero; the
+    // derivatives not asked for are not carried through the kernel).
     // False + err naming the effect when a user effect's apply fails.
     bool eval(const Eigen::VectorXd &full, const double ref[3], double t_s, Eigen::Vector4d &y,
               Eigen::Matrix<double, 4, Eigen::Dynamic> *J, Eigen::Matrix<double, 4, 3> *dydP,
-              std::string *err) const;
+              std::string *err, int dydP_cols = 3) const;
 
     // eval at n positions at once (refs: n x 3 row-major, t_s: n), with the
     // same values and derivatives, into out (its memory is reused from one

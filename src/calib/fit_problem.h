@@ -1,0 +1,270 @@
+// The least-squares problem a fit solves: the model's readings against
+// the per-position means, weighted (sqrt(w) * (mean - y)), with their
+// Jacobian over the fitted parameters and the fixture heights' x offsets;
+// the gauge (full = base + Q * free), the bounds and the weak prior.
+// Private to src/calib: fit.cpp runs the optimiser on it, fit_queries.cpp
+// answers the diagnosis's questions about a model (its chi-square, its
+// Jacobian, an effect's overlap with the others).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "calib/fit.h"
+#include "model/effect.h"
+#include "model/evaluator.h"
+
+namespace cdm::fit_detail {
+
+struct Problem {
+    Model &m;
+    const std::vector<PreparedPos> &pos;
+    const FitOptions &opt;
+    ReadingEvaluator ev;
+    Eigen::VectorXd cur;              // the effects' parameters being evaluated (ev's layout)
+    int F = 0;                        // fixture heights with their own x offset (0: none)
+    Eigen::VectorXd fx;               // their offsets (mm, jig frame x)
+    Eigen::VectorXd scale, lo, hi, init;
+    Eigen::MatrixXd Q;                // full = base + Q * free
+    std::vector<int> rows;            // positions used
+    Eigen::VectorXd w;                // weights per observation (4 per used position)
+    int evals = 0;
+    bool cancelled = false;
+    std::string failure;              // a user effect's apply failed: its message
+    ReadingEvaluator::Batch batch;    // every used position's readings, when a user effect works on arrays
+    std::vector<double> refs, ts;     // their reference positions and times (eval_rows)
+
+    Problem(Model &m_, const std::vector<PreparedPos> &p_, const FitOptions &o_)
+        : m(m_), pos(p_), opt(o_), ev(m_) {
+        if (opt.fixture_count >= 2 && opt.fixture.size() == pos.size()) F = opt.fixture_count;
+        fx = Eigen::VectorXd::Zero(F);
+        const int n = ev.size() + F;
+        cur = ev.current();
+        scale.resize(n);
+        lo.resize(n);
+        hi.resize(n);
+        init.resize(n);
+        for (size_t e = 0; e < m.effect_count(); ++e) {
+            if (ev.offset(e) < 0) continue;
+            const auto &ps = m.effect_desc(e).params;
+            for (size_t k = 0; k < ps.size(); ++k) {
+                const int a = ev.offset(e) + int(k);
+                scale(a) = ps[k].scale;
+                lo(a) = ps[k].lower;
+                hi(a) = ps[k].upper;
+                init(a) = ps[k].init;
+            }
+        }
+        for (int k = 0; k < F; ++k) {
+            const int a = ev.size() + k;
+            scale(a) = 0.05; // a machined spacer's tolerance
+            lo(a) = -kFixtureMaxMm;
+            hi(a) = kFixtureMaxMm;
+            init(a) = 0;
+        }
+        build_gauge();
+        for (size_t j = 0; j < pos.size(); ++j)
+            if (opt.use.empty() || opt.use[j]) rows.push_back(int(j));
+        if (opt.weigh_with) {
+            Model wm = *opt.weigh_with;
+            FitOptions wo = opt;
+            wo.weigh_with = nullptr;
+            wo.hold.clear();
+            Problem wp(wm, pos, wo); // the same positions (opt.use)
+            w = wp.w;
+            failure = wp.failure;
+        } else {
+            compute_weights();
+        }
+    }
+    int n_params() const { return ev.size() + F; }
+
+    void build_gauge() {
+        const int n = n_params();
+        Q = Eigen::MatrixXd::Zero(n, n);
+        int col = 0;
+        for (size_t e = 0; e < m.effect_count(); ++e) {
+            if (ev.offset(e) < 0) continue;
+            const int o = ev.offset(e);
+            Eigen::MatrixXd B = effect_gauge_basis(m, e);
+            for (const auto &h : opt.hold)
+                if (h.first == e && h.second < size_t(B.rows())) hold_row(B, int(h.second));
+            Q.block(o, col, B.rows(), B.cols()) = B;
+            col += int(B.cols());
+        }
+        // The fixture offsets sum to zero: contrasts e_k - 1/F.
+        for (int k = 0; k + 1 < F; ++k, ++col) {
+            Q.block(ev.size(), col, F, 1).setConstant(-1.0 / F);
+            Q(ev.size() + k, col) += 1.0;
+        }
+        Q.conservativeResize(n, col);
+    }
+    int n_fixture_free() const { return F > 0 ? F - 1 : 0; }
+
+    // Restricts the basis B (full = base + B * free) to the directions that
+    // leave parameter r where it is: the column with the largest entry in
+    // row r is eliminated from the others and dropped (exact for any basis,
+    // the identity included; the covariance does not depend on the basis).
+    static void hold_row(Eigen::MatrixXd &B, int r) {
+        if (B.cols() == 0) return;
+        Eigen::Index k = 0;
+        if (B.row(r).cwiseAbs().maxCoeff(&k) == 0) return; // already fixed by the gauge
+        for (Eigen::Index j = 0; j < B.cols(); ++j)
+            if (j != k) B.col(j) -= B(r, j) / B(r, k) * B.col(k);
+        if (k + 1 < B.cols()) B.block(0, k, B.rows(), B.cols() - k - 1) = B.rightCols(B.cols() - k - 1).eval();
+        B.conservativeResize(B.rows(), B.cols() - 1);
+        B.row(r).setZero(); // round-off
+    }
+
+    void set_full(const Eigen::VectorXd &full) {
+        cur = full.head(ev.size());
+        fx = full.tail(F);
+    }
+    Eigen::VectorXd get_full() const {
+        Eigen::VectorXd full(n_params());
+        full << cur, fx;
+        return full;
+    }
+
+    // Writes the parameters back into the model, clamped to their bounds
+    // (SLSQP honours them to its constraint tolerance, 1e-9).
+    void commit() {
+        for (size_t e = 0; e < m.effect_count(); ++e) {
+            if (ev.offset(e) < 0) continue;
+            std::vector<double> v(m.effect_params(e).size());
+            for (size_t k = 0; k < v.size(); ++k) {
+                const int a = ev.offset(e) + int(k);
+                v[k] = std::clamp(cur(a), lo(a), hi(a));
+            }
+            std::string err;
+            if (!m.set_effect_params(e, v, err) && failure.empty()) failure = err;
+        }
+    }
+
+    // Predicted readings and d(readings)/d(effect params) at position j
+    // (its fixture height's offset applied to the reference).
+    void reference(size_t j, double ref[3]) const {
+        const PreparedPos &pp = pos[j];
+        ref[0] = pp.ref(0) + (F > 0 ? fx(opt.fixture[j]) : 0.0);
+        ref[1] = pp.ref(1);
+        ref[2] = pp.ref(2);
+    }
+    bool eval_position(size_t j, Eigen::Vector4d &y, Eigen::Matrix<double, 4, Eigen::Dynamic> *J,
+                       Eigen::Matrix<double, 4, 3> *dydP, int dydP_cols = 3) {
+        double ref[3];
+        reference(j, ref);
+        std::string err;
+        if (ev.eval(cur, ref, pos[j].t_s, y, J, dydP, &err, dydP_cols)) return true;
+        if (failure.empty()) failure = err;
+        return false;
+    }
+    // Every used position at once into `batch`, when a user effect works on
+    // arrays: its apply_batch is then called once per central-difference
+    // step, not once per position and step (a Python effect: numpy over
+    // all positions instead of a call into the interpreter for each).
+    bool eval_rows(bool want_J, bool want_dydP) {
+        refs.resize(3 * rows.size());
+        ts.resize(rows.size());
+        for (size_t r = 0; r < rows.size(); ++r) {
+            reference(size_t(rows[r]), &refs[3 * r]);
+            ts[r] = pos[size_t(rows[r])].t_s;
+        }
+        std::string err;
+        if (ev.eval_batch(cur, rows.size(), refs.data(), ts.data(), want_J, want_dydP, batch, &err)) return true;
+        if (failure.empty()) failure = err;
+        return false;
+    }
+
+    void compute_weights() {
+        w.resize(4 * int(rows.size()));
+        const bool batched = ev.has_batch();
+        const bool batch_ok = batched && eval_rows(false, true);
+        for (size_t r = 0; r < rows.size(); ++r) {
+            const auto &pp = pos[rows[r]];
+            Eigen::Vector4d y;
+            Eigen::Matrix<double, 4, 3> dP;
+            if (batched)
+                dP = batch_ok ? batch.dydP[r] : Eigen::Matrix<double, 4, 3>::Zero();
+            else if (!eval_position(size_t(rows[r]), y, nullptr, &dP))
+                dP.setZero();
+            for (int c = 0; c < 4; ++c) {
+                double jig = 0;
+                for (int a = 0; a < 3; ++a) jig += dP(c, a) * dP(c, a) * opt.jig_sigma(a) * opt.jig_sigma(a);
+                w(4 * r + c) = 1.0 / (pp.var_mean(c) + jig);
+            }
+        }
+    }
+
+    // Weighted residuals (sqrt(w) * (mean - y)) and Jacobian of y. False
+    // when a user effect's apply fails (message in `failure`).
+    bool residuals(Eigen::VectorXd &res, Eigen::MatrixXd *J) {
+        const int n = n_params();
+        res.resize(4 * int(rows.size()));
+        if (J) J->resize(4 * int(rows.size()), n);
+        if (J && F > 0) J->rightCols(F).setZero(); // the rest is written below
+        Eigen::Matrix<double, 4, Eigen::Dynamic> Jp(4, ev.size());
+        Eigen::Matrix<double, 4, 3> dP;
+        const bool batched = ev.has_batch();
+        if (batched && !eval_rows(J != nullptr, J && F > 0)) return false;
+        for (size_t r = 0; r < rows.size(); ++r) {
+            const size_t j = size_t(rows[r]);
+            const auto &pp = pos[j];
+            Eigen::Vector4d y;
+            if (batched) {
+                y = batch.y[r];
+                if (J) Jp = batch.J[r];
+                if (J && F > 0) dP = batch.dydP[r];
+            } else if (!eval_position(j, y, J ? &Jp : nullptr, J && F > 0 ? &dP : nullptr, 1)) {
+                return false;
+            }
+            Eigen::Array4d sw;
+            for (int c = 0; c < 4; ++c) {
+                sw(c) = std::sqrt(w(4 * r + c));
+                res(4 * r + c) = sw(c) * (pp.mean(c) - y(c));
+            }
+            if (!J) continue;
+            // The position's four rows at once: each column's four entries
+            // are adjacent in the column-major J.
+            J->block(4 * long(r), 0, 4, ev.size()) = Jp.array().colwise() * sw;
+            // d y / d (jig-frame x): the device-frame x derivative; the
+            // jig's rotation (a few mrad) is left out of this column.
+            if (F > 0) J->block<4, 1>(4 * long(r), ev.size() + opt.fixture[j]) = sw * dP.col(0).array();
+        }
+        return true;
+    }
+
+    // The fixture offsets alone fitted at the current effect parameters
+    // (Gauss-Newton; nearly linear in them): the chi-square a model has
+    // with the jig as it is.
+    bool profile_fixture() {
+        if (F == 0) return true;
+        Eigen::MatrixXd Qf = Q.bottomRows(F).rightCols(F - 1);
+        for (int it = 0; it < 3; ++it) {
+            Eigen::VectorXd res;
+            Eigen::MatrixXd J;
+            if (!residuals(res, &J)) return false;
+            Eigen::MatrixXd A = J.rightCols(F) * Qf;
+            Eigen::VectorXd step = (A.transpose() * A).ldlt().solve(A.transpose() * res);
+            fx = (fx + Qf * step).cwiseMax(-kFixtureMaxMm).cwiseMin(kFixtureMaxMm);
+        }
+        return true;
+    }
+
+    double prior(const Eigen::VectorXd &full, Eigen::VectorXd *grad) const {
+        double s = 0;
+        if (grad) grad->setZero(full.size());
+        for (int a = 0; a < full.size(); ++a) {
+            const double sd = 10 * scale(a);
+            const double z = (full(a) - init(a)) / sd;
+            s += z * z;
+            if (grad) (*grad)(a) = 2 * z / sd;
+        }
+        return s;
+    }
+};
+
+} // namespace cdm::fit_detail

@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <new>
+#include <random>
 #include <fstream>
 #include <setjmp.h>
 #include <sstream>
@@ -314,6 +315,45 @@ static void weights_from_the_named_model(void **) {
 }
 
 // The accessors the JSON codec and the diagnosis use.
+// A fit ends where a fresh fit from its result finds nothing more: the
+// pass's stall stop (three evaluations within 1e-4 of the best chi-square/2)
+// must not end a fit on a slope. Means of 13 x 13 x 5 positions with
+// Gaussian noise of 0.01 mm on each reading (the weights say so: chi2/dof
+// near 1) hide anchor errors, an exit pulley, a stretch and a gain, fitted
+// from the nominal start (19 parameters). The refit may gain at most 0.01
+// in chi-square: the diagnosis prints its chi-square changes and BIC to
+// tenths, so 0.01 cannot move a printed figure by more than a unit of its
+// last digit. A stop on a slope is far above that: with the stall
+// threshold 1e7 times looser (1e3) this fit ended 1,169 above its minimum.
+static void fit_ends_at_its_minimum(void **) {
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    for (const char *e : {"anchor_position", "exit_pulley", "cable_stretch", "cable_gain"})
+        assert_true(truth.add_effect_random(e, 5, err));
+    std::vector<PreparedPos> pos = noise_free_jig(truth);
+    std::mt19937_64 rng(11);
+    std::normal_distribution<double> noise(0.0, 0.01);
+    for (auto &pp : pos) {
+        for (int c = 0; c < 4; ++c) pp.mean(c) += noise(rng);
+        pp.var_mean.setConstant(0.01 * 0.01);
+    }
+    FitOptions fo;
+    fo.jig_sigma.setZero();
+    Model m{DeviceGeometry{}};
+    for (const char *e : {"anchor_position", "exit_pulley", "cable_stretch", "cable_gain"})
+        assert_true(m.add_effect(e, {}, err));
+    FitReport rep;
+    assert_true(fit_model(m, pos, fo, rep));
+    if (!rep.converged) fail_msg("not converged: %s", rep.message.c_str());
+    const double dof = double(rep.n_obs - rep.n_free);
+    if (!(rep.chi2 < 2 * dof)) fail_msg("chi2 %g for %g dof: the fit did not find the truth's basin", rep.chi2, dof);
+    Model again = m;
+    FitReport rep2;
+    assert_true(fit_model(again, pos, fo, rep2));
+    if (!(rep.chi2 - rep2.chi2 <= 0.01))
+        fail_msg("a refit from the result lowered chi2 from %.6f to %.6f", rep.chi2, rep2.chi2);
+}
+
 static void effect_accessors(void **) {
     Model m{DeviceGeometry{}};
     std::string err;
@@ -383,6 +423,7 @@ int main(void) {
         cmocka_unit_test(apply_failure_is_reported),
         cmocka_unit_test(held_parameter_stays),
         cmocka_unit_test(weights_from_the_named_model),
+        cmocka_unit_test(fit_ends_at_its_minimum),
         cmocka_unit_test(effect_accessors),
         cmocka_unit_test(catalogue_table_matches_docs),
         cmocka_unit_test(driver_path_does_not_allocate),

@@ -15,6 +15,7 @@
 
 #include "calib/fit.h"
 #include "model/effect.h"
+#include "model/evaluator.h"
 #include "model/model.h"
 #include "io/calibration_json.h"
 #include "io/device_json.h"
@@ -264,6 +265,53 @@ static void held_parameter_stays(void **) {
     }
 }
 
+// hold with a gauge that is not the identity: with jig_misalignment in the
+// model, anchor_position moves only in the 6 directions a rigid motion of
+// the four anchors does not (effect_gauge_basis). Holding a1_x there must
+// keep it bit for bit at its start, take exactly one direction away (12
+// free parameters become 11), and leave every move of the anchors within
+// the gauge's span (no rigid part creeps back in through the elimination);
+// the projection residual is round-off (the basis is orthonormal: 1e-12 of
+// the move's size).
+static void held_parameter_in_a_gauge(void **) {
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    assert_true(truth.add_effect_random("anchor_position", 3, err));
+    const std::vector<PreparedPos> pos = noise_free_jig(truth);
+    FitOptions fo;
+    fo.jig_sigma.setZero();
+    auto start = [&] {
+        Model m{DeviceGeometry{}};
+        assert_true(m.add_effect("jig_misalignment", {}, err));
+        assert_true(m.add_effect("anchor_position", ParamValues{{"a1_x", 0.25}}, err));
+        return m;
+    };
+    Model free_m = start();
+    FitReport rfree;
+    assert_true(fit_model(free_m, pos, fo, rfree));
+    assert_int_equal(rfree.n_free, 12);
+
+    Model m = start();
+    const std::vector<double> a0 = m.effect_params(1);
+    const double chi0 = model_chi2(m, pos, fo);
+    FitOptions held = fo;
+    held.hold = {{1, 0}};
+    FitReport rep;
+    assert_true(fit_model(m, pos, held, rep));
+    assert_int_equal(rep.n_free, 11);
+    assert_true(m.effect_params(1)[0] == 0.25);
+    assert_true(rep.std[1][0] == 0.0);
+    if (!(rep.chi2 < 0.5 * chi0)) fail_msg("chi2 %g from %g", rep.chi2, chi0);
+    const Eigen::MatrixXd B = effect_gauge_basis(m, 1);
+    assert_int_equal(int(B.cols()), 6);
+    Eigen::VectorXd move(12);
+    for (int k = 0; k < 12; ++k) move(k) = m.effect_params(1)[size_t(k)] - a0[size_t(k)];
+    const double off_span = (move - B * (B.transpose() * move)).norm();
+    if (!(move.norm() > 1e-3)) fail_msg("the anchors did not move (%g mm)", move.norm());
+    if (!(off_span <= 1e-12 * std::max(1.0, move.norm())))
+        fail_msg("the anchors' move leaves the gauge by %g mm of %g", off_span, move.norm());
+}
+
 // FitOptions::weigh_with: each reading's weight holds the jig tolerance
 // mapped through a model's sensitivity to the position, and the model named
 // there is the one whose sensitivity is used (the search compares every fit
@@ -422,6 +470,7 @@ int main(void) {
         cmocka_unit_test(json_round_trip_and_errors),
         cmocka_unit_test(apply_failure_is_reported),
         cmocka_unit_test(held_parameter_stays),
+        cmocka_unit_test(held_parameter_in_a_gauge),
         cmocka_unit_test(weights_from_the_named_model),
         cmocka_unit_test(fit_ends_at_its_minimum),
         cmocka_unit_test(effect_accessors),

@@ -368,7 +368,7 @@ static void weights_from_the_named_model(void **) {
 // must not end a fit on a slope. Means of 13 x 13 x 5 positions with
 // Gaussian noise of 0.01 mm on each reading (the weights say so: chi2/dof
 // near 1) hide anchor errors, an exit pulley, a stretch and a gain, fitted
-// from the nominal start (19 parameters). The refit may gain at most 0.01
+// from the nominal start (18 free parameters). The refit may gain at most 0.01
 // in chi-square: the diagnosis prints its chi-square changes and BIC to
 // tenths, so 0.01 cannot move a printed figure by more than a unit of its
 // last digit. A stop on a slope is far above that: with the stall

@@ -17,8 +17,10 @@
 // and each cable's own parameters and scattered into the full Jacobian;
 // central differences through user-defined effects).
 //
-// Gauge: parameters that change nothing measurable are fixed, not left to
-// wander (each effect's gauge() in its file says which): with jig_misalignment on, the anchors' common rigid motion (3
+// Gauge (built in fit_problem.h, with the residuals, weights and prior):
+// parameters that change nothing measurable are fixed, not left to wander
+// (each effect's gauge() in its file says which): with jig_misalignment on,
+// the anchors' common rigid motion (3
 // translations, 3 small rotations) is the jig's and is projected out of
 // anchor_position; the holder points' common translation is the jig's (or the
 // anchors') and is projected out of holder_geometry; cable_stretch's s0 is the

@@ -27,108 +27,6 @@ std::string fmt(double v, int prec = 3) {
 }
 } // namespace
 
-namespace {
-std::string fit_key(const DiagContext &ctx, const Model &m) {
-    std::string k;
-    auto bytes = [&](const void *p, size_t n) { k.append(static_cast<const char *>(p), n); };
-    for (size_t e = 0; e < m.effect_count(); ++e) {
-        k += m.effect_name(e);
-        k += '\0';
-        const auto &v = m.effect_params(e);
-        bytes(v.data(), v.size() * sizeof(double));
-        k += '\1';
-    }
-    bytes(ctx.fo.jig_sigma.data(), 3 * sizeof(double));
-    if (const Model *w = ctx.fo.weigh_with) { // the weights' model, bit for bit
-        k += "\4weighed ";
-        for (size_t e = 0; e < w->effect_count(); ++e) {
-            k += w->effect_name(e);
-            k += '\0';
-            const auto &v = w->effect_params(e);
-            bytes(v.data(), v.size() * sizeof(double));
-            k += '\1';
-        }
-    }
-    bytes(&ctx.fo.max_evals, sizeof ctx.fo.max_evals);
-    k.append(ctx.fo.use.begin(), ctx.fo.use.end());
-    return k;
-}
-} // namespace
-
-namespace {
-// The "period" parameters (mm) of effect `name` in m: {effect, parameter}.
-std::vector<std::pair<size_t, size_t>> period_params(const Model &m, const std::string &name) {
-    std::vector<std::pair<size_t, size_t>> v;
-    for (size_t e = 0; e < m.effect_count(); ++e) {
-        if (m.effect_name(e) != name) continue;
-        const auto &ps = m.effect_desc(e).params;
-        for (size_t q = 0; q < ps.size(); ++q)
-            if (ps[q].name == "period" && (ps[q].unit == "mm" || ps[q].unit.empty())) v.push_back({e, q});
-    }
-    return v;
-}
-
-// A job: one fit, or a seeded one (FitJob): every start with its period
-// held, then one joint fit from the best (and from the next when the
-// period it lands on is not shown in the data).
-bool run_job(const DiagContext &ctx, FitJob &j, const FitOptions &f) {
-    if (j.more_starts.empty() || j.seeded.empty()) return fit_model(j.m, ctx.pos, f, j.rep);
-    std::vector<Model> starts;
-    starts.push_back(j.m);
-    for (auto &m : j.more_starts) starts.push_back(m);
-    int evals = 0;
-    double seconds = 0;
-    std::vector<double> chi2(starts.size());
-    std::vector<char> shown(starts.size());
-    std::vector<Model> held = starts;
-    for (size_t k = 0; k < held.size(); ++k) {
-        FitOptions fh = f;
-        fh.hold = period_params(held[k], j.seeded);
-        FitReport r;
-        if (!fit_model(held[k], ctx.pos, fh, r)) {
-            j.rep = r;
-            return false;
-        }
-        evals += r.evals;
-        seconds += r.seconds;
-        chi2[k] = std::isnan(r.chi2) ? INFINITY : r.chi2; // a strict weak order for the sort below
-        shown[k] = period_shown(held[k], j.seeded, ctx.pos);
-    }
-    // Shown periods first, then by chi-square; the earlier start on a tie.
-    std::vector<size_t> order(starts.size());
-    for (size_t k = 0; k < order.size(); ++k) order[k] = k;
-    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-        if (shown[a] != shown[b]) return shown[a] > shown[b];
-        return chi2[a] < chi2[b];
-    });
-    bool have = false;
-    for (size_t k : order) {
-        Model m = held[k];
-        FitReport r;
-        FitOptions fj = f;
-        // Weighed as at the start (amplitudes zero), as a fit from there
-        // is: the chi-squares stay comparable with the other models'.
-        if (!fj.weigh_with) fj.weigh_with = &starts[k];
-        if (!fit_model(m, ctx.pos, fj, r)) {
-            j.rep = r;
-            return false;
-        }
-        evals += r.evals;
-        seconds += r.seconds;
-        const bool ok = period_shown(m, j.seeded, ctx.pos);
-        if (!have || ok) {
-            j.m = std::move(m);
-            j.rep = r;
-            have = true;
-        }
-        if (ok) break;
-    }
-    j.rep.evals = evals;
-    j.rep.seconds = seconds;
-    return true;
-}
-} // namespace
-
 FitJob start_job(const Model &from, const std::vector<std::string> &keep, const std::string &add,
                  const std::vector<ParamValues> &starts, std::string stage) {
     FitJob j(model_with(from, keep, add, starts.empty() ? ParamValues{} : starts.front()), std::move(stage));
@@ -141,103 +39,6 @@ FitJob start_job(const Model &from, const std::vector<std::string> &keep, const 
         }
     }
     return j;
-}
-
-bool has_user_effect(const Model &m) {
-    for (size_t k = 0; k < m.effect_count(); ++k)
-        if (m.effect_desc(k).stage == Stage::User) return true;
-    return false;
-}
-
-bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err) {
-    // Fits done before (bit-identical start and noise model): their result.
-    std::vector<std::string> keys(jobs.size());
-    std::vector<char> cached(jobs.size(), 0);
-    if (ctx.cache) {
-        std::lock_guard<std::mutex> lk(ctx.cache->mu);
-        for (size_t k = 0; k < jobs.size(); ++k) {
-            keys[k] = fit_key(ctx, jobs[k].m);
-            if (!jobs[k].seeded.empty()) {
-                keys[k] += "\2seeded " + jobs[k].seeded + '\0';
-                for (auto &m : jobs[k].more_starts) keys[k] += fit_key(ctx, m) + '\3';
-            }
-            auto it = ctx.cache->done.find(keys[k]);
-            if (it == ctx.cache->done.end()) continue;
-            std::string e2;
-            bool ok = true;
-            for (size_t e = 0; e < jobs[k].m.effect_count() && ok; ++e)
-                ok = jobs[k].m.set_effect_params(e, it->second.first[e], e2);
-            if (!ok) continue; // fitted below as usual
-            jobs[k].rep = it->second.second;
-            jobs[k].ok = true;
-            cached[k] = 1;
-        }
-    }
-    // Jobs with a user effect: on the calling thread, before the others.
-    // (A fit also evaluates the model it is weighed with: when that one
-    // holds a user effect, every job calls the user's callback.)
-    const bool weigh_user = ctx.fo.weigh_with && has_user_effect(*ctx.fo.weigh_with);
-    std::vector<size_t> serial, shared;
-    for (size_t k = 0; k < jobs.size(); ++k)
-        if (!cached[k]) (weigh_user || has_user_effect(jobs[k].m) ? serial : shared).push_back(k);
-    // The seeded jobs (several fits each) taken first, so that the batch
-    // does not wait for one started last; which thread fits a job changes
-    // nothing in its result.
-    std::stable_partition(shared.begin(), shared.end(), [&](size_t k) { return !jobs[k].more_starts.empty(); });
-    std::atomic<bool> cancelled{false};
-    auto run = [&](FitJob &j, bool main) {
-        FitOptions f = ctx.fo;
-        if (main)
-            f.progress = [&](double fr) {
-                if (ctx.report(j.stage, fr)) return !cancelled.load();
-                cancelled = true;
-                return false;
-            };
-        else
-            f.progress = [&](double) { return !cancelled.load(); };
-        j.ok = run_job(ctx, j, f);
-        if (!j.ok) cancelled = true; // the batch fails: stop the others early
-    };
-    for (size_t k : serial) {
-        run(jobs[k], true);
-        if (!jobs[k].ok) break;
-    }
-    if (!cancelled) {
-        std::atomic<size_t> next{0};
-        std::exception_ptr failure;
-        std::atomic<bool> failed{false};
-        auto work = [&](bool main) {
-            for (size_t i; !cancelled && (i = next++) < shared.size();) {
-                try {
-                    run(jobs[shared[i]], main);
-                } catch (...) {
-                    if (!failed.exchange(true)) failure = std::current_exception();
-                    cancelled = true;
-                }
-            }
-        };
-        const size_t nt = std::min<size_t>(size_t(std::max(1, ctx.threads)), shared.size());
-        std::vector<std::thread> pool;
-        for (size_t t = 1; t < nt; ++t) pool.emplace_back(work, false);
-        work(true);
-        for (auto &t : pool) t.join();
-        if (failure) std::rethrow_exception(failure);
-    }
-    for (auto &j : jobs)
-        if (!j.ok) {
-            err = j.rep.message.empty() ? "fit cancelled" : j.rep.message;
-            return false;
-        }
-    if (ctx.cache) {
-        std::lock_guard<std::mutex> lk(ctx.cache->mu);
-        for (size_t k = 0; k < jobs.size(); ++k) {
-            if (cached[k]) continue;
-            std::vector<std::vector<double>> v;
-            for (size_t e = 0; e < jobs[k].m.effect_count(); ++e) v.push_back(jobs[k].m.effect_params(e));
-            ctx.cache->done.emplace(keys[k], std::make_pair(std::move(v), jobs[k].rep));
-        }
-    }
-    return true;
 }
 
 std::vector<std::string> reading_effects(const Model &m) {
@@ -299,35 +100,6 @@ bool period_shown(const Model &m, const std::string &effect, const std::vector<P
         }
     }
     return true;
-}
-
-void for_each_parallel(const DiagContext &ctx, size_t n, const std::function<bool(size_t)> &serial,
-                       const std::function<void(size_t)> &work) {
-    // Work that fits or weighs evaluates ctx.fo.weigh_with too: a user
-    // effect there keeps everything on the calling thread.
-    const bool weigh_user = ctx.fo.weigh_with && has_user_effect(*ctx.fo.weigh_with);
-    std::vector<size_t> shared;
-    for (size_t k = 0; k < n; ++k)
-        if (weigh_user || serial(k)) work(k);
-        else shared.push_back(k);
-    std::atomic<size_t> next{0};
-    std::atomic<bool> failed{false};
-    std::exception_ptr failure;
-    auto run = [&] {
-        for (size_t i; !failed && (i = next++) < shared.size();) {
-            try {
-                work(shared[i]);
-            } catch (...) {
-                if (!failed.exchange(true)) failure = std::current_exception();
-            }
-        }
-    };
-    const size_t nt = std::min<size_t>(size_t(std::max(1, ctx.threads)), shared.size());
-    std::vector<std::thread> pool;
-    for (size_t t = 1; t < nt; ++t) pool.emplace_back(run);
-    run();
-    for (auto &t : pool) t.join();
-    if (failure) std::rethrow_exception(failure);
 }
 
 bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
@@ -393,7 +165,7 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
                 if (c.in_model.empty() && ov.all > 0.99)
                     for (auto &pe : ov.per_effect) c.in_model.push_back(pe.first);
             }
-            c.E = evaluate(c.m, ctx.pos);
+            c.E = evaluate_cached(ctx, c.m);
         });
     size_t done = 0;
     for (size_t i = 0; i < list.size(); ++i) {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cmath>
+#include <deque>
 #include <functional>
 #include <map>
 #include <memory>
@@ -25,9 +26,19 @@ namespace diag {
 // fit is deterministic, so one asked for again (the search and its
 // alternatives reach the same set from the same start; a noise-model round
 // repeats a step) is taken from here, with the same numbers.
+//
+// The same for evaluations (evaluate_cached): a fit taken from the cache
+// gives the same model, whose evaluation (a forward-kinematics solve per
+// position) was made too: 20 of the 49 evaluations of a diagnosis on
+// `exit_pulley` were repeats. The kEvals most recent are kept (about half a
+// megabyte each on a full jig); every context sharing a cache has the same
+// positions.
 struct FitCache {
     std::mutex mu;
     std::map<std::string, std::pair<std::vector<std::vector<double>>, FitReport>> done;
+    static constexpr size_t kEvals = 16;
+    std::map<std::string, Eval> evals;
+    std::deque<std::string> eval_order; // oldest first
 };
 
 struct DiagContext {
@@ -92,9 +103,17 @@ struct FitJob {
 // thread reports progress; the others stop when it is cancelled. Models
 // with a user effect are fitted in turn on the calling thread (a user's
 // callback need not be reentrant), and so is every job when the model the
-// fits are weighed with (ctx.fo.weigh_with) holds one. False + err (the first failed job's
-// message, in job order) when a fit fails or is cancelled.
+// fits are weighed with (ctx.fo.weigh_with) holds one. A seeded job's fits
+// are separate tasks (diag_batch.cpp), with the result of fitting them in
+// turn. False + err (the message of the fit that failed first; the others
+// are then stopped) when a fit fails or is cancelled.
 bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err);
+
+// evaluate(m, ctx.pos), or the same evaluation made before (FitCache).
+// Models with a user effect are evaluated every time.
+Eval evaluate_cached(const DiagContext &ctx, const Model &m);
+// Stores E as evaluate(m, ctx.pos), which it must be (bit for bit).
+void remember_evaluation(const DiagContext &ctx, const Model &m, const Eval &E);
 
 // True when the model holds a user effect (its callback need not be
 // reentrant: such a model is fitted and evaluated on the calling thread).

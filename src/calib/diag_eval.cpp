@@ -1,7 +1,9 @@
 // See diag_eval.h.
 #include "calib/diag_eval.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include <limits>
 
@@ -100,6 +102,22 @@ bool sample_pass(const Dataset &d, const std::vector<PreparedPos> &pos, const st
     const size_t P = pos.size();
     for (Eval *E : linear)
         for (int a = 0; a < 3; ++a) E->err[a].mx = E->within[a].mx = 0;
+    // An evaluation the same as one before it in what the maxima read (which
+    // positions, their residuals and linearisations, bit for bit: the
+    // recommended model's candidates are the user's model's when the search
+    // stays there) is not visited again; its maxima are copied after.
+    auto bits = [](const auto &a, const auto &b) {
+        return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof a[0]) == 0;
+    };
+    std::vector<Eval *> visited;
+    std::vector<std::pair<Eval *, const Eval *>> copies; // (to, from)
+    for (Eval *E : linear) {
+        auto same = std::find_if(visited.begin(), visited.end(), [&](const Eval *U) {
+            return U == E || (bits(U->ok, E->ok) && bits(U->res, E->res) && bits(U->Jp, E->Jp));
+        });
+        if (same == visited.end()) visited.push_back(E);
+        else if (*same != E) copies.emplace_back(E, *same);
+    }
     std::vector<Eval> sv(seeds.size(), init_eval(P));
     std::vector<std::vector<V3>> sum(seeds.size(), std::vector<V3>(P, V3::Zero()));
     std::vector<std::vector<int>> cnt(seeds.size(), std::vector<int>(P, 0));
@@ -107,7 +125,7 @@ bool sample_pass(const Dataset &d, const std::vector<PreparedPos> &pos, const st
         if (j >= P) return; // for_each_sample checked the positions; pos comes from the same dataset
         const Eigen::Vector4d dl(ls[0] - pos[j].mean(0), ls[1] - pos[j].mean(1), ls[2] - pos[j].mean(2),
                                  ls[3] - pos[j].mean(3));
-        for (Eval *E : linear) {
+        for (Eval *E : visited) {
             if (!E->ok[j]) continue;
             const V3 dev = E->Jp[j] * dl;
             for (int a = 0; a < 3; ++a) {
@@ -128,6 +146,11 @@ bool sample_pass(const Dataset &d, const std::vector<PreparedPos> &pos, const st
         }
     };
     if (!for_each_sample(d, visit, err)) return false;
+    for (auto &[to, from] : copies)
+        for (int a = 0; a < 3; ++a) {
+            to->err[a].mx = from->err[a].mx;
+            to->within[a].mx = from->within[a].mx;
+        }
     for (size_t k = 0; k < seeds.size(); ++k) {
         Eval &E = sv[k];
         for (size_t j = 0; j < P; ++j) {

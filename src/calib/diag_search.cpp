@@ -42,7 +42,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
     double cur_chi2 = model_chi2(cur, ctx.pos, ctx.fo);
     FitReport cur_rep = start_rep;
     cur_rep.n_free = cur_free;
-    Eval cur_E = evaluate(cur, ctx.pos);
+    Eval cur_E = evaluate_cached(ctx, cur);
     std::set<std::vector<std::string>> seen{sorted(reading_effects(cur))};
     if (seen_before) seen.insert(seen_before->begin(), seen_before->end());
     out.visited.push_back({reading_effects(cur), ctx.bic(cur_chi2, cur_free)});
@@ -53,7 +53,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
         cur_rep = r;
         cur_free = r.n_free;
         cur_chi2 = model_chi2(cur, ctx.pos, ctx.fo);
-        cur_E = E ? *E : evaluate(cur, ctx.pos);
+        cur_E = E ? *E : evaluate_cached(ctx, cur);
     };
     std::vector<Candidate> cands;
     for (int step = 1; step <= 12; ++step) {

@@ -82,6 +82,11 @@ struct ReadingEvaluator::Impl {
     // P = jig map of ref, with dP/d(jig parameters) in dPdj (3 x njig).
     void jig_position(const Eigen::VectorXd &full, const double ref[3], double P[3],
                       DPdj &dPdj) const {
+        if (jig.empty()) { // jig_map is the identity: no Jig-stage effect
+            for (int k = 0; k < 3; ++k) P[k] = ref[k];
+            dPdj.resize(3, 0);
+            return;
+        }
         ADJ store[kMaxJig];
         EffectParams<ADJ> p{};
         for (auto [e, first] : jig) {

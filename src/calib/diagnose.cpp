@@ -115,6 +115,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     fopt.jig_tolerance_mm = opt.jig_tolerance_mm;
     fopt.progress = opt.progress;
     fopt.fitted_maxima = false; // one pass over the rows below serves every evaluation
+    fopt.threads = opt.threads;
     CalibrationFit cf(g);
     if (!fit_calibration(data, g, fopt, cf, err)) return false;
     const auto &pos = cf.pos;
@@ -132,6 +133,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     DiagContext ctx{data, g, pos, cf.grid, jig, user_jig, repeats ? 0.05 : INFINITY, cf.fit_options,
                     4.0 * double(P), opt.progress};
     ctx.threads = opt.threads > 0 ? opt.threads : usable_cores();
+    remember_evaluation(ctx, model, cur); // fit_calibration's evaluate(model, pos), as yet untouched
     int model_free = rep.n_free;
     for (size_t k = 0; k < model.effect_count(); ++k)
         if (model.effect_desc(k).stage == Stage::Position) model_free -= int(model.effect_desc(k).params.size());

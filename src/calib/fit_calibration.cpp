@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <future>
+#include <system_error>
 
 namespace cdm {
 
@@ -31,7 +33,25 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
     const bool repeats = std::any_of(pos.begin(), pos.end(), [](const PreparedPos &p) { return p.n > 1; });
     const double jig_cap = repeats ? 0.05 : INFINITY;
     progress("nominal model", 0.0);
-    if (!diag::evaluate_seed(g, data, pos, nullptr, out.nominal, err)) return false;
+    // The nominal triangulation of every sample (a pass over the rows) needs
+    // nothing from the fit below: with fitted_maxima it joins that pass at
+    // the end; otherwise it runs on a second thread beside the fit (or
+    // here, with one thread or none to be had). std::async's future waits
+    // for it on every way out of this function, and get() hands on what
+    // it threw.
+    std::string seed_err;
+    std::future<bool> seed;
+    if (!opt.fitted_maxima) {
+        auto run = [&] { return diag::evaluate_seed(g, data, pos, nullptr, out.nominal, seed_err); };
+        if (opt.threads != 1) try {
+                seed = std::async(std::launch::async, run);
+            } catch (const std::system_error &) { // no thread to be had
+            }
+        if (!seed.valid() && !run()) {
+            err = seed_err;
+            return false;
+        }
+    }
 
     Model &model = out.model;
     model = Model(g);
@@ -73,7 +93,12 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
         out.fitted = diag::evaluate(model, pos);
         out.report.n_free += 3;
     }
-    if (opt.fitted_maxima && !diag::sample_pass(data, pos, {&out.fitted}, {}, err)) return false;
+    if (opt.fitted_maxima && !diag::sample_pass(data, pos, {&out.fitted}, {{&g, nullptr, &out.nominal}}, err))
+        return false;
+    if (seed.valid() && !seed.get()) {
+        err = seed_err;
+        return false;
+    }
     return true;
 }
 

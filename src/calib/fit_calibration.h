@@ -20,6 +20,11 @@ struct FitCalibrationOptions {
     // Fill fitted's per-sample maxima (a pass over the rows). A caller that
     // makes its own pass at the end (diagnose) turns it off.
     bool fitted_maxima = true;
+    // 1: everything on the calling thread. Otherwise the nominal
+    // triangulation's pass over the rows, which needs nothing from the fit,
+    // runs on a second thread beside it (without fitted_maxima; with it,
+    // both are one pass at the end).
+    int threads = 0;
 };
 
 struct CalibrationFit {

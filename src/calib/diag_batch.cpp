@@ -192,8 +192,17 @@ private:
         // Weighed as at the start (amplitudes zero), as a fit from there
         // is: the chi-squares stay comparable with the other models'.
         if (!f.weigh_with) f.weigh_with = &s.starts[q];
+        // A period that goes past twice the measured span has left the
+        // ripple for a smooth trend (less than half a cycle over the data):
+        // the fit is given up there, its result as not shown as where it
+        // would have ended. (On a model far from the data, such as the
+        // nominal one, every start's joint fit went that way, to the
+        // period's upper bound, in 70-130 evaluations each: a fifth of a
+        // single-effect diagnosis's fitting.)
+        const double span = length_span(ctx_.pos);
+        for (auto at : period_params(s.joint[q], j.seeded)) f.abandon_above.push_back({at, 2 * span});
         s.joint_ok[q] = fit_model(s.joint[q], ctx_.pos, f, s.joint_rep[q]);
-        s.shown_joint[q] = period_shown(s.joint[q], j.seeded, ctx_.pos);
+        s.shown_joint[q] = !s.joint_rep[q].abandoned && period_shown(s.joint[q], j.seeded, ctx_.pos);
     }
 
     // Under the lock: task t has ended; what follows from it.

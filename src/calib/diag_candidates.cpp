@@ -82,21 +82,25 @@ std::vector<ParamValues> effect_starts(const Model &base, const std::string &eff
     return {{}};
 }
 
+double length_span(const std::vector<PreparedPos> &pos) {
+    double lo = INFINITY, hi = -INFINITY;
+    for (auto &pp : pos)
+        for (int c = 0; c < 4; ++c) {
+            lo = std::min(lo, pp.mean(c));
+            hi = std::max(hi, pp.mean(c));
+        }
+    return hi - lo;
+}
+
 bool period_shown(const Model &m, const std::string &effect, const std::vector<PreparedPos> &pos) {
     for (size_t k = 0; k < m.effect_count(); ++k) {
         if (m.effect_name(k) != effect) continue;
         const EffectDesc &d = m.effect_desc(k);
         for (size_t q = 0; q < d.params.size(); ++q) {
             if (d.params[q].name != "period") continue;
-            double lo = INFINITY, hi = -INFINITY;
-            for (auto &pp : pos)
-                for (int c = 0; c < 4; ++c) {
-                    lo = std::min(lo, pp.mean(c));
-                    hi = std::max(hi, pp.mean(c));
-                }
             // One full period at least within the measured lengths, as the
             // periodogram searches (periods up to the span).
-            return m.effect_params(k)[q] <= hi - lo;
+            return m.effect_params(k)[q] <= length_span(pos);
         }
     }
     return true;

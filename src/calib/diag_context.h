@@ -146,6 +146,8 @@ std::vector<std::string> reading_effects(const Model &m);
 // the data and is a smooth trend in disguise (a flexible stand-in for gain or
 // non-linearity), so that fit is not taken.
 bool period_shown(const Model &m, const std::string &effect, const std::vector<PreparedPos> &pos);
+// The span of the measured cable lengths (mm): the longest period shown.
+double length_span(const std::vector<PreparedPos> &pos);
 
 std::vector<ParamValues> effect_starts(const Model &base, const std::string &effect,
                                        const std::vector<PreparedPos> &pos);

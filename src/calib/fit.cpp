@@ -67,6 +67,9 @@ struct Whitened {
     // Successive evaluations within kStallF of the best so far (see objective).
     int stall = 0;
     bool stalled = false;
+    // FitOptions::abandon_above, by index in the full parameter vector.
+    std::vector<std::pair<int, double>> abandon = {};
+    bool abandoned = false;
 };
 
 // SLSQP checks convergence only when a line search completes. At a minimum
@@ -86,6 +89,13 @@ double objective(unsigned n, const double *z, double *grad, void *data) {
     Problem &pb = *W->pb;
     Eigen::Map<const Eigen::VectorXd> zeta(z, n);
     Eigen::VectorXd full = W->base + W->T * zeta;
+    for (auto [a, v] : W->abandon)
+        if (full(a) > v) { // the result is not wanted (FitOptions::abandon_above): stop, unevaluated
+            W->abandoned = true;
+            if (grad) std::fill(grad, grad + n, 0.0);
+            if (W->opt) nlopt_force_stop(W->opt);
+            return 1e300;
+        }
     pb.set_full(full);
     Eigen::VectorXd res;
     Eigen::MatrixXd J;
@@ -243,6 +253,9 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         W.seed_res = std::move(res);
         W.seed_J = std::move(J);
         W.seeded = true;
+        for (auto &[at, v] : opt.abandon_above)
+            if (at.first < m.effect_count() && pb.ev.offset(at.first) >= 0 && at.second < m.effect_params(at.first).size())
+                W.abandon.emplace_back(pb.ev.offset(at.first) + int(at.second), v);
         nlopt_opt o = nlopt_create(NLOPT_LD_SLSQP, unsigned(nfree));
         W.opt = o;
         nlopt_set_min_objective(o, objective, &W);
@@ -275,6 +288,11 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         if (pb.cancelled) {
             rep.message = "fit cancelled";
             ok = false;
+            break;
+        }
+        if (W.abandoned) {
+            rep.abandoned = true;
+            rep.message = "abandoned: a parameter went past the value its result was wanted for";
             break;
         }
         if (r < 0 && r != NLOPT_ROUNDOFF_LIMITED && !(r == NLOPT_FORCED_STOP && W.stalled)) {

@@ -58,6 +58,12 @@ struct FitOptions {
     // fitted ripple would give a chi-square on another scale than the same
     // model fitted from zero amplitudes.
     const Model *weigh_with = nullptr;
+    // A fit whose result is not wanted once a parameter passes a value:
+    // {{effect index, parameter index}, value}. The fit stops at the first
+    // point beyond (not evaluated there) with FitReport::abandoned. The
+    // diagnosis gives up a joint fit of a seeded period that has gone past
+    // twice the span of the measured lengths (diag_batch.cpp).
+    std::vector<std::pair<std::pair<size_t, size_t>, double>> abandon_above;
 };
 
 struct FitReport {
@@ -73,6 +79,7 @@ struct FitReport {
     std::string message;
     std::vector<double> fixture_mm; // fitted per-height x offsets (FitOptions::fixture), sum zero
     int n_fixture = 0;              // their free parameters (not in n_free: the same in every model)
+    bool abandoned = false;         // stopped by FitOptions::abandon_above (not converged)
 };
 
 // The largest per-height error taken as the height fixture's (mm): 3x a

@@ -402,6 +402,51 @@ static void fit_ends_at_its_minimum(void **) {
         fail_msg("a refit from the result lowered chi2 from %.6f to %.6f", rep.chi2, rep2.chi2);
 }
 
+// FitOptions::abandon_above: a fit stops at the first point past the value
+// (unevaluated there), says so, and keeps the best point before it; set
+// above anything the fit reaches, it changes nothing, bit for bit. The case
+// is the diagnosis's: a ripple fitted to a smooth error (a pot gain) whose
+// period runs off to a trend.
+static void abandoned_fit_stops_at_its_bound(void **) {
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    assert_true(truth.add_effect_random("cable_gain", 5, err));
+    const std::vector<PreparedPos> pos = noise_free_jig(truth);
+    FitOptions fo;
+    fo.jig_sigma.setZero();
+    Model start{DeviceGeometry{}};
+    assert_true(start.add_effect("drum_eccentricity", {{"period", 100.0}}, err));
+    const size_t e = 0, q = 0; // drum_eccentricity's first parameter is its period
+    assert_string_equal(start.effect_desc(e).params[q].name.c_str(), "period");
+    Model free = start;
+    FitReport r0;
+    assert_true(fit_model(free, pos, fo, r0));
+    const double went = free.effect_params(e)[q];
+    if (!(went > 200)) fail_msg("premise: the unbounded period went to %g mm, not past 200", went);
+    assert_false(r0.abandoned);
+    // Past 150 mm: given up there.
+    Model cut = start;
+    FitOptions fa = fo;
+    fa.abandon_above = {{{e, q}, 150.0}};
+    FitReport r1;
+    assert_true(fit_model(cut, pos, fa, r1));
+    assert_true(r1.abandoned);
+    assert_false(r1.converged);
+    if (!(cut.effect_params(e)[q] <= 150.0)) fail_msg("kept period %g mm, past the 150 mm bound", cut.effect_params(e)[q]);
+    if (!(r1.evals < r0.evals)) fail_msg("abandoned after %d evaluations, the whole fit took %d", r1.evals, r0.evals);
+    // Never reached: the same fit bit for bit.
+    Model same = start;
+    FitOptions fn = fo;
+    fn.abandon_above = {{{e, q}, 1e9}};
+    FitReport r2;
+    assert_true(fit_model(same, pos, fn, r2));
+    assert_false(r2.abandoned);
+    assert_int_equal(r2.evals, r0.evals);
+    assert_true(std::memcmp(&r2.chi2, &r0.chi2, sizeof(double)) == 0);
+    for (size_t k = 0; k < same.effect_params(e).size(); ++k)
+        assert_true(std::memcmp(&same.effect_params(e)[k], &free.effect_params(e)[k], sizeof(double)) == 0);
+}
+
 static void effect_accessors(void **) {
     Model m{DeviceGeometry{}};
     std::string err;
@@ -473,6 +518,7 @@ int main(void) {
         cmocka_unit_test(held_parameter_in_a_gauge),
         cmocka_unit_test(weights_from_the_named_model),
         cmocka_unit_test(fit_ends_at_its_minimum),
+        cmocka_unit_test(abandoned_fit_stops_at_its_bound),
         cmocka_unit_test(effect_accessors),
         cmocka_unit_test(catalogue_table_matches_docs),
         cmocka_unit_test(driver_path_does_not_allocate),

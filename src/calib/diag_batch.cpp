@@ -159,7 +159,12 @@ private:
             }
             lk.lock();
             --in_flight_;
-            done(t);
+            try {
+                done(t);
+            } catch (...) { // (an allocation): the batch fails with it
+                if (!failure_) failure_ = std::current_exception();
+                cancelled_ = true;
+            }
             cv_.notify_all();
         }
     }
@@ -192,10 +197,11 @@ private:
         // Weighed as at the start (amplitudes zero), as a fit from there
         // is: the chi-squares stay comparable with the other models'.
         if (!f.weigh_with) f.weigh_with = &s.starts[q];
-        // A period that goes past twice the measured span has left the
-        // ripple for a smooth trend (less than half a cycle over the data):
-        // the fit is given up there, its result as not shown as where it
-        // would have ended. (On a model far from the data, such as the
+        // A period whose best fit so far lies past twice the measured span
+        // has left the ripple for a smooth trend (less than half a cycle
+        // over the data): the fit is given up there and ends on that point,
+        // whose period is not shown, as where it was heading. (On a model
+        // far from the data, such as the
         // nominal one, every start's joint fit went that way, to the
         // period's upper bound, in 70-130 evaluations each: a fifth of a
         // single-effect diagnosis's fitting.)

@@ -83,10 +83,14 @@ struct DiagContext {
 // others (the same model, another period). Each start is fitted with its
 // period held (the rest: near-linear, a few evaluations), and one joint
 // fit (period free) is run from the best of them by chi-square; m and rep
-// are that fit's, rep.evals and rep.seconds count every fit of the job.
-// (Three joint fits, one per start, took half of a diagnosis's evaluation
-// work: docs/performance.md.) A joint fit whose period is not shown in the
-// data (period_shown) is followed by one from the next-best start.
+// are that fit's, rep.evals and rep.seconds count the held fits and the
+// joint fits this order needed (not those a second thread tried ahead and
+// were not needed: diag_batch.cpp). (Three joint fits, one per start, took
+// half of a diagnosis's evaluation work: docs/performance.md.) A joint fit
+// whose period is not shown in the data (period_shown; one given up past
+// twice the span ends there, FitReport::abandoned) is followed by one from
+// the next-best start; when none is shown, m and rep are the first's, and
+// every reader sets them aside by period_shown.
 struct FitJob {
     FitJob(Model m_, std::string stage_) : m(std::move(m_)), stage(std::move(stage_)) {}
     Model m;

@@ -89,13 +89,6 @@ double objective(unsigned n, const double *z, double *grad, void *data) {
     Problem &pb = *W->pb;
     Eigen::Map<const Eigen::VectorXd> zeta(z, n);
     Eigen::VectorXd full = W->base + W->T * zeta;
-    for (auto [a, v] : W->abandon)
-        if (full(a) > v) { // the result is not wanted (FitOptions::abandon_above): stop, unevaluated
-            W->abandoned = true;
-            if (grad) std::fill(grad, grad + n, 0.0);
-            if (W->opt) nlopt_force_stop(W->opt);
-            return 1e300;
-        }
     pb.set_full(full);
     Eigen::VectorXd res;
     Eigen::MatrixXd J;
@@ -142,6 +135,15 @@ double objective(unsigned n, const double *z, double *grad, void *data) {
             std::swap(W->best_res, res);
             std::swap(W->best_J, J); // the previous best's storage is reused
         }
+        // The best point so far past a value its result is not wanted
+        // beyond (FitOptions::abandon_above): the fit stops there, on it. (A
+        // line-search trial past the value that does not lower the
+        // objective is only a trial: SLSQP steps back from it.)
+        for (auto [a, v] : W->abandon)
+            if (full(a) > v) {
+                W->abandoned = true;
+                if (W->opt) nlopt_force_stop(W->opt);
+            }
     }
     if (grad && J.size()) std::swap(J, W->scratch_J);
     if (pb.opt.progress && pb.evals % 5 == 0 && !pb.opt.progress(std::min(1.0, pb.evals / double(pb.opt.max_evals))))

@@ -59,10 +59,12 @@ struct FitOptions {
     // model fitted from zero amplitudes.
     const Model *weigh_with = nullptr;
     // A fit whose result is not wanted once a parameter passes a value:
-    // {{effect index, parameter index}, value}. The fit stops at the first
-    // point beyond (not evaluated there) with FitReport::abandoned. The
-    // diagnosis gives up a joint fit of a seeded period that has gone past
-    // twice the span of the measured lengths (diag_batch.cpp).
+    // {{effect index, parameter index}, value}. The fit stops as soon as its
+    // best point so far lies beyond (a line-search trial beyond that does
+    // not improve on the best is not enough), ends on that point, and says
+    // so in FitReport::abandoned. The diagnosis gives up a joint fit of a
+    // seeded period that has gone past twice the span of the measured
+    // lengths (diag_batch.cpp): its result, ending there, is not shown.
     std::vector<std::pair<std::pair<size_t, size_t>, double>> abandon_above;
 };
 

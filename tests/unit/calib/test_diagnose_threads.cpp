@@ -59,9 +59,51 @@ static void same_result_on_any_thread_count(void **) {
     }
 }
 
+// A cancel from the progress callback while a batch of fits runs on two
+// threads (a seeded ripple's held starts and joint fits among them, the
+// review's refits, the validation's folds): the diagnosis stops and says it
+// was cancelled, and nothing runs on after it returns (ThreadSanitizer and
+// AddressSanitizer builds run this too). The user's model has an effect so
+// that the review and the validation have fits to run.
+static void cancel_inside_a_batch(void **) {
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    for (const char *e : {"cable_gain", "exit_pulley"}) assert_true(truth.add_effect_random(e, 61, err));
+    JigSimOptions so;
+    so.n = 13;
+    so.pitch_mm = 10;
+    so.samples = 40;
+    so.seed = 62;
+    Dataset d;
+    assert_true(simulate_jig(truth, so, d, err));
+    // (Only the calling thread reports, every fifth evaluation of the fit it
+    // runs: stages it is sure to report inside a fit.)
+    for (const char *prefix : {"candidates", "search step", "reviewing", "validation"}) {
+        DiagnoseOptions o;
+        o.effects = {"exit_pulley"};
+        o.threads = 2;
+        bool reached = false;
+        int calls = 0;
+        o.progress = [&](const std::string &stage, double) {
+            if (stage.rfind(prefix, 0) != 0) return true;
+            reached = true;
+            return ++calls < 2; // the second report of the stage: inside its fits
+        };
+        nlohmann::json out;
+        Model fitted{DeviceGeometry{}};
+        std::string e2;
+        const bool ok = diagnose(d, DeviceGeometry{}, o, out, fitted, e2);
+        if (!reached) fail_msg("premise: the diagnosis never reported a stage \"%s\"", prefix);
+        if (ok) fail_msg("cancelled in \"%s\", the diagnosis still returned a result", prefix);
+        if (e2.find("cancel") == std::string::npos)
+            fail_msg("cancelled in \"%s\": the error says \"%s\"", prefix, e2.c_str());
+    }
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(same_result_on_any_thread_count),
+        cmocka_unit_test(cancel_inside_a_batch),
     };
     return cmocka_run_group_tests(tests, nullptr, nullptr);
 }

@@ -32,6 +32,20 @@ static nlohmann::json diagnose_with(const Dataset &d, int threads) {
     return out;
 }
 
+// The half-resolution jig both tests use: 13 x 13 holes at 10 mm, 40
+// samples, the given noise seed.
+static Dataset half_jig(const Model &truth, uint64_t seed) {
+    JigSimOptions so;
+    so.n = 13;
+    so.pitch_mm = 10;
+    so.samples = 40;
+    so.seed = seed;
+    Dataset d;
+    std::string err;
+    if (!simulate_jig(truth, so, d, err)) fail_msg("simulate: %s", err.c_str());
+    return d;
+}
+
 static void same_result_on_any_thread_count(void **) {
     const std::vector<std::vector<std::string>> hidden{{"cable_gain", "exit_pulley"}, {"drum_eccentricity"}};
     uint64_t seed = 40;
@@ -39,13 +53,7 @@ static void same_result_on_any_thread_count(void **) {
         Model truth{DeviceGeometry{}};
         std::string err;
         for (auto &e : effects) assert_true(truth.add_effect_random(e, ++seed, err));
-        JigSimOptions so;
-        so.n = 13;
-        so.pitch_mm = 10;
-        so.samples = 40;
-        so.seed = ++seed;
-        Dataset d;
-        assert_true(simulate_jig(truth, so, d, err));
+        const Dataset d = half_jig(truth, ++seed);
         const auto one = diagnose_with(d, 1);
         // the search ran and moved (else this test would show nothing)
         assert_false(one["recommended"]["path"].empty());
@@ -69,13 +77,7 @@ static void cancel_inside_a_batch(void **) {
     Model truth{DeviceGeometry{}};
     std::string err;
     for (const char *e : {"cable_gain", "exit_pulley"}) assert_true(truth.add_effect_random(e, 61, err));
-    JigSimOptions so;
-    so.n = 13;
-    so.pitch_mm = 10;
-    so.samples = 40;
-    so.seed = 62;
-    Dataset d;
-    assert_true(simulate_jig(truth, so, d, err));
+    const Dataset d = half_jig(truth, 62);
     // (Only the calling thread reports, every fifth evaluation of the fit it
     // runs: stages it is sure to report inside a fit.)
     for (const char *prefix : {"candidates", "search step", "reviewing", "validation"}) {

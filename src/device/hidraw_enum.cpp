@@ -1,6 +1,7 @@
 #include "device/hidraw_enum.h"
 
 #include <libudev.h>
+#include <linux/input.h>
 
 #include <cerrno>
 #include <cstdio>
@@ -13,8 +14,7 @@
 namespace {
 // "0003:0000ABCD:00001234" (bus:vendor:product, hex) as the kernel writes
 // HID_ID; false for anything else.
-bool parse_hid_id(const char *id, unsigned &vid, unsigned &pid) {
-    unsigned bus = 0;
+bool parse_hid_id(const char *id, unsigned &bus, unsigned &vid, unsigned &pid) {
     char tail = 0;
     return id && std::sscanf(id, "%x:%x:%x%c", &bus, &vid, &pid, &tail) == 3;
 }
@@ -59,8 +59,12 @@ extern "C" int cdm_hidraw_list_masters(cdm_hidraw_master_fn fn, void *ctx, char 
         // which some sysfs trees (containers, emulators) lack.
         udev_device *hid = udev_device_get_parent_with_subsystem_devtype(raw, "hid", nullptr);
         const char *id = hid ? udev_device_get_property_value(hid, "HID_ID") : nullptr;
-        unsigned vid = 0, pid = 0;
-        if (node && *node && parse_hid_id(id, vid, pid) && vid == cdm::proto::kVendorId &&
+        // The master is a USB device: the same IDs on another bus (a
+        // Bluetooth or uhid device claiming them) are not listed. The udev
+        // rule grants access only to a USB master's node, so such a device
+        // would be listed but could not be opened by the seat's user.
+        unsigned bus = 0, vid = 0, pid = 0;
+        if (node && *node && parse_hid_id(id, bus, vid, pid) && bus == BUS_USB && vid == cdm::proto::kVendorId &&
             pid == cdm::proto::kProductId) {
             const char *uniq = udev_device_get_property_value(hid, "HID_UNIQ");
             udev_device *usb = udev_device_get_parent_with_subsystem_devtype(raw, "usb", "usb_device");

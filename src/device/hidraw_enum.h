@@ -12,7 +12,8 @@
 #include <cstddef>
 
 extern "C" {
-// Called once per master node (VID/PID of protocol.h, subsystem hidraw):
+// Called once per master node (VID/PID of protocol.h on the USB bus,
+// subsystem hidraw):
 // its devnode ("/dev/hidrawN"), the HID device's unique id (the USB serial
 // string; "" if none) and the USB device's bcdDevice (0 if unknown). The
 // strings live until the callback returns.

@@ -6,6 +6,7 @@
 // a feature transfer; the reader does not take it to read, since nobody else
 // ever changes the pointer.
 #include <hidapi.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <chrono>
@@ -89,19 +90,38 @@ std::vector<MasterNode> master_nodes(std::string &err) {
     return out;
 }
 
-// The serial of the master at `path`, as the enumeration knows it, or ""
-// (a path that is not the node's own name, a symlink, gets "": the handle
-// then reconnects by that path). Not hidapi's hid_get_serial_number_string:
-// in 0.13.1 it goes through the same unchecked sysfs reads that crashed
-// hid_enumerate on a node being made or removed (docs/reliability.md), and
-// an open right after an arrival is exactly then. The same source as
-// find_by_serial, so a reconnection compares like with like. (No realpath
-// here: under umockdev's preload, which wraps it, it smashed the stack.)
-std::string serial_of(const std::string &path) {
+// The master node `path` names, as the enumeration knows it (its own
+// /dev/hidrawN and its serial): the node itself, or another name for it (a
+// udev rule's SYMLINK+="cdm-master", a hard link): the same inode, or the
+// same character device number. False when no enumerated master is there
+// (the handle then reconnects by the path it was given). Not hidapi's
+// hid_get_serial_number_string: in 0.13.1 it goes through the same
+// unchecked sysfs reads that crashed hid_enumerate on a node being made or
+// removed (docs/reliability.md), and an open right after an arrival is
+// exactly then. The same source as find_by_serial, so a reconnection
+// compares like with like. (stat, not realpath: under umockdev's preload,
+// which wraps realpath, it smashed the stack.)
+bool master_named_by(const std::string &path, MasterNode &out) {
     std::string err;
-    for (const MasterNode &n : master_nodes(err))
-        if (n.path == path) return n.serial;
-    return "";
+    const std::vector<MasterNode> nodes = master_nodes(err);
+    for (const MasterNode &n : nodes)
+        if (n.path == path) {
+            out = n;
+            return true;
+        }
+    struct stat a {};
+    if (::stat(path.c_str(), &a) != 0) return false;
+    for (const MasterNode &n : nodes) {
+        struct stat b {};
+        if (::stat(n.path.c_str(), &b) != 0) continue;
+        const bool same_inode = a.st_dev == b.st_dev && a.st_ino == b.st_ino;
+        const bool same_device = S_ISCHR(a.st_mode) && S_ISCHR(b.st_mode) && a.st_rdev == b.st_rdev;
+        if (same_inode || same_device) {
+            out = n;
+            return true;
+        }
+    }
+    return false;
 }
 
 // Path of the connected master with this serial number, or "".
@@ -238,15 +258,20 @@ private:
     std::unique_ptr<UdevMonitor> mon_; // while disconnected; reader thread only
 };
 
+// Opens the master at `path`; another name for an enumerated master's node
+// opens that node, and the handle knows its serial (reconnects by it).
 int open_path(const std::string &path, const std::string &uri_text, TransportPtr &out, std::string &err) {
+    MasterNode node;
+    const bool known = master_named_by(path, node);
+    const std::string at = known ? node.path : path;
     std::string why;
     hid_device *d = nullptr;
-    const int rc = checked_open(path, d, why);
+    const int rc = checked_open(at, d, why);
     if (rc != CDM_OK) {
         err = "URI \"" + uri_text + "\": " + why + " (is it a master, and may this user open it? see udev/70-cdm.rules)";
         return rc;
     }
-    out = std::make_unique<HidTransport>(d, path, serial_of(path));
+    out = std::make_unique<HidTransport>(d, at, known ? node.serial : std::string());
     return CDM_OK;
 }
 

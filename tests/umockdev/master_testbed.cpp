@@ -156,10 +156,12 @@ std::string MasterTestbed::Impl::tree_text(bool with_node) const {
     // enumeration reads <hidraw>/device/uevent through it.
     if (o.device_link) t += "L: device=../../../0003:1209:CD01.0001\n";
     t += "\n";
-    t += std::string("P: ") + (kHidDev + 4) +
-         "\nE: DRIVER=hid-generic\nE: HID_ID=0003:00001209:0000CD01\nE: HID_NAME=pid.codes cdm haptic master\n"
+    char bus[8];
+    std::snprintf(bus, sizeof bus, "%04X", o.hid_bus & 0xFFFFu);
+    t += std::string("P: ") + (kHidDev + 4) + "\nE: DRIVER=hid-generic\nE: HID_ID=" + bus +
+         ":00001209:0000CD01\nE: HID_NAME=pid.codes cdm haptic master\n"
          "E: HID_PHYS=usb-0000:00:14.0-1/input0\nE: HID_UNIQ=" + sn +
-         "\nE: MODALIAS=hid:b0003g0001v00001209p0000CD01\nE: SUBSYSTEM=hid\n"
+         "\nE: MODALIAS=hid:b" + bus + "g0001v00001209p0000CD01\nE: SUBSYSTEM=hid\n"
          "H: report_descriptor=" + hex_string(kReportDescriptor, kReportDescriptorSize) +
          "\nA: country=00\nL: driver=../../../../../../../bus/hid/drivers/hid-generic\n\n";
     t += std::string("P: ") + (kUsbIntf + 4) +

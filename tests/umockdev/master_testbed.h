@@ -33,6 +33,9 @@ struct TestbedOptions {
     // reproduces a sysfs without it (umockdev's default, and issue 13's
     // report): hidapi's filtered enumeration then misses the master.
     bool device_link = true;
+    // The HID device's bus in HID_ID and its modalias (linux/input.h:
+    // 0x03 USB, 0x05 Bluetooth, 0x06 virtual, as uhid devices say).
+    unsigned hid_bus = 0x0003;
 };
 
 class MasterTestbed {

@@ -105,6 +105,30 @@ void test_enumerate_without_device_link(void **) {
     assert_int_equal(hid, 1);
 }
 
+// The same IDs on another bus (a Bluetooth device, or a uhid one, claiming
+// to be the master) are not listed, and a serial finds no master: the udev
+// rule grants access only to a USB master's node. Until 2026-11-24 any bus
+// was listed. (hidapi itself still sees the node: it is there.)
+void test_enumerate_skips_other_buses(void **) {
+    TestbedOptions o;
+    o.hid_bus = 0x0005; // BUS_BLUETOOTH
+    MasterTestbed tb(o);
+    assert_int_equal(hid_init(), 0);
+    assert_int_equal(count_hid(0, 0), 1);
+    cdm_device_list *list = nullptr;
+    assert_int_equal(cdm_enumerate(&list), CDM_OK);
+    for (size_t i = 0; i < cdm_device_list_count(list); ++i) {
+        cdm_device_info info{};
+        info.struct_size = sizeof info;
+        assert_int_equal(cdm_device_list_get(list, i, &info), CDM_OK);
+        assert_string_not_equal(info.transport, "hid");
+    }
+    cdm_device_list_free(list);
+    cdm_device *dev = nullptr;
+    assert_int_equal(cdm_open("serial:UMOCK0001", &dev), CDM_ERR_NO_DEVICE);
+    assert_null(dev);
+}
+
 void test_cdm_enumerate(void **) {
     MasterTestbed tb;
     cdm_device_list *list = nullptr;
@@ -355,6 +379,7 @@ int main() {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_hidapi_enumerates),
         cmocka_unit_test(test_cdm_enumerate),
+        cmocka_unit_test(test_enumerate_skips_other_buses),
         cmocka_unit_test(test_enumerate_without_device_link),
         cmocka_unit_test(test_stream_matches_truth),
         cmocka_unit_test(test_info_and_calibration_store),

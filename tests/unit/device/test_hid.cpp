@@ -8,6 +8,7 @@
 // will_return queues: hid_read_timeout runs on the driver's reader thread,
 // and cmocka's queues are not thread-safe.
 #include <hidapi.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -565,6 +566,42 @@ void test_enumerate(void **) {
     cdm_device_list_free(list);
 }
 
+// Another name for the master's node (a udev rule's SYMLINK+=): the handle
+// opens the node it names and knows the master's serial, so it reconnects
+// by serial like a handle opened by the node's own name. Until 2026-11-24 it
+// got no serial and reconnected only by the link's path. The mock's node is
+// a plain file here (the node check is bypassed; file identity is what the
+// library compares).
+void test_open_through_a_link(void **) {
+    char dir[] = "/tmp/cdm-hid-link-XXXXXX";
+    assert_non_null(mkdtemp(dir));
+    const std::string node = std::string(dir) + "/hidraw7", link = std::string(dir) + "/cdm-master";
+    FILE *f = std::fopen(node.c_str(), "w");
+    assert_non_null(f);
+    std::fclose(f);
+    assert_int_equal(symlink(node.c_str(), link.c_str()), 0);
+    set_plugged(true, node.c_str());
+    cdm_device *dev = open_ok(("hid:" + link).c_str());
+    cdm_device_info info{};
+    info.struct_size = sizeof info;
+    assert_int_equal(cdm_get_info(dev, &info), CDM_OK);
+    assert_string_equal(info.uri, "serial:MOCK0001");
+    close_dev(dev);
+    // A link to something that is not an enumerated master is opened by
+    // its own path (and here refused: the mock's hid_open_path knows only
+    // the node).
+    const std::string other = std::string(dir) + "/other", other_link = std::string(dir) + "/other-link";
+    f = std::fopen(other.c_str(), "w");
+    assert_non_null(f);
+    std::fclose(f);
+    assert_int_equal(symlink(other.c_str(), other_link.c_str()), 0);
+    cdm_device *none = nullptr;
+    assert_int_equal(cdm_open(("hid:" + other_link).c_str(), &none), CDM_ERR_NO_DEVICE);
+    assert_null(none);
+    for (const std::string &p : {link, node, other_link, other}) std::remove(p.c_str());
+    rmdir(dir);
+}
+
 void test_unplug_replug(void **) {
     cdm_device *dev = open_ok("hid:/dev/hidraw7");
     const double at[3] = {50, -10, 10};
@@ -637,6 +674,7 @@ int main(void) {
         cmocka_unit_test_setup_teardown(test_device_info_insane_values_refused, setup, teardown),
         cmocka_unit_test_setup_teardown(test_enumerate, setup, teardown),
         cmocka_unit_test_setup_teardown(test_unplug_replug, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_open_through_a_link, setup, teardown),
     };
     return cmocka_run_group_tests(tests, nullptr, nullptr);
 }

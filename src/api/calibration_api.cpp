@@ -48,7 +48,8 @@ int diagnose_body(const char *data_csv_path, const char *device_json_path, const
     cdm::Model fitted(in.geometry);
     std::string err;
     if (!cdm::diagnose(in.data, in.geometry, opt, out, fitted, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
-    if (int rc = cdm::api::commit_calibration(in, fitted, data_csv_path, out["error_mm"])) return rc;
+    if (int rc = cdm::api::commit_calibration(in, fitted, data_csv_path, out["error_mm"], out["data"]["outliers"],
+                                                     out["data"]["glitches"])) return rc;
     return cdm::api::return_json(out, "cdm_diagnose", result_json);
 }
 

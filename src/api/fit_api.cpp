@@ -73,7 +73,7 @@ extern "C" int cdm_fit(const char *data_csv_path, const char *device_json_path, 
         if (!cdm::run_setting_aside_outliers(in.data, a.outliers, round, outliers, err))
             return cdm::fail(CDM_ERR_INVALID_ARG, err);
         const json out = result_json(cf, in.data, outliers);
-        if (int rc = cdm::api::commit_calibration(in, cf.model, data_csv_path, out["error_mm"])) return rc;
+        if (int rc = cdm::api::commit_calibration(in, cf.model, data_csv_path, out["error_mm"], out["outliers"], out["glitches"])) return rc;
         return cdm::api::return_json(out, "cdm_fit", result_json_out);
     });
 }

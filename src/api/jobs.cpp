@@ -117,10 +117,21 @@ int open_job(const char *data_path, const char *device_path, const JobArgs &a, J
     return check_solvable(in.data, in.geometry);
 }
 
-int commit_calibration(JobInputs &in, const Model &fitted, const char *data_path, const nlohmann::json &error_mm) {
+int commit_calibration(JobInputs &in, const Model &fitted, const char *data_path, const nlohmann::json &error_mm,
+                       const nlohmann::json &outliers, const nlohmann::json &glitches) {
     if (!in.calib_out.is_open()) return CDM_OK;
     auto cj = cdm::io::model_to_json(fitted);
-    cj["fit"] = {{"data", data_path}, {"error_mm", error_mm}};
+    nlohmann::json positions = nlohmann::json::array();
+    for (const auto &o : outliers.value("set_aside", nlohmann::json::array()))
+        positions.push_back({{"point", o.at("point")}, {"ref", o.at("ref")}, {"residual_mm", o.at("residual_mm")}});
+    cj["fit"] = {{"data", data_path},
+                 {"error_mm", error_mm},
+                 {"set_aside",
+                  {{"outliers_screened", outliers.value("enabled", false)},
+                   {"positions", positions},
+                   {"glitch_samples", glitches.value("count", 0)},
+                   {"glitch_positions", glitches.value("positions", 0)},
+                   {"glitches_listed", glitches.value("samples", nlohmann::json::array())}}}};
     std::string err;
     if (!in.calib_out.write(cj.dump(2) + "\n", err) || !in.calib_out.commit(err)) return cdm::fail(CDM_ERR_IO, err);
     return CDM_OK;

@@ -38,8 +38,13 @@ struct JobInputs {
 // checks that most positions can be placed by the nominal triangulation.
 int open_job(const char *data_path, const char *device_path, const JobArgs &a, JobInputs &in);
 
-// Writes the fitted model as a calibration, if one was asked for.
-int commit_calibration(JobInputs &in, const Model &fitted, const char *data_path, const nlohmann::json &error_mm);
+// Writes the fitted model as a calibration, if one was asked for. Its
+// "fit" block says where it came from: the data file, the fitted model's
+// error, and what of the data the fit did not use (`outliers`, `glitches`:
+// the job's blocks, fit_outliers.h and diag::glitches_json), so a reader of
+// the calibration alone knows which positions and samples were left out.
+int commit_calibration(JobInputs &in, const Model &fitted, const char *data_path, const nlohmann::json &error_mm,
+                       const nlohmann::json &outliers, const nlohmann::json &glitches);
 
 // A malloc'ed copy of j.dump() into *out (freed with cdm_free_string).
 int return_json(const nlohmann::json &j, const char *fn, char **out);

@@ -97,11 +97,19 @@ def test_fit_sets_misplaced_positions_aside(tmp_path):
     shifts = {20: (1.0, 0.0), 100: (0.0, -1.0), 190: (0.7, 0.7)}
     _misplaced(clean, bad, shifts)
     r0 = cdm.fit(clean, DEVICE_JSON, ["exit_pulley"])
-    r1 = cdm.fit(bad, DEVICE_JSON, ["exit_pulley"])
-    r2 = cdm.fit(bad, DEVICE_JSON, ["exit_pulley"], outliers=False)
+    r1 = cdm.fit(bad, DEVICE_JSON, ["exit_pulley"], calibration_out=tmp_path / "c1.json")
+    r2 = cdm.fit(bad, DEVICE_JSON, ["exit_pulley"], outliers=False, calibration_out=tmp_path / "c2.json")
     assert r0["outliers"]["count"] == 0 and r0["outliers"]["positions_read"] == 243
     assert sorted(x["point"] for x in r1["outliers"]["set_aside"]) == sorted(shifts)
     assert r2["outliers"]["count"] == 0 and not r2["outliers"]["enabled"]
+    # The calibration file alone says which positions its fit left out (and
+    # that none was screened out when the screen was off).
+    c1 = json.loads((tmp_path / "c1.json").read_text())["fit"]
+    c2 = json.loads((tmp_path / "c2.json").read_text())["fit"]
+    assert c1["data"] == str(bad) and c1["set_aside"]["outliers_screened"]
+    assert sorted(x["point"] for x in c1["set_aside"]["positions"]) == sorted(shifts)
+    assert c2["set_aside"]["positions"] == [] and not c2["set_aside"]["outliers_screened"]
+    assert c1["set_aside"]["glitch_samples"] == r1["glitches"]["count"]
     for a in (1, 2):
         j0, j1, j2 = (r["jig_tolerance_mm"][a] for r in (r0, r1, r2))
         assert abs(j1 - j0) <= 0.05 * j0, (a, j0, j1)

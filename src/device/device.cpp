@@ -143,12 +143,6 @@ cdm_device::cdm_device(TransportPtr t, const proto::DeviceInfoReport &info, uint
     conv_ = conversion_from(info);
     nominal_ = nominal_model(info);
     model_ = nominal_;
-#ifdef CLOCK_MONOTONIC_COARSE
-    // 0 (no coarse clock): every stale check reads CLOCK_MONOTONIC.
-    timespec res;
-    if (clock_getres(CLOCK_MONOTONIC_COARSE, &res) == 0)
-        coarse_tick_ns_ = uint64_t(res.tv_sec) * 1000000000ull + uint64_t(res.tv_nsec);
-#endif
 }
 
 cdm_device::~cdm_device() {

@@ -6,8 +6,7 @@
 //    converts and publishes. It never waits for a consumer (except through a
 //    sample callback the user installed, which is the point of one).
 //  - cdm_get_pose / cdm_get_raw read the seqlock and a few atomics: no lock,
-//    no allocation, no system call but the vDSO clocks (the coarse one,
-//    and CLOCK_MONOTONIC only near the stale deadline).
+//    no allocation, no system call but the vDSO's CLOCK_MONOTONIC.
 //  - cdm_wait_pose sleeps on a condition variable that the reader thread
 //    signals only when someone is waiting (an atomic waiter count).
 //  - cdm_set_calibration hands a new model over a mutex shared only with the
@@ -118,7 +117,8 @@ private:
     void notify_waiters();
     int finish(cdm_pose &pose, bool have, uint32_t state_before_snapshot) const;
     // Whether a pose received at host_ns (CLOCK_MONOTONIC) is older than
-    // limit_ns now; the coarse clock first (device.cpp says why).
+    // limit_ns now, by CLOCK_MONOTONIC (device_read.cpp says why not the
+    // coarse clock).
     bool older_than(uint64_t host_ns, uint64_t limit_ns) const;
     static Conversion conversion_from(const cdm::proto::DeviceInfoReport &r);
 
@@ -141,7 +141,6 @@ private:
     std::atomic<uint64_t> n_reports_{0}, n_malformed_{0}, n_dropped_{0}, n_oow_{0}, n_reconnects_{0};
     std::atomic<uint64_t> n_seq_jumps_{0}, n_out_of_order_{0};
     uint64_t truncated_bytes_ = 0; // set before start(), read-only after
-    uint64_t coarse_tick_ns_ = 0;  // CLOCK_MONOTONIC_COARSE's resolution; 0: not used
     // host_sequence of the newest published pose (0: none yet).
     std::atomic<uint64_t> published_{0};
 

@@ -4,9 +4,11 @@
 // cdm_device_error text. Unpaced (realtime=0) where only counts matter;
 // paced where the time to notice matters.
 #include <chrono>
+#include <ctime>
 #include <cmath>
 #include <cstring>
 #include <string>
+#include <thread>
 
 #include "cdm/cdm.h"
 #include "test_util.h"
@@ -184,6 +186,45 @@ void test_fault_stall_goes_stale(void **) {
     cdm_close(dev);
 }
 
+// Never fresh past the deadline: a pose whose age, read on CLOCK_MONOTONIC
+// *before* the call, already exceeds the stale deadline must come back
+// STALE. Exact, whatever the scheduling (the call's clock reads after the
+// test's). Until 2026-11-24 the stale check trusted the coarse clock to lag
+// by at most one tick; on this project's VM it lagged by up to 7 ms, and
+// such calls returned CDM_OK (an independent tester's finding).
+void test_fault_stale_never_late(void **) {
+    for (uint32_t limit_us : {5000u, 50000u}) {
+        cdm_device *dev = nullptr;
+        cdm_open_options o{};
+        o.struct_size = sizeof o;
+        o.stale_timeout_us = limit_us;
+        assert_int_equal(cdm_open_ex("sim:?rate=1000&motion=still&stall_after=20", &o, &dev), CDM_OK);
+        cdm_pose p{};
+        p.struct_size = sizeof p;
+        assert_true(cdm_test::wait_until([&] { cdm_get_pose(dev, &p); return p.host_sequence == 20; }, 2000));
+        int checked = 0;
+        const auto until = std::chrono::steady_clock::now() + std::chrono::microseconds(limit_us + 30000);
+        while (std::chrono::steady_clock::now() < until) {
+            timespec ts;
+            clock_gettime(CLOCK_MONOTONIC, &ts);
+            const uint64_t before = uint64_t(ts.tv_sec) * 1000000000ull + uint64_t(ts.tv_nsec);
+            const int rc = cdm_get_pose(dev, &p);
+            if (before > p.host_time_ns && before - p.host_time_ns > uint64_t(limit_us) * 1000u) {
+                if (rc != CDM_ERR_STALE || !(p.flags & CDM_POSE_STALE))
+                    fail_msg("deadline %u us: pose %.3f ms old before the call came back rc %d, flags 0x%x", limit_us,
+                             double(before - p.host_time_ns) / 1e6, rc, unsigned(p.flags));
+                ++checked;
+            }
+            // A loop that sleeps, as a real control loop does between its
+            // periods: the CPU idles, and a tickless kernel's coarse clock
+            // falls behind (a busy loop kept it current and hid the bug).
+            std::this_thread::sleep_for(std::chrono::microseconds(50));
+        }
+        assert_true(checked > 50); // the stall was reached and checked many times
+        cdm_close(dev);
+    }
+}
+
 void test_fault_options_checked(void **) {
     cdm_device *dev = nullptr;
     assert_int_equal(cdm_open("sim:?malformed=bogus:3", &dev), CDM_ERR_INVALID_ARG);
@@ -207,6 +248,7 @@ int main(void) {
         cmocka_unit_test(test_fault_adc_saturation_holds_position),
         cmocka_unit_test(test_fault_disconnect_and_replug),
         cmocka_unit_test(test_fault_stall_goes_stale),
+        cmocka_unit_test(test_fault_stale_never_late),
         cmocka_unit_test(test_fault_options_checked),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

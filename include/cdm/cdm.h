@@ -230,7 +230,9 @@ typedef struct cdm_sample {
  * Called on the device's reader thread for every parsed report, in order.
  * It must return quickly at real-time rates; with `sim:?realtime=0` or
  * `replay:FILE?speed=0` it paces the stream (nothing is dropped).
- * The pointers are valid only during the call.
+ * The pointers are valid only during the call. The same rules as
+ * cdm_event_fn for what it may call (no cdm_close of its own device; a
+ * cdm_wait_pose* on it returns CDM_ERR_INVALID_ARG at once).
  */
 typedef void (*cdm_sample_fn)(void *user, const cdm_sample *sample);
 
@@ -255,7 +257,9 @@ typedef struct cdm_event {
  * since 1.1. Called on the device's reader thread when the device's state
  * changes (cdm_open_options.on_event). STALE is noticed within the stale
  * timeout plus 50 ms (the reader's poll). Keep it short; it may call any
- * cdm_* function except cdm_close on its own device.
+ * cdm_* function except cdm_close on its own device. cdm_wait_pose and
+ * cdm_wait_pose_after on its own device return CDM_ERR_INVALID_ARG at once
+ * (no pose can arrive while the reader thread waits; use cdm_get_pose).
  */
 typedef void (*cdm_event_fn)(void *user, const cdm_event *event);
 
@@ -301,7 +305,8 @@ CDM_API void cdm_close(cdm_device *dev);
  * and sets OUT_OF_WORKSPACE; before the first solvable report there is none
  * to keep: CDM_ERR_NO_DATA with OUT_OF_WORKSPACE | NO_POSITION (since 1.1).
  * The orientation is always a unit quaternion (identity before the first
- * report).
+ * report). On any return but CDM_OK, cdm_thread_error() says why (a
+ * constant text: nothing is allocated); after CDM_OK it is empty.
  */
 CDM_API int cdm_get_pose(cdm_device *dev, cdm_pose *out);
 

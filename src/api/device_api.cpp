@@ -132,22 +132,61 @@ void cdm_close(cdm_device *dev) {
     }
 }
 
-// No allocation, no lock, no thread error on the success and state paths:
-// this is the 1 kHz call.
+// No allocation, no lock: this is the 1 kHz call. The thread error is
+// emptied on entry and, on any return but CDM_OK, set to a constant text
+// (fail_static: nothing allocated or freed), so that cdm_thread_error after
+// a failing call says why, never what an earlier call said.
+namespace {
+struct PoseTexts {
+    const char *null_arg, *small, *no_report, *no_position, *stale, *disconnected, *end, *timeout, *own_thread;
+};
+#define CDM_POSE_TEXTS(fn)                                                                                          \
+    PoseTexts {                                                                                                      \
+        fn ": NULL device or output", fn ": struct_size is below the oldest size this call accepts",                \
+            fn ": no report received yet",                                                                           \
+            fn ": no position yet: every report so far was out of the workspace (flags NO_POSITION, "               \
+               "OUT_OF_WORKSPACE)",                                                                                  \
+            fn ": the newest pose is older than the stale deadline (flag STALE)",                                   \
+            fn ": the device is disconnected; the last pose is held (cdm_device_error says why)",                   \
+            fn ": the stream has ended (flag END_OF_STREAM)", fn ": no newer pose within the timeout",              \
+            fn ": called on the device's own reader thread (from its callback), where no pose can arrive while "    \
+               "it waits; use cdm_get_pose there"                                                                    \
+    }
+constexpr PoseTexts kGetPose = CDM_POSE_TEXTS("cdm_get_pose");
+constexpr PoseTexts kGetRaw = CDM_POSE_TEXTS("cdm_get_raw");
+constexpr PoseTexts kWaitPose = CDM_POSE_TEXTS("cdm_wait_pose");
+constexpr PoseTexts kWaitPoseAfter = CDM_POSE_TEXTS("cdm_wait_pose_after");
+#undef CDM_POSE_TEXTS
+
+int pose_status(int rc, uint32_t flags, const PoseTexts &t) noexcept {
+    switch (rc) {
+    case CDM_OK: return rc;
+    case CDM_ERR_NO_DATA: return cdm::fail_static(rc, (flags & CDM_POSE_NO_POSITION) ? t.no_position : t.no_report);
+    case CDM_ERR_STALE: return cdm::fail_static(rc, t.stale);
+    case CDM_ERR_DISCONNECTED: return cdm::fail_static(rc, t.disconnected);
+    case CDM_ERR_END_OF_STREAM: return cdm::fail_static(rc, t.end);
+    case CDM_ERR_TIMEOUT: return cdm::fail_static(rc, t.timeout);
+    case CDM_ERR_INVALID_ARG: return cdm::fail_static(rc, t.own_thread);
+    default: return rc;
+    }
+}
+} // namespace
 int cdm_get_pose(cdm_device *dev, cdm_pose *out) {
-    if (!dev || !out || out->struct_size < kPoseSize10) return CDM_ERR_INVALID_ARG;
+    cdm::clear_thread_error_rt();
+    if (!dev || !out) return cdm::fail_static(CDM_ERR_INVALID_ARG, kGetPose.null_arg);
+    if (out->struct_size < kPoseSize10) return cdm::fail_static(CDM_ERR_INVALID_ARG, kGetPose.small);
     const uint32_t cs = out->struct_size;
     if (cs >= sizeof(cdm_pose)) {
         // The current size: straight from the sequence lock into the
         // caller's struct, no intermediate copy.
         const int rc = dev->get_pose(*out);
         out->struct_size = cs;
-        return rc;
+        return rc == CDM_OK ? rc : pose_status(rc, out->flags, kGetPose);
     }
     cdm_pose p;
     const int rc = dev->get_pose(p);
     copy_out(p, out);
-    return rc;
+    return rc == CDM_OK ? rc : pose_status(rc, p.flags, kGetPose);
 }
 
 int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out) {
@@ -157,7 +196,7 @@ int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out) {
         cdm_pose p;
         const int rc = dev->wait_pose(timeout_ms, p);
         copy_out(p, out);
-        return rc;
+        return pose_status(rc, p.flags, kWaitPose);
     });
 }
 
@@ -170,16 +209,20 @@ int cdm_wait_pose_after(cdm_device *dev, uint64_t after_host_sequence, int timeo
         cdm_pose p;
         const int rc = dev->wait_pose_after(after_host_sequence, timeout_ms, p);
         copy_out(p, out);
-        return rc;
+        return pose_status(rc, p.flags, kWaitPoseAfter);
     });
 }
 
 int cdm_get_raw(cdm_device *dev, cdm_raw *out) {
-    if (!dev || !out || out->struct_size < kRawSize10) return CDM_ERR_INVALID_ARG;
+    cdm::clear_thread_error_rt();
+    if (!dev || !out) return cdm::fail_static(CDM_ERR_INVALID_ARG, kGetRaw.null_arg);
+    if (out->struct_size < kRawSize10) return cdm::fail_static(CDM_ERR_INVALID_ARG, kGetRaw.small);
     cdm_raw r;
     const int rc = dev->get_raw(r);
     copy_out(r, out);
-    return rc;
+    // cdm_raw has no flags: a report received (host time set) with no
+    // pose is one that could not be solved.
+    return rc == CDM_OK ? rc : pose_status(rc, r.host_time_ns != 0 ? uint32_t(CDM_POSE_NO_POSITION) : 0u, kGetRaw);
 }
 
 int cdm_get_info(cdm_device *dev, cdm_device_info *out) {

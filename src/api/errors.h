@@ -20,6 +20,12 @@ void clear_thread_error();
 // Sets the text without allocating a std::string argument first, and never
 // throws (a text that cannot be stored is replaced by a fixed one).
 int fail_noexcept(int code, const char *fn, const char *what) noexcept;
+// Sets the text to a constant (a string literal that lives for the
+// program) without allocating or freeing anything: the real-time calls'
+// (cdm_get_pose, cdm_get_raw) way to say why they failed.
+int fail_static(int code, const char *text) noexcept;
+// The same for the real-time calls' entry: empties the text, never frees.
+void clear_thread_error_rt() noexcept;
 
 // Runs `body` (returning a cdm status code) so that no exception reaches a C
 // caller: std::bad_alloc -> CDM_ERR_NO_MEM, any other -> CDM_ERR_INTERNAL

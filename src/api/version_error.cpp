@@ -6,16 +6,34 @@
 
 namespace {
 thread_local std::string t_error;
+// A constant text (fail_static), shown instead of t_error when set: the
+// real-time calls set it without touching the string's storage.
+thread_local const char *t_static = nullptr;
 }
 
 namespace cdm {
 int fail(int code, const std::string &detail) {
+    t_static = nullptr;
     t_error = detail;
     log::message(code == CDM_ERR_INTERNAL ? log::kError : log::kDebug, detail);
     return code;
 }
-void clear_thread_error() { t_error.clear(); }
+void clear_thread_error() {
+    t_static = nullptr;
+    t_error.clear();
+}
+// clear() keeps the string's capacity: nothing is freed or allocated.
+void clear_thread_error_rt() noexcept {
+    t_static = nullptr;
+    t_error.clear();
+}
+int fail_static(int code, const char *text) noexcept {
+    t_error.clear();
+    t_static = text;
+    return code;
+}
 int fail_noexcept(int code, const char *fn, const char *what) noexcept {
+    t_static = nullptr;
     try {
         t_error = std::string(fn) + ": " + (code == CDM_ERR_INTERNAL ? "internal error: " : "") + what;
     } catch (...) {
@@ -46,7 +64,7 @@ const char *cdm_strerror(int code) {
     case CDM_ERR_TIMEOUT: return "timed out";
     case CDM_ERR_DISCONNECTED: return "device disconnected";
     case CDM_ERR_STALE: return "pose is stale";
-    case CDM_ERR_NO_DATA: return "no report received yet";
+    case CDM_ERR_NO_DATA: return "no pose yet (no report received, or none could be solved)";
     case CDM_ERR_PROTOCOL: return "malformed or wrong-version report";
     case CDM_ERR_UNSUPPORTED: return "not supported by this device or transport";
     case CDM_ERR_NO_MEM: return "out of memory or buffer too small";
@@ -59,6 +77,6 @@ const char *cdm_strerror(int code) {
     }
 }
 
-const char *cdm_thread_error(void) { return t_error.c_str(); }
+const char *cdm_thread_error(void) { return t_static ? t_static : t_error.c_str(); }
 
 } // extern "C"

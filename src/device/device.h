@@ -74,6 +74,8 @@ public:
     int get_pose(cdm_pose &out) const;
     int wait_pose(int timeout_ms, cdm_pose &out);
     int wait_pose_after(uint64_t after, int timeout_ms, cdm_pose &out);
+    // True on the reader thread (in a sample or event callback).
+    bool on_reader_thread() const;
     int get_raw(cdm_raw &out) const;
     void get_info(cdm_device_info &out) const;
     void get_stats(cdm_stats &out) const;

@@ -99,6 +99,25 @@ def test_no_data_raises(lib, monkeypatch):
     assert e.value.code == cdm.CDM_ERR_NO_DATA and e.value.function == "cdm_get_pose"
 
 
+def test_unsolvable_reports_raise_with_their_own_reason():
+    # Every report saturated: NO_DATA with NO_POSITION. The error says so,
+    # not what an earlier failing call (a missing calibration) said.
+    with cdm.open("sim:?saturate=0:1000000") as dev:
+        time.sleep(0.05)
+        with pytest.raises(cdm.CdmError):
+            cdm.Calibration.load("/nonexistent/cdm-test-calibration.json")
+        with pytest.raises(cdm.CdmError) as e:
+            dev.get_pose()
+    assert e.value.code == cdm.CDM_ERR_NO_DATA
+    assert "no position yet" in str(e.value) and "calibration" not in str(e.value)
+
+
+@pytest.mark.parametrize("uri, exc", [("sim:\x00rate=5", ValueError), (b"sim:", TypeError), (5, TypeError)])
+def test_uri_that_c_would_read_otherwise_is_refused(uri, exc):
+    with pytest.raises(exc):
+        cdm.open(uri)
+
+
 def test_context_manager_and_idempotent_close():
     with cdm.open("sim:") as dev:
         assert not dev.closed

@@ -373,6 +373,11 @@ def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None):  # noqa: 
         opts.on_event = event_callback
         callback = (callback, event_callback)  # both kept alive by the Device
     h = ctypes.c_void_p()
+    # A C string ends at its first NUL: "sim:\x00rate=5" would open "sim:".
+    if uri is not None and not isinstance(uri, str):
+        raise TypeError("open: uri must be a str or None, got %s" % type(uri).__name__)
+    if uri is not None and "\x00" in uri:
+        raise ValueError("open: uri %r contains a NUL character" % (uri,))
     raw_uri = None if uri is None else uri.encode("utf-8")
     rc = L.cdm_open_ex(raw_uri, ctypes.byref(opts), ctypes.byref(h))
     if rc < 0:

@@ -113,6 +113,74 @@ void test_log_hook(void **) {
     assert_int_equal(s.logs.size(), n);
 }
 
+// A callback that waits on its own device (the header allows any cdm_*
+// call but cdm_close there) would wait for a pose only its own thread can
+// publish: until the timeout, or, without one, until cdm_close. It is
+// refused at once (an independent tester's finding: it blocked 2.9 s).
+struct OwnWait {
+    std::atomic<cdm_device *> dev{nullptr};
+    std::atomic<int> calls{0}, rc{0};
+    std::atomic<long> ms{-1};
+    std::string text;
+};
+
+void wait_in_callback(void *user, const cdm_sample *) {
+    auto *w = static_cast<OwnWait *>(user);
+    cdm_device *dev = w->dev.load();
+    if (!dev || w->calls.fetch_add(1) != 0) return;
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    const auto t0 = std::chrono::steady_clock::now();
+    w->rc = cdm_wait_pose_after(dev, 0xFFFFFFFFull, -1, &p); // no limit: only a refusal returns
+    w->ms = long(std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - t0).count());
+    w->text = cdm_thread_error();
+}
+
+void test_wait_from_own_callback_refused(void **) {
+    OwnWait w;
+    cdm_open_options o{};
+    o.struct_size = sizeof o;
+    o.user = &w;
+    o.on_sample = wait_in_callback;
+    cdm_device *dev = nullptr;
+    assert_int_equal(cdm_open_ex("sim:?rate=200", &o, &dev), CDM_OK);
+    w.dev = dev;
+    assert_true(cdm_test::wait_until([&] { return w.ms.load() >= 0; }, 3000));
+    cdm_close(dev);
+    assert_int_equal(w.rc.load(), CDM_ERR_INVALID_ARG);
+    assert_true(w.ms.load() < 100); // at once, not after a wait
+    assert_non_null(std::strstr(w.text.c_str(), "reader thread"));
+}
+
+// A failing cdm_get_pose / cdm_get_raw says why in cdm_thread_error, and a
+// succeeding one leaves it empty: never an earlier call's text (an
+// independent tester saw "cdm_get_pose: ... cannot open the calibration").
+void test_pose_calls_own_their_thread_error(void **) {
+    cdm_device *dev = nullptr;
+    assert_int_equal(cdm_open("sim:?saturate=0:1000000", &dev), CDM_OK);
+    cdm_pose p{};
+    p.struct_size = sizeof p;
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_ERR_NO_DATA && p.flags != 0; }, 2000));
+    cdm_device *none = nullptr;
+    assert_int_equal(cdm_open("nosuch:", &none), CDM_ERR_NO_DEVICE); // an unrelated failure's text
+    assert_int_equal(cdm_get_pose(dev, &p), CDM_ERR_NO_DATA);
+    assert_non_null(std::strstr(cdm_thread_error(), "cdm_get_pose: no position yet"));
+    cdm_raw r{};
+    r.struct_size = sizeof r;
+    assert_int_equal(cdm_get_raw(dev, &r), CDM_ERR_NO_DATA);
+    assert_non_null(std::strstr(cdm_thread_error(), "cdm_get_raw: no position yet"));
+    p.struct_size = 4;
+    assert_int_equal(cdm_get_pose(dev, &p), CDM_ERR_INVALID_ARG);
+    assert_non_null(std::strstr(cdm_thread_error(), "struct_size"));
+    cdm_close(dev);
+    assert_int_equal(cdm_open("sim:", &dev), CDM_OK);
+    p.struct_size = sizeof p;
+    assert_int_equal(cdm_open("nosuch:", &none), CDM_ERR_NO_DEVICE);
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_OK; }, 2000));
+    assert_string_equal(cdm_thread_error(), "");
+    cdm_close(dev);
+}
+
 } // namespace
 
 int main(void) {
@@ -120,6 +188,8 @@ int main(void) {
         cmocka_unit_test(test_stall_raises_stale_once),
         cmocka_unit_test(test_unplug_and_replug),
         cmocka_unit_test(test_log_hook),
+        cmocka_unit_test(test_wait_from_own_callback_refused),
+        cmocka_unit_test(test_pose_calls_own_their_thread_error),
     };
     return cmocka_run_group_tests(tests, nullptr, nullptr);
 }

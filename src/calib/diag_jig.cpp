@@ -60,8 +60,26 @@ Eval without_fixture(const Eval &E, const Grid &G, const FixtureOffsets &f) {
     return out;
 }
 
+double fixture_lr_chi2(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &fo, bool &cancelled) {
+    cancelled = false;
+    if (fo.fixture_count < 2 || fo.fixture.size() != pos.size()) return NAN;
+    FitOptions with = fo, without = fo;
+    without.fixture.clear();
+    without.fixture_count = 0;
+    // The same weights for both: those of m, or of what fo names.
+    if (!with.weigh_with) with.weigh_with = without.weigh_with = &m;
+    Model a = m, b = m;
+    FitReport ra, rb;
+    const bool oka = fit_model(a, pos, with, ra), okb = oka && fit_model(b, pos, without, rb);
+    if (!oka || !okb) {
+        cancelled = ra.message == "fit cancelled" || rb.message == "fit cancelled";
+        return NAN;
+    }
+    return std::max(0.0, rb.chi2 - ra.chi2);
+}
+
 JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<PreparedPos> &pos, const V3 &jig,
-                         const V3 &noise) {
+                         const V3 &noise, double fixture_lr) {
     JigAnalysis A;
     json &out = A.report;
     out = {{"fixture", nullptr}, {"holes", nullptr}, {"text", json::array()}, {"finding", nullptr}};
@@ -79,8 +97,14 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
     const auto hm = height_means(E, G, jig);
     json fx = {{"heights_mm", json::array()}, {"offsets_mm", json::object()}, {"max_mm", json::object()},
                {"p_value", json::object()}, {"taken_as_jig", true},
-               {"test", "chi-square of the per-height weighted mean residuals about their common mean, K - 1 "
-                        "degrees of freedom, per axis; Bonferroni over the three axes"}};
+               {"test", std::isnan(fixture_lr)
+                            ? "chi-square of the per-height weighted mean residuals about their common mean, K - 1 "
+                              "degrees of freedom, per axis; Bonferroni over the three axes"
+                            : "x (the axis the spacers set, fitted as per-height offsets): likelihood ratio, the "
+                              "model refitted without the offsets, delta chi-square against chi-square(K - 1); y, z: "
+                              "chi-square of the per-height weighted mean residuals about their common mean, K - 1 "
+                              "degrees of freedom; Bonferroni over the three axes"}};
+    if (!std::isnan(fixture_lr)) fx["lr_chi2_x"] = fixture_lr;
     {
         std::map<int, double> href; // a height index's fixture height (mm): the mean x reference
         std::map<int, int> hn;
@@ -111,7 +135,10 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
             offs.push_back(d);
             if (std::fabs(m.mean()) > kFixtureMaxMm) fx["taken_as_jig"] = false;
         }
-        const double p = std::min(1.0, 3 * chi2_sf(chi2, K - 1));
+        // x: the likelihood ratio when given (its offsets were fitted beside
+        // the device's parameters, which can take a trend over the heights).
+        const double stat = (a == 0 && !std::isnan(fixture_lr)) ? fixture_lr : chi2;
+        const double p = std::min(1.0, 3 * chi2_sf(stat, K - 1));
         fx["offsets_mm"][kAxis[a]] = offs;
         fx["max_mm"][kAxis[a]] = mx;
         fx["p_value"][kAxis[a]] = p;

@@ -17,6 +17,10 @@
 //    repeats at every height but is smooth over the plate.
 #pragma once
 
+#include <cmath>
+
+#include "calib/fit.h"
+
 #include <map>
 #include <utility>
 
@@ -51,8 +55,23 @@ struct JigAnalysis {
     nlohmann::json report;
     std::vector<V3> offset;
 };
+// fixture_lr: the chi-square the model gains back when refitted without
+// the fixture's per-height x offsets (fixture_lr_chi2 below), the x axis's
+// test statistic (chi-square, K - 1 degrees of freedom). NaN: x is tested
+// like y and z, by the per-height means against their standard errors,
+// which ignores that the device's parameters were fitted beside the offsets.
 JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<PreparedPos> &pos, const V3 &jig,
-                         const V3 &noise);
+                         const V3 &noise, double fixture_lr = NAN);
+
+// The likelihood ratio of the fixture's x offsets for model `m` (fitted
+// with them under `fo`): m refitted with them and without them, from m's
+// parameters, the same weights; their chi-square difference (>= 0). NaN
+// when fo has no fixture, or a fit fails or is cancelled (`cancelled`).
+// A device effect that can mimic a trend over the heights (a scale against
+// cable_stretch or holder_geometry) takes the offsets' place without them:
+// the per-height means alone called such a trend the fixture's (p 1e-54 on
+// data with none: an independent tester's case, docs/calibration.md).
+double fixture_lr_chi2(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &fo, bool &cancelled);
 
 } // namespace diag
 } // namespace cdm

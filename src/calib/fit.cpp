@@ -226,7 +226,7 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         Hfree = JQ.transpose() * JQ;
         for (int a = 0; a < int(full.size()); ++a) {
             // the prior's Hessian, mapped through Q
-            const double sd = 10 * pb.scale(a);
+            const double sd = pb.prior_sd(a);
             Hfree += pb.Q.row(a).transpose() * pb.Q.row(a) / (sd * sd);
         }
         Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Hfree);
@@ -324,7 +324,7 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         Eigen::MatrixXd JQ = J * pb.Q;
         Eigen::MatrixXd H = JQ.transpose() * JQ;
         for (int a = 0; a < pb.n_params(); ++a) {
-            const double sd = 10 * pb.scale(a);
+            const double sd = pb.prior_sd(a);
             H += pb.Q.row(a).transpose() * pb.Q.row(a) / (sd * sd);
         }
         Eigen::MatrixXd C = pb.Q * H.ldlt().solve(Eigen::MatrixXd::Identity(nfree, nfree)) * pb.Q.transpose();

@@ -87,6 +87,10 @@ struct FitReport {
 // The largest per-height error taken as the height fixture's (mm): 3x a
 // machined 0.05 mm tolerance. The judge (diag_spatial.cpp) uses the same.
 constexpr double kFixtureMaxMm = 0.15;
+// The fixture heights' offsets are a random effect with this standard
+// deviation (a machined spacer's tolerance; the cap above is three of
+// them): the fit's prior on them (fit_problem.h, prior_sd).
+constexpr double kFixturePriorSdMm = 0.05;
 
 // Fits every parameter of every effect in `m` except the ellipsoid's, from
 // their current values. Gauge freedoms are fixed explicitly (see fit.cpp).

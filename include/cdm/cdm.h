@@ -549,18 +549,36 @@ CDM_API void cdm_free_string(char *s);
  * `path` must not be a special file nor one of `protect_paths` (the caller's
  * own inputs; n_protect may be 0). Errors carry the errno text
  * (cdm_thread_error). One writer per thread at a time; free accepts NULL.
+ * Numbers are written with four decimals and '.' whatever the locale.
  */
 typedef struct cdm_dataset_writer cdm_dataset_writer;
 CDM_API int cdm_dataset_writer_open(const char *path, const char *const *protect_paths, size_t n_protect,
                                     cdm_dataset_writer **out);
+/* One sample: the jig position's id and reference (mm, jig frame) and the
+ * four cable lengths (mm). A row the dataset reader would refuse is refused
+ * here, CDM_ERR_INVALID_ARG, with a text naming the point, the argument
+ * (ref_mm[k] / lengths_mm[k]) and its value: a NaN or infinite value, a
+ * reference beyond +-5000 mm, a length outside (0, 10000] mm as the file
+ * would hold it (1e-5 is written 0.0000: refused), a point whose reference
+ * differs from its first row's (as written). Such a refused row writes
+ * nothing and the writer goes on. Also CDM_ERR_INVALID_ARG: any add after
+ * cdm_dataset_writer_commit ("already committed"). CDM_ERR_IO: a write
+ * failed (ENOSPC, EIO, EFBIG); the file is then abandoned and every later
+ * add and the commit fail with CDM_ERR_IO and that first failure's text. */
 CDM_API int cdm_dataset_writer_add(cdm_dataset_writer *w, int point, const double ref_mm[3],
                                    const double lengths_mm[4]);
 /* A row with its acquisition time (s since the session's start, finite):
  * the file then has a t_s column, which drift over the session is measured
  * against (docs/calibration.md). A file's rows are all timed or all not:
- * mixing the two calls is CDM_ERR_INVALID_ARG. */
+ * mixing the two calls is CDM_ERR_INVALID_ARG (a refused row decides
+ * nothing). Otherwise as cdm_dataset_writer_add. */
 CDM_API int cdm_dataset_writer_add_at(cdm_dataset_writer *w, int point, const double ref_mm[3],
                                       const double lengths_mm[4], double t_s);
+/* Writes the rest, fsyncs and renames over `path` (no row: the header
+ * alone). Once only: a second commit is CDM_ERR_INVALID_ARG ("already
+ * committed"); after an add or commit that failed with CDM_ERR_IO, that
+ * error again with the first failure's text. The writer still needs
+ * cdm_dataset_writer_free. */
 CDM_API int cdm_dataset_writer_commit(cdm_dataset_writer *w);
 CDM_API void cdm_dataset_writer_free(cdm_dataset_writer *w);
 

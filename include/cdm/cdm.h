@@ -617,6 +617,11 @@ CDM_API int cdm_sim_truth(cdm_device *dev, uint32_t sequence, double position_mm
  * per recorder (the caller serialises); write may be called from the
  * on_sample callback. cdm_recorder_open picks the format by the extension:
  * ".mcap" MCAP, ".csv" a CSV of poses, anything else the replay format.
+ * The device-info report is checked by the parser replay: checks it with,
+ * before the file is created, whatever the format: NULL, empty (len 0),
+ * longer than 1024 bytes, or rejected by the parser (too short, wrong report
+ * ID or protocol version, a field out of range) is CDM_ERR_INVALID_ARG with
+ * a text naming what is wrong.
  */
 typedef struct cdm_recorder cdm_recorder;
 CDM_API int cdm_recorder_open(const char *path, const uint8_t *info_report, size_t len, cdm_recorder **out);
@@ -625,10 +630,16 @@ CDM_API int cdm_recorder_open(const char *path, const uint8_t *info_report, size
 CDM_API int cdm_recorder_open_ex(const char *path, const char *format, const uint8_t *info_report, size_t len,
                                  cdm_recorder **out);
 /** The report only: MCAP gets no pose for it, a CSV refuses it
- *  (CDM_ERR_INVALID_ARG). */
+ *  (CDM_ERR_INVALID_ARG). Host times never decrease in a recording (replay:
+ *  refuses a file where one does): a host_time_ns before the previous
+ *  record's is CDM_ERR_INVALID_ARG naming both, nothing is written and the
+ *  recorder goes on; an equal time is fine. The report's bytes (1..1024)
+ *  are kept as received, malformed or not: a replay counts them as a live
+ *  device's (cdm_stats.malformed), as the recorded device did. After a
+ *  write error (CDM_ERR_IO) no later write succeeds. */
 CDM_API int cdm_recorder_write(cdm_recorder *rec, uint64_t host_time_ns, const uint8_t *report, size_t len);
 /** since 1.1: one on_sample sample: its report at source_time_ns and (MCAP,
- *  CSV) its pose. */
+ *  CSV) its pose. Times as cdm_recorder_write's, in every format. */
 CDM_API int cdm_recorder_write_sample(cdm_recorder *rec, const cdm_sample *sample);
 CDM_API int cdm_recorder_close(cdm_recorder *rec);
 

@@ -554,18 +554,36 @@ CDM_API void cdm_free_string(char *s);
  * `path` must not be a special file nor one of `protect_paths` (the caller's
  * own inputs; n_protect may be 0). Errors carry the errno text
  * (cdm_thread_error). One writer per thread at a time; free accepts NULL.
+ * Numbers are written with four decimals and '.' whatever the locale.
  */
 typedef struct cdm_dataset_writer cdm_dataset_writer;
 CDM_API int cdm_dataset_writer_open(const char *path, const char *const *protect_paths, size_t n_protect,
                                     cdm_dataset_writer **out);
+/* One sample: the jig position's id and reference (mm, jig frame) and the
+ * four cable lengths (mm). A row the dataset reader would refuse is refused
+ * here, CDM_ERR_INVALID_ARG, with a text naming the point, the argument
+ * (ref_mm[k] / lengths_mm[k]) and its value: a NaN or infinite value, a
+ * reference beyond +-5000 mm, a length outside (0, 10000] mm as the file
+ * would hold it (1e-5 is written 0.0000: refused), a point whose reference
+ * differs from its first row's (as written). Such a refused row writes
+ * nothing and the writer goes on. Also CDM_ERR_INVALID_ARG: any add after
+ * cdm_dataset_writer_commit ("already committed"). CDM_ERR_IO: a write
+ * failed (ENOSPC, EIO, EFBIG); the file is then abandoned and every later
+ * add and the commit fail with CDM_ERR_IO and that first failure's text. */
 CDM_API int cdm_dataset_writer_add(cdm_dataset_writer *w, int point, const double ref_mm[3],
                                    const double lengths_mm[4]);
 /* A row with its acquisition time (s since the session's start, finite):
  * the file then has a t_s column, which drift over the session is measured
  * against (docs/calibration.md). A file's rows are all timed or all not:
- * mixing the two calls is CDM_ERR_INVALID_ARG. */
+ * mixing the two calls is CDM_ERR_INVALID_ARG (a refused row decides
+ * nothing). Otherwise as cdm_dataset_writer_add. */
 CDM_API int cdm_dataset_writer_add_at(cdm_dataset_writer *w, int point, const double ref_mm[3],
                                       const double lengths_mm[4], double t_s);
+/* Writes the rest, fsyncs and renames over `path` (no row: the header
+ * alone). Once only: a second commit is CDM_ERR_INVALID_ARG ("already
+ * committed"); after an add or commit that failed with CDM_ERR_IO, that
+ * error again with the first failure's text. The writer still needs
+ * cdm_dataset_writer_free. */
 CDM_API int cdm_dataset_writer_commit(cdm_dataset_writer *w);
 CDM_API void cdm_dataset_writer_free(cdm_dataset_writer *w);
 
@@ -604,6 +622,11 @@ CDM_API int cdm_sim_truth(cdm_device *dev, uint32_t sequence, double position_mm
  * per recorder (the caller serialises); write may be called from the
  * on_sample callback. cdm_recorder_open picks the format by the extension:
  * ".mcap" MCAP, ".csv" a CSV of poses, anything else the replay format.
+ * The device-info report is checked by the parser replay: checks it with,
+ * before the file is created, whatever the format: NULL, empty (len 0),
+ * longer than 1024 bytes, or rejected by the parser (too short, wrong report
+ * ID or protocol version, a field out of range) is CDM_ERR_INVALID_ARG with
+ * a text naming what is wrong.
  */
 typedef struct cdm_recorder cdm_recorder;
 CDM_API int cdm_recorder_open(const char *path, const uint8_t *info_report, size_t len, cdm_recorder **out);
@@ -612,10 +635,16 @@ CDM_API int cdm_recorder_open(const char *path, const uint8_t *info_report, size
 CDM_API int cdm_recorder_open_ex(const char *path, const char *format, const uint8_t *info_report, size_t len,
                                  cdm_recorder **out);
 /** The report only: MCAP gets no pose for it, a CSV refuses it
- *  (CDM_ERR_INVALID_ARG). */
+ *  (CDM_ERR_INVALID_ARG). Host times never decrease in a recording (replay:
+ *  refuses a file where one does): a host_time_ns before the previous
+ *  record's is CDM_ERR_INVALID_ARG naming both, nothing is written and the
+ *  recorder goes on; an equal time is fine. The report's bytes (1..1024)
+ *  are kept as received, malformed or not: a replay counts them as a live
+ *  device's (cdm_stats.malformed), as the recorded device did. After a
+ *  write error (CDM_ERR_IO) no later write succeeds. */
 CDM_API int cdm_recorder_write(cdm_recorder *rec, uint64_t host_time_ns, const uint8_t *report, size_t len);
 /** since 1.1: one on_sample sample: its report at source_time_ns and (MCAP,
- *  CSV) its pose. */
+ *  CSV) its pose. Times as cdm_recorder_write's, in every format. */
 CDM_API int cdm_recorder_write_sample(cdm_recorder *rec, const cdm_sample *sample);
 CDM_API int cdm_recorder_close(cdm_recorder *rec);
 

@@ -258,7 +258,8 @@ int cdm_dataset_writer_commit(cdm_dataset_writer *w) {
     return cdm::guarded("cdm_dataset_writer_commit", [&]() -> int {
         if (!w) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_dataset_writer_commit: NULL writer");
         std::string err;
-        if (!w->w.commit(err)) return cdm::fail(CDM_ERR_IO, err);
+        bool usage = false;
+        if (!w->w.commit(err, &usage)) return cdm::fail(usage ? CDM_ERR_INVALID_ARG : CDM_ERR_IO, err);
         return CDM_OK;
     });
 }

@@ -213,7 +213,10 @@ int cdm_recorder_open_ex(const char *path, const char *format, const uint8_t *in
         if (!out) return null_arg("cdm_recorder_open", "out");
         *out = nullptr;
         if (!path) return null_arg("cdm_recorder_open", "path");
-        if (!info_report || len == 0) return null_arg("cdm_recorder_open", "info_report");
+        if (!info_report) return null_arg("cdm_recorder_open", "info_report");
+        if (len == 0)
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_recorder_open: info_report is empty (len 0; the device-info "
+                                                  "report of cdm_device_info_report, 128 bytes in protocol 1)");
         cdm::recording::Format f = cdm::recording::format_for_path(path);
         if (format && !cdm::recording::parse_format(format, f))
             return cdm::fail(CDM_ERR_INVALID_ARG, std::string("cdm_recorder_open: format \"") + format +

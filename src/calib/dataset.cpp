@@ -50,6 +50,27 @@ bool to_double(const char *b, const char *e, double &v) {
 }
 } // namespace
 
+const char *const kDatasetColumns[kDatasetValues] = {"point", "x_ref", "y_ref", "z_ref", "l1", "l2", "l3", "l4"};
+
+DatasetFault dataset_value_fault(int column, double v) {
+    if (!std::isfinite(v)) return DatasetFault::NotFinite;
+    if (column == 0) return v != std::floor(v) || std::fabs(v) > 9e15 ? DatasetFault::NotInteger : DatasetFault::None;
+    if (column < 4) return std::fabs(v) > kDatasetMaxRefMm ? DatasetFault::OutOfRange : DatasetFault::None;
+    return !(v > 0) || v > kDatasetMaxLengthMm ? DatasetFault::OutOfRange : DatasetFault::None;
+}
+
+std::string dataset_fault_text(DatasetFault f, int column, const std::string &name, const std::string &shown) {
+    switch (f) {
+    case DatasetFault::None: break;
+    case DatasetFault::NotFinite: return name + " is not a finite number: '" + shown + "'";
+    case DatasetFault::NotInteger: return name + " must be an integer id, got " + shown;
+    case DatasetFault::OutOfRange:
+        return column < 4 ? name + " = " + shown + " mm is beyond the sane range of +-5000 mm (wrong unit?)"
+                          : name + " must be a positive length in mm, at most 10000 (got " + shown + ")";
+    }
+    return name + " is accepted";
+}
+
 struct DatasetSource {
     bool is_file = false;
     io::FileReader file; // the descriptor load_dataset() opened
@@ -138,8 +159,6 @@ private:
     DistinctValues distinct_[4];
 };
 
-const char *const kRequired[] = {"point", "x_ref", "y_ref", "z_ref", "l1", "l2", "l3", "l4"};
-
 bool Parser::header(std::string &err) {
     const std::string &src = src_;
     header_ = true;
@@ -156,9 +175,9 @@ bool Parser::header(std::string &err) {
         names.push_back(std::move(n));
     }
     for (int k = 0; k < 8; ++k) {
-        auto it = std::find(names.begin(), names.end(), kRequired[k]);
+        auto it = std::find(names.begin(), names.end(), kDatasetColumns[k]);
         if (it == names.end()) {
-            err = at(src, line_, 1) + "header lacks column \"" + kRequired[k] +
+            err = at(src, line_, 1) + "header lacks column \"" + kDatasetColumns[k] +
                   "\" (expected point,x_ref,y_ref,z_ref,l1,l2,l3,l4)";
             return false;
         }
@@ -166,14 +185,15 @@ bool Parser::header(std::string &err) {
     }
     for (size_t k = 0; k < names.size(); ++k)
         if (names[k] == "t_s") tcol_ = int(k);
-        else if (std::find(std::begin(kRequired), std::end(kRequired), names[k]) == std::end(kRequired))
+        else if (std::find(kDatasetColumns, kDatasetColumns + kDatasetValues, names[k]) ==
+                 kDatasetColumns + kDatasetValues)
             d_.ignored_columns.push_back(names[k]);
     return true;
 }
 
 bool Parser::line(const char *b, const char *le, std::string &err) {
     const std::string &src = src_;
-    const char *const *required = kRequired;
+    const char *const *required = kDatasetColumns;
     auto &f = f_;
     const auto &colidx = colidx_;
     const size_t line = ++line_;
@@ -186,32 +206,22 @@ bool Parser::line(const char *b, const char *le, std::string &err) {
               " fields as in the header, found " + std::to_string(f.size());
         return false;
     }
-    double v[8];
-    for (int k = 0; k < 8; ++k) {
+    // Every field a number first, then each value by the rule the writer
+    // shares (dataset_value_fault), column by column.
+    double v[kDatasetValues];
+    for (int k = 0; k < kDatasetValues; ++k) {
         auto &x = f[size_t(colidx[k])];
         if (!to_double(x.first, x.second, v[k]) || !std::isfinite(v[k])) {
-            err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " is not a finite number: '" +
-                  shown(x.first, x.second) + "'";
+            err = at(src, line, size_t(colidx[k]) + 1) +
+                  dataset_fault_text(DatasetFault::NotFinite, k, required[k], shown(x.first, x.second));
             return false;
         }
     }
-    if (v[0] != std::floor(v[0]) || std::fabs(v[0]) > 9e15) {
-        err = at(src, line, size_t(colidx[0]) + 1) + "point must be an integer id, got " +
-              shown(f[size_t(colidx[0])].first, f[size_t(colidx[0])].second);
-        return false;
-    }
-    for (int k = 1; k < 4; ++k)
-        if (std::fabs(v[k]) > kDatasetMaxRefMm) {
-            err = at(src, line, size_t(colidx[k]) + 1) + required[k] + " = " +
-                  shown(f[size_t(colidx[k])].first, f[size_t(colidx[k])].second) +
-                  " mm is beyond the sane range of +-5000 mm (wrong unit?)";
-            return false;
-        }
-    for (int k = 4; k < 8; ++k)
-        if (!(v[k] > 0) || v[k] > kDatasetMaxLengthMm) {
-            err = at(src, line, size_t(colidx[k]) + 1) + required[k] +
-                  " must be a positive length in mm, at most 10000 (got " +
-                  shown(f[size_t(colidx[k])].first, f[size_t(colidx[k])].second) + ")";
+    for (int k = 0; k < kDatasetValues; ++k)
+        if (const DatasetFault fault = dataset_value_fault(k, v[k]); fault != DatasetFault::None) {
+            auto &x = f[size_t(colidx[k])];
+            err = at(src, line, size_t(colidx[k]) + 1) +
+                  dataset_fault_text(fault, k, required[k], shown(x.first, x.second));
             return false;
         }
     long id = long(v[0]);

@@ -7,10 +7,12 @@
 // statistics").
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <functional>
 #include <memory>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "io/file.h"
@@ -93,6 +95,26 @@ bool for_each_sample(const Dataset &d, const std::function<void(size_t, const do
 constexpr double kDatasetMaxRefMm = 5000.0;
 constexpr double kDatasetMaxLengthMm = 10000.0;
 
+// The columns every row has, in the writer's order.
+constexpr int kDatasetValues = 8;
+extern const char *const kDatasetColumns[kDatasetValues]; // point, x_ref, y_ref, z_ref, l1..l4
+
+// Why the reader refuses one value of a row: the one rule, which
+// load_dataset applies to what it reads and DatasetWriter to what it is
+// about to write, so the writer never writes a row the reader refuses.
+enum class DatasetFault {
+    None,
+    NotFinite,  // NaN or infinite (the reader also says so of a field that is no number)
+    NotInteger, // point: not an integer id within +-9e15
+    OutOfRange, // a reference beyond kDatasetMaxRefMm, a length outside (0, kDatasetMaxLengthMm]
+};
+// `column` indexes kDatasetColumns.
+DatasetFault dataset_value_fault(int column, double v);
+// The reader's words for a fault of value `shown` (as the file or the
+// caller has it) of the value called `name`, e.g. "l2 must be a positive
+// length in mm, at most 10000 (got -1)".
+std::string dataset_fault_text(DatasetFault f, int column, const std::string &name, const std::string &shown);
+
 // Parses and groups, streaming (load_dataset reads the file in 1 MiB
 // pieces; a line longer than that is held whole). On error returns false with `err` naming the file,
 // line and column (1-based), e.g. "jig.csv:17:6: l2 is not a number: 'abc'".
@@ -116,20 +138,38 @@ bool without_points(const Dataset &d, const std::vector<long> &points, Dataset &
 // The one dataset writer: the header, then add_row() per sample, then
 // commit() (atomic: io::AtomicFile). Rows are written as they come, so a
 // recording need not be held in memory. Destroyed without commit(): no file.
+// Numbers are written with '.' as the decimal point whatever the process's
+// locale (std::to_chars), four decimals (six for t_s).
+//
+// Refusals come in two kinds. The caller's mistake (*usage set): the row is
+// refused before anything is written and the writer goes on as if it had
+// not been given. A failed write or commit (I/O): the file is abandoned, and
+// every later add_row() and commit() fails with that first failure's text.
 class DatasetWriter {
 public:
     bool open(const std::string &path, const std::vector<std::string> &protect_paths, std::string &err);
     // t_s finite: the row's acquisition time, written in a t_s column. The
     // first row decides whether the file has the column; a later row of the
     // other kind is refused (*usage set: the caller's mistake, not I/O).
+    // Refused too (*usage): a row load_dataset would refuse, judged on the
+    // values as the file would hold them (dataset_value_fault; a length of
+    // 1e-5 mm is written 0.0000, not positive), a point whose reference
+    // differs from its first row's (as written), and any row after commit().
+    // The text names the point, the argument (ref_mm[k] / lengths_mm[k], the
+    // C API's names) and its value.
     bool add_row(long point, const double ref[3], const double lengths[4], std::string &err, double t_s = NAN,
                  bool *usage = nullptr);
-    bool commit(std::string &err);
+    // A second commit() is refused (*usage); after a failure, see above.
+    bool commit(std::string &err, bool *usage = nullptr);
 
 private:
     io::AtomicFile f_;
-    std::string buf_;
+    std::string path_, buf_;
     int timed_ = -1; // -1: no row yet; 0: no t_s column; 1: t_s column
+    bool committed_ = false;
+    std::string failed_; // the write or commit failure that ended the file (sticky)
+    // Each point's reference as written: the reader holds a point to it.
+    std::unordered_map<long, std::array<double, 3>> refs_;
 };
 
 

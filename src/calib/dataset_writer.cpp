@@ -1,55 +1,153 @@
 // The one dataset writer (see dataset.h): the jig CSV's header, its rows as
-// they come, the file committed atomically.
+// they come, the file committed atomically. A row is checked, as the file
+// would hold it, by the reader's own rule before a byte of it is kept, so a
+// file this writer commits is one load_dataset reads.
 #include "calib/dataset.h"
 
+#include <charconv>
 #include <cmath>
-#include <cstdio>
+#include <cstring>
 
 namespace cdm {
+
+namespace {
+
+const char *const kHeader = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4";
+
+// The caller's value, shortest form ("nan", "-1", "1e-05"): what a message
+// shows of it.
+std::string shortest(double v) {
+    char b[32];
+    const auto r = std::to_chars(b, b + sizeof b, v);
+    return std::string(b, r.ptr);
+}
+
+// A row as it is built: fields appended with '.' as the decimal point
+// whatever the locale (printf's %f would write "30,0000" under a comma
+// locale, which the reader splits into two fields).
+struct Line {
+    char buf[512]; // fits any row: the checked fields are short, and a finite t_s has at most 309 digits
+    char *p = buf;
+    bool fits = true;
+    char *end() { return buf + sizeof buf; }
+    // Appends ",v" with `decimals` decimals; `field` receives those characters.
+    void fixed(double v, int decimals, std::string *field = nullptr) {
+        if (!fits || p == end()) return void(fits = false);
+        *p++ = ',';
+        char *const start = p;
+        const auto r = std::to_chars(p, end(), v, std::chars_format::fixed, decimals);
+        fits = r.ec == std::errc();
+        p = r.ptr;
+        if (fits && field) field->assign(start, p);
+    }
+};
+
+// What the reader gets back from a field the writer printed.
+double read_back(const std::string &field) {
+    double v = NAN;
+    std::from_chars(field.data(), field.data() + field.size(), v);
+    return v;
+}
+
+} // namespace
 
 bool DatasetWriter::open(const std::string &path, const std::vector<std::string> &protect, std::string &err) {
     buf_.clear(); // the header waits for the first row: it decides the t_s column
     timed_ = -1;
+    committed_ = false;
+    failed_.clear();
+    refs_.clear();
+    path_ = path;
     return f_.open(path, protect, err);
 }
 
 bool DatasetWriter::add_row(long point, const double ref[3], const double len[4], std::string &err, double t_s,
                             bool *usage) {
-    const int timed = std::isfinite(t_s) ? 1 : 0;
-    if (timed_ < 0) {
-        timed_ = timed;
-        buf_ = timed ? "point,x_ref,y_ref,z_ref,l1,l2,l3,l4,t_s\n" : "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n";
-    } else if (timed != timed_) {
-        err = std::string("dataset row for point ") + std::to_string(point) +
-              (timed ? " has a time, but the file's rows have none" : " has no time, but the file's rows have t_s");
+    auto refuse = [&](const std::string &why) {
+        err = "dataset row for point " + std::to_string(point) + ": " + why;
         if (usage) *usage = true;
         return false;
-    }
-    char line[256];
-    const int n = timed ? std::snprintf(line, sizeof line, "%ld,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.6f\n", point,
-                                        ref[0], ref[1], ref[2], len[0], len[1], len[2], len[3], t_s)
-                        : std::snprintf(line, sizeof line, "%ld,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f\n", point, ref[0],
-                                        ref[1], ref[2], len[0], len[1], len[2], len[3]);
-    if (n < 0 || size_t(n) >= sizeof line) {
-        err = "dataset row for point " + std::to_string(point) + " does not fit a CSV line (non-sane values)";
-        f_.abandon();
+    };
+    if (committed_) return refuse(path_ + " was already committed; a row added now would be lost (open a new writer)");
+    if (!failed_.empty()) {
+        err = failed_ + " (an earlier failure ended this dataset: nothing more is written)";
         return false;
     }
-    buf_.append(line, size_t(n));
+    const int timed = std::isfinite(t_s) ? 1 : 0;
+    if (timed_ >= 0 && timed != timed_)
+        return refuse(timed ? "has a time, but the file's rows have none"
+                            : "has no time, but the file's rows have t_s");
+
+    // The row, checked value by value as the reader will read it back.
+    static const char *const kArg[kDatasetValues] = {"point",          "ref_mm[0] (x_ref)",  "ref_mm[1] (y_ref)",
+                                                     "ref_mm[2] (z_ref)", "lengths_mm[0] (l1)", "lengths_mm[1] (l2)",
+                                                     "lengths_mm[2] (l3)", "lengths_mm[3] (l4)"};
+    Line line;
+    if (const DatasetFault f = dataset_value_fault(0, double(point)); f != DatasetFault::None)
+        return refuse(dataset_fault_text(f, 0, kArg[0], std::to_string(point)));
+    line.p = std::to_chars(line.buf, line.end(), point).ptr;
+    double written[kDatasetValues] = {double(point)};
+    std::string field;
+    for (int k = 1; k < kDatasetValues; ++k) {
+        const double v = k < 4 ? ref[k - 1] : len[k - 4];
+        if (!std::isfinite(v)) return refuse(dataset_fault_text(DatasetFault::NotFinite, k, kArg[k], shortest(v)));
+        line.fixed(v, 4, &field);
+        if (!line.fits) break;
+        written[k] = read_back(field);
+        if (const DatasetFault f = dataset_value_fault(k, written[k]); f != DatasetFault::None) {
+            const std::string shown = written[k] == v ? shortest(v) : shortest(v) + ", " + field + " in the file";
+            return refuse(dataset_fault_text(f, k, kArg[k], shown));
+        }
+    }
+    if (timed) line.fixed(t_s, 6);
+    if (!line.fits || line.p == line.end()) // cannot happen with checked values; never a partial row
+        return refuse("does not fit a CSV line of " + std::to_string(sizeof line.buf) + " characters");
+    *line.p++ = '\n';
+    const auto known = refs_.find(point);
+    if (known != refs_.end())
+        for (int k = 0; k < 3; ++k)
+            if (known->second[size_t(k)] != written[1 + k])
+                return refuse(std::string(kArg[1 + k]) + " is " + shortest(ref[k]) +
+                              " but the point's first row gave " + shortest(known->second[size_t(k)]) +
+                              ": a point's reference is fixed (the reader refuses a file where it moves)");
+
+    // Accepted: from here on the row is the file's.
+    if (timed_ < 0) {
+        timed_ = timed;
+        buf_ = std::string(kHeader) + (timed ? ",t_s\n" : "\n");
+    }
+    if (known == refs_.end()) refs_.emplace(point, std::array<double, 3>{written[1], written[2], written[3]});
+    buf_.append(line.buf, size_t(line.p - line.buf));
     // Flush in 64 kB pieces: bounded memory for long recordings.
     if (buf_.size() >= 65536) {
-        if (!f_.write(buf_, err)) return false;
+        if (!f_.write(buf_, err)) { // AtomicFile abandoned the temporary: the file is lost
+            failed_ = err;
+            return false;
+        }
         buf_.clear();
     }
     return true;
 }
 
-bool DatasetWriter::commit(std::string &err) {
-    if (timed_ < 0) buf_ = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n"; // no rows: the header alone
-    timed_ = 0;
-    if (!buf_.empty() && !f_.write(buf_, err)) return false;
+bool DatasetWriter::commit(std::string &err, bool *usage) {
+    if (committed_) {
+        err = path_ + ": the dataset was already committed (a writer commits once)";
+        if (usage) *usage = true;
+        return false;
+    }
+    if (!failed_.empty()) {
+        err = failed_ + " (an earlier failure ended this dataset: nothing more is written)";
+        return false;
+    }
+    if (timed_ < 0) buf_ = std::string(kHeader) + "\n"; // no rows: the header alone
+    if ((!buf_.empty() && !f_.write(buf_, err)) || !f_.commit(err)) {
+        failed_ = err;
+        return false;
+    }
     buf_.clear();
-    return f_.commit(err);
+    buf_.shrink_to_fit();
+    committed_ = true;
+    return true;
 }
 
 } // namespace cdm

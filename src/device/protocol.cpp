@@ -110,6 +110,11 @@ Reject bad(std::string *detail, const std::string &what) {
 }
 bool positive_finite(float v) { return std::isfinite(v) && v > 0; }
 bool in_range(float v, double lo, double hi) { return std::isfinite(v) && double(v) >= lo && double(v) <= hi; }
+std::string hex_byte(uint8_t b) {
+    char t[8];
+    std::snprintf(t, sizeof t, "0x%02X", unsigned(b));
+    return t;
+}
 std::string range_text(const std::string &field, float v, double lo, double hi) {
     char b[200];
     std::snprintf(b, sizeof b, "%s = %g outside [%g, %g]", field.c_str(), double(v), lo, hi);
@@ -118,9 +123,21 @@ std::string range_text(const std::string &field, float v, double lo, double hi) 
 } // namespace
 
 Reject parse_device_info(const uint8_t *buf, size_t len, DeviceInfoReport &out, std::string *detail) {
-    if (buf == nullptr || len < kDeviceInfoReportSize) return Reject::Short;
-    if (buf[0] != kDeviceInfoReportId) return Reject::WrongReportId;
-    if (buf[1] != kProtocolVersion) return Reject::WrongVersion;
+    if (buf == nullptr || len < kDeviceInfoReportSize) {
+        if (detail) *detail = std::to_string(buf ? len : 0) + " bytes, a device-info report has " +
+                              std::to_string(kDeviceInfoReportSize);
+        return Reject::Short;
+    }
+    if (buf[0] != kDeviceInfoReportId) {
+        if (detail) *detail = "byte 0 is " + hex_byte(buf[0]) + ", a device-info report starts with " +
+                              hex_byte(kDeviceInfoReportId);
+        return Reject::WrongReportId;
+    }
+    if (buf[1] != kProtocolVersion) {
+        if (detail) *detail = "byte 1 is " + std::to_string(buf[1]) + ", this library speaks protocol " +
+                              std::to_string(kProtocolVersion);
+        return Reject::WrongVersion;
+    }
     DeviceInfoReport r;
     r.protocol_version = buf[1];
     r.fw_major = buf[2];

@@ -113,7 +113,8 @@ constexpr double kGripOpenMaxRad = 3.14159265358979323846;      // grip_open_rad
 // Rejects Short, WrongReportId, WrongVersion and BadValue (a field outside
 // the ranges above or non-finite, m >= 2a or 2b, hall_open == hall_closed,
 // adc_bits outside 1..16, a non-printable serial); `detail` then names the
-// field, its value and its range.
+// field, its value and its range (for the first three: the length, byte 0,
+// byte 1 and what they should be).
 Reject parse_device_info(const uint8_t *buf, size_t len, DeviceInfoReport &out, std::string *detail);
 void serialize_device_info(const DeviceInfoReport &r, uint8_t *buf); // kDeviceInfoReportSize bytes
 

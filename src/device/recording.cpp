@@ -68,6 +68,10 @@ public:
             err = path_ + ": a CSV recording holds poses: every row needs one";
             return CDM_ERR_INVALID_ARG;
         }
+        // Not replayed, but a recording all the same: its host_time_ns
+        // column keeps the order the replayable formats must keep.
+        if (!replay::host_time_in_order(host_ns, last_ns_, rows_, err)) return CDM_ERR_INVALID_ARG;
+        last_ns_ = host_ns;
         const double *v = p->struct_size >= offsetof(cdm_pose, velocity) + sizeof p->velocity ? p->velocity : zero_;
         buf_ += std::to_string(host_ns) + "," + std::to_string(p->sequence) + "," + std::to_string(p->device_time_us);
         for (double x : {p->position[0], p->position[1], p->position[2], p->orientation[0], p->orientation[1],
@@ -114,6 +118,7 @@ private:
     int fd_ = -1;
     std::string path_, buf_, fail_;
     uint64_t rows_ = 0;
+    uint64_t last_ns_ = 0; // the last row's host time
 };
 
 } // namespace
@@ -138,7 +143,17 @@ int open_writer(const std::string &path, Format format, const uint8_t *info, siz
         err = "device-info report of " + std::to_string(info_len) + " bytes (1..1024)";
         return CDM_ERR_INVALID_ARG;
     }
-    if (format == Format::Mcap) return open_mcap_writer(path, info, info_len, out, err);
+    // What replay: checks when it opens the file (transport_replay.cpp),
+    // checked before the file is created: a recording it would refuse is
+    // never started. The CSV keeps no report, but is asked for the same one.
+    proto::DeviceInfoReport di;
+    std::string detail;
+    if (const proto::Reject rej = proto::parse_device_info(info, info_len, di, &detail); rej != proto::Reject::None) {
+        err = "device-info report (" + std::to_string(info_len) + " bytes) rejected: " + proto::reject_text(rej) +
+              (detail.empty() ? "" : ": " + detail);
+        return CDM_ERR_INVALID_ARG;
+    }
+    if (format == Format::Mcap) return open_mcap_writer(path, info, info_len, di, out, err);
     if (format == Format::Csv) {
         auto w = std::make_unique<CsvWriter>();
         if (int rc = w->open(path, err); rc != CDM_OK) return rc;

@@ -28,7 +28,9 @@ public:
     // One input report as received, its host time (ns, CLOCK_MONOTONIC of
     // the recording machine) and, when known, the pose libcdm decoded from
     // it (MCAP and CSV keep it; the replay format keeps only the bytes).
-    // Returns CDM_OK or a cdm_error with err set.
+    // Returns CDM_OK or a cdm_error with err set. A host time before the
+    // previous report's is refused (CDM_ERR_INVALID_ARG, nothing written,
+    // the writer goes on): replay: refuses a file where time goes back.
     virtual int write(uint64_t host_ns, const uint8_t *report, size_t len, const cdm_pose *pose,
                       std::string &err) = 0;
     // Completes the file (MCAP: summary and footer) and fsyncs it. What was
@@ -39,7 +41,8 @@ public:
 
 // Creates `path` (a new file: never over an existing one) in `format`,
 // starting with the device-info feature report (report ID first; checked
-// by the protocol parser, since every replay needs it).
+// by the protocol parser before the file is created, whatever the format,
+// since every replay needs it: CDM_ERR_INVALID_ARG naming what is wrong).
 int open_writer(const std::string &path, Format format, const uint8_t *info, size_t info_len,
                 std::unique_ptr<Writer> &out, std::string &err);
 

@@ -104,15 +104,8 @@ int nibble(char c) {
 
 class McapWriter final : public Writer {
 public:
-    int open(const std::string &path, const uint8_t *info, size_t info_len, std::string &err) {
-        proto::DeviceInfoReport di;
-        std::string detail;
-        const proto::Reject rej = proto::parse_device_info(info, info_len, di, &detail);
-        if (rej != proto::Reject::None) {
-            err = "device-info report rejected: " + std::string(proto::reject_text(rej)) +
-                  (detail.empty() ? "" : ": " + detail);
-            return CDM_ERR_INVALID_ARG;
-        }
+    int open(const std::string &path, const uint8_t *info, size_t info_len, const proto::DeviceInfoReport &di,
+             std::string &err) {
         const std::string version = std::to_string(CDM_VERSION_MAJOR) + "." + std::to_string(CDM_VERSION_MINOR) +
                                     "." + std::to_string(CDM_VERSION_PATCH);
         // No well-known profile fits (ros1/ros2 need their message
@@ -144,8 +137,11 @@ public:
             err = "report of " + std::to_string(len) + " bytes (1..1024)";
             return CDM_ERR_INVALID_ARG;
         }
+        // parse_mcap refuses a report channel whose log time goes back.
+        if (!replay::host_time_in_order(host_ns, last_ns_, reports_, err)) return CDM_ERR_INVALID_ARG;
         if (!w_.write_message(report_, host_ns, report, len, err)) return CDM_ERR_IO;
         ++reports_;
+        last_ns_ = host_ns;
         if (!pose) return CDM_OK;
         const std::string p = pose_json(host_ns, *pose), s = state_json(host_ns, *pose);
         if (!w_.write_message(pose_, host_ns, reinterpret_cast<const uint8_t *>(p.data()), p.size(), err) ||
@@ -162,6 +158,7 @@ private:
     mcap::Writer w_;
     uint16_t report_ = 0, pose_ = 0, state_ = 0;
     uint64_t reports_ = 0;
+    uint64_t last_ns_ = 0; // the last report's log time
 };
 
 int parse_error(const std::string &name, size_t offset, const std::string &what, std::string &err) {
@@ -209,10 +206,10 @@ std::string state_json(uint64_t host_ns, const cdm_pose &p) {
     return s;
 }
 
-int open_mcap_writer(const std::string &path, const uint8_t *info, size_t info_len, std::unique_ptr<Writer> &out,
-                     std::string &err) {
+int open_mcap_writer(const std::string &path, const uint8_t *info, size_t info_len, const proto::DeviceInfoReport &di,
+                     std::unique_ptr<Writer> &out, std::string &err) {
     auto w = std::make_unique<McapWriter>();
-    const int rc = w->open(path, info, info_len, err);
+    const int rc = w->open(path, info, info_len, di, err);
     if (rc != CDM_OK) return rc;
     out = std::move(w);
     return CDM_OK;

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "cdm/cdm.h"
+#include "device/protocol.h"
 #include "device/recording.h"
 #include "device/replay_format.h"
 
@@ -33,9 +34,10 @@ void append_number(std::string &s, double v);
 std::string pose_json(uint64_t host_ns, const cdm_pose &p);
 std::string state_json(uint64_t host_ns, const cdm_pose &p);
 
-// Creates an MCAP recording (recording.h's open_writer, format Mcap).
-int open_mcap_writer(const std::string &path, const uint8_t *info, size_t info_len, std::unique_ptr<Writer> &out,
-                     std::string &err);
+// Creates an MCAP recording (recording.h's open_writer, format Mcap):
+// `info` the device-info report, `di` what the protocol parser read in it.
+int open_mcap_writer(const std::string &path, const uint8_t *info, size_t info_len, const proto::DeviceInfoReport &di,
+                     std::unique_ptr<Writer> &out, std::string &err);
 
 // An MCAP recording as the replay transport reads it: the device-info report
 // from the cdm.device metadata, the /cdm/report messages in file order as

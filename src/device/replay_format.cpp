@@ -123,6 +123,14 @@ int load(const std::string &path, File &out, std::string &err) {
     return parse(std::move(bytes), path, out, err);
 }
 
+bool host_time_in_order(uint64_t host_ns, uint64_t previous_ns, uint64_t n, std::string &err) {
+    if (n == 0 || host_ns >= previous_ns) return true;
+    err = "host time " + std::to_string(host_ns) + " ns of record " + std::to_string(n) +
+          " is before the previous record's " + std::to_string(previous_ns) +
+          " ns: host times never decrease in a recording (replay: refuses a file where one does); not written";
+    return false;
+}
+
 Writer::~Writer() {
     if (fd_ >= 0) ::close(fd_);
 }
@@ -165,7 +173,7 @@ int Writer::open(const std::string &path, const uint8_t *info, size_t info_len, 
     }
     path_ = path;
     failed_ = false;
-    records_ = bytes_ = 0;
+    records_ = bytes_ = last_ns_ = 0;
     std::vector<uint8_t> h(kHeaderSize + info_len);
     std::memcpy(h.data(), kMagic, sizeof kMagic);
     proto::put_u16(h.data() + 8, kVersion);
@@ -179,12 +187,20 @@ int Writer::write(uint64_t host_ns, const uint8_t *report, size_t len, std::stri
         err = fd_ < 0 ? std::string("recording not open") : "record of " + std::to_string(len) + " bytes (1..1024)";
         return CDM_ERR_INVALID_ARG;
     }
+    if (failed_) { // a failed writer says why, whatever it is given
+        err = fail_text_;
+        return CDM_ERR_IO;
+    }
+    if (!host_time_in_order(host_ns, last_ns_, records_, err)) return CDM_ERR_INVALID_ARG;
     uint8_t rec[kRecordHeaderSize + kMaxReport];
     proto::put_u64(rec, host_ns);
     proto::put_u16(rec + 8, uint16_t(len));
     std::memcpy(rec + kRecordHeaderSize, report, len);
     const int rc = write_all(rec, kRecordHeaderSize + len, err);
-    if (rc == CDM_OK) ++records_;
+    if (rc == CDM_OK) {
+        ++records_;
+        last_ns_ = host_ns;
+    }
     return rc;
 }
 

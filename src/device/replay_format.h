@@ -50,13 +50,22 @@ int parse(std::vector<uint8_t> bytes, const std::string &name, File &out, std::s
 // blocking), at most kMaxFileBytes; errors carry strerror.
 int load(const std::string &path, File &out, std::string &err);
 
+// Host times never decrease in a recording: parse() refuses a file where
+// one does, whatever its format, so every recording writer refuses such a
+// record before writing anything of it. False when `host_ns` (the n-th
+// record's, 0-based) is before `previous_ns` (the record before it's),
+// with err naming both.
+bool host_time_in_order(uint64_t host_ns, uint64_t previous_ns, uint64_t n, std::string &err);
+
 // Writes a recording, append-only: every write() hands its record to the
 // kernel at once (one write(2), no user-space buffer), so a process killed
 // by any signal leaves every record it wrote, and at worst one incomplete
 // record that parse() drops. A failed write (ENOSPC, EIO) truncates the file
 // back to the last complete record, reports the errno, and leaves the writer
 // failed: later writes return the same error; close() keeps the file.
-// Not thread-safe; the caller serialises.
+// A record whose host time is before the previous one's is refused
+// (CDM_ERR_INVALID_ARG, host_time_in_order) and nothing of it is written;
+// the writer goes on. Not thread-safe; the caller serialises.
 class Writer {
 public:
     Writer() = default;
@@ -79,6 +88,7 @@ private:
     bool failed_ = false;
     std::string path_, fail_text_;
     uint64_t records_ = 0, bytes_ = 0;
+    uint64_t last_ns_ = 0; // the last record's host time
 };
 
 } // namespace cdm::replay

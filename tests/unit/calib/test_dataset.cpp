@@ -307,12 +307,55 @@ static void changed_file_is_refused(void **) {
     assert_non_null(strstr(err.c_str(), "the dataset changed since it was loaded"));
 }
 
+// The writer and the reader agree, value by value at the edges of the
+// reader's rule: every row the writer accepts the reader reads, in the same
+// count, and what it refuses is refused before anything of it is kept
+// (around 0, 5000 and 10000 mm the file's four decimals decide, so the
+// writer judges the value as printed). Time columns: the same on every row.
+static void writer_accepts_exactly_what_the_reader_reads(void **) {
+    const double edges[] = {0.0,     -0.0,      1e-5,      5e-5,      4999.99996, 5000.00004, 5000.00006,
+                            -5000.00006, 9999.99996, 10000.00004, 10000.00006, 1e300,   NAN,       INFINITY,
+                            -1.0,    150.0,     1e-300};
+    const size_t n = sizeof edges / sizeof edges[0];
+    char path[] = "/tmp/cdm_ds_agree_XXXXXX";
+    const int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    close(fd);
+    for (int timed = 0; timed < 2; ++timed) {
+        DatasetWriter w;
+        std::string err;
+        assert_true(w.open(path, {}, err));
+        size_t accepted = 0;
+        for (size_t a = 0; a < n; ++a)
+            for (size_t b = 0; b < n; ++b) {
+                // A point per (a, b): its reference never moves here.
+                const long point = long(a * n + b);
+                const double ref[3] = {edges[a], 0, 0}, len[4] = {150, edges[b], 150, 150};
+                bool usage = false;
+                if (w.add_row(point, ref, len, err, timed ? 0.001 * double(point) : NAN, &usage)) {
+                    ++accepted;
+                } else {
+                    if (!usage) fail_msg("(%g, %g): refused as an I/O failure: %s", edges[a], edges[b], err.c_str());
+                    if (!std::strstr(err.c_str(), ("point " + std::to_string(point)).c_str()))
+                        fail_msg("\"%s\" does not name the point", err.c_str());
+                }
+            }
+        assert_true(accepted > 0 && accepted < n * n);
+        assert_true(w.commit(err));
+        Dataset d;
+        if (!load_dataset(path, d, err)) fail_msg("the reader refuses what the writer wrote: %s", err.c_str());
+        assert_int_equal(d.rows, accepted);
+    }
+    unlink(path);
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(groups_and_ignores),
         cmocka_unit_test(acquisition_order_per_position),
         cmocka_unit_test(errors_name_line_and_column),
         cmocka_unit_test(write_is_atomic),
+        cmocka_unit_test(writer_accepts_exactly_what_the_reader_reads),
         cmocka_unit_test(test_dataset_duplicate_column_refused),
         cmocka_unit_test(test_dataset_huge_field_not_echoed_whole),
         cmocka_unit_test(test_dataset_insane_magnitudes_refused),

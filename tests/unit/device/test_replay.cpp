@@ -1,5 +1,6 @@
 // Replay: a sim session recorded through the sample callback (as `cdm
-// record` does) plays back to the very same poses; pacing; corrupt files.
+// record` does) plays back to the very same poses; pacing; corrupt files;
+// the recorder (cdm_recorder_*) refusing what replay: would refuse.
 #include <sys/resource.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -375,6 +376,109 @@ void test_replay_writer_full_disk_keeps_records(void **) {
     std::remove(out.c_str());
 }
 
+// The sim's device-info report and one of its input reports, as `cdm
+// record` takes them.
+void sim_reports(std::vector<uint8_t> &info, std::vector<uint8_t> &report) {
+    const std::string good = tmp_path("one.cdmrec");
+    record("sim:?realtime=0&motion=still", good, 1);
+    cdm::replay::File f;
+    std::string err;
+    assert_int_equal(cdm::replay::load(good, f, err), CDM_OK);
+    info = f.info;
+    report.assign(f.bytes.begin() + long(f.records[0].offset),
+                  f.bytes.begin() + long(f.records[0].offset + f.records[0].length));
+    std::remove(good.c_str());
+}
+
+void expect_thread_error(const char *needle) {
+    if (!std::strstr(cdm_thread_error(), needle)) fail_msg("\"%s\" lacks \"%s\"", cdm_thread_error(), needle);
+}
+
+// A host time before the previous record's is refused when written, naming
+// both, and writes nothing: replay: refuses such a file whole ("host time
+// goes backwards", tester's t12), so the recording would be lost. Equal
+// times are fine. The recording goes on and plays, in both replayable
+// formats; the CSV keeps the same order.
+void test_recorder_refuses_time_going_back(void **) {
+    std::vector<uint8_t> info, rep;
+    sim_reports(info, rep);
+    for (const char *ext : {".cdmrec", ".mcap"}) {
+        const std::string path = tmp_path("back") + ext;
+        cdm_recorder *rec = nullptr;
+        assert_int_equal(cdm_recorder_open(path.c_str(), info.data(), info.size(), &rec), CDM_OK);
+        assert_int_equal(cdm_recorder_write(rec, 2000, rep.data(), rep.size()), CDM_OK);
+        assert_int_equal(cdm_recorder_write(rec, 1000, rep.data(), rep.size()), CDM_ERR_INVALID_ARG);
+        expect_thread_error("host time 1000 ns");
+        expect_thread_error("2000 ns");
+        assert_int_equal(cdm_recorder_write(rec, 2000, rep.data(), rep.size()), CDM_OK);
+        assert_int_equal(cdm_recorder_write(rec, 3000, rep.data(), rep.size()), CDM_OK);
+        assert_int_equal(cdm_recorder_close(rec), CDM_OK);
+        cdm::replay::File f;
+        std::string err;
+        if (cdm::replay::load(path, f, err) != CDM_OK) fail_msg("%s: %s", ext, err.c_str());
+        assert_int_equal(f.records.size(), 3);
+        assert_true(f.records[0].host_ns == 2000 && f.records[1].host_ns == 2000 && f.records[2].host_ns == 3000);
+        cdm_device *dev = nullptr;
+        if (cdm_open(("replay:" + path + "?speed=0").c_str(), &dev) != CDM_OK)
+            fail_msg("%s: %s", ext, cdm_thread_error());
+        cdm_close(dev);
+        std::remove(path.c_str());
+    }
+    const std::string csv = tmp_path("back.csv");
+    cdm_recorder *rec = nullptr;
+    assert_int_equal(cdm_recorder_open(csv.c_str(), info.data(), info.size(), &rec), CDM_OK);
+    cdm_raw raw{};
+    raw.struct_size = sizeof raw;
+    cdm_pose pose{};
+    pose.struct_size = sizeof pose;
+    pose.orientation[0] = 1;
+    cdm_sample s{};
+    s.struct_size = sizeof s;
+    s.report = rep.data();
+    s.report_len = uint32_t(rep.size());
+    s.raw = &raw;
+    s.pose = &pose;
+    s.source_time_ns = 5000;
+    assert_int_equal(cdm_recorder_write_sample(rec, &s), CDM_OK);
+    s.source_time_ns = 4000;
+    assert_int_equal(cdm_recorder_write_sample(rec, &s), CDM_ERR_INVALID_ARG);
+    expect_thread_error("host time 4000 ns");
+    assert_int_equal(cdm_recorder_close(rec), CDM_OK);
+    std::remove(csv.c_str());
+}
+
+// The device-info report is checked when the recorder opens, by the parser
+// replay: checks it with, so a recording replay: would refuse is never
+// started (tester's t12: 128 bytes of 0x55 made a replay-format recording);
+// the file is not created. A zero length is an empty report, not a NULL one.
+void test_recorder_refuses_a_bad_device_info(void **) {
+    std::vector<uint8_t> info, rep;
+    sim_reports(info, rep);
+    std::vector<uint8_t> junk(128, 0x55), version = info;
+    version[1] = 9;
+    for (const char *ext : {".cdmrec", ".mcap", ".csv"}) {
+        const std::string path = tmp_path("info") + ext;
+        cdm_recorder *rec = nullptr;
+        assert_int_equal(cdm_recorder_open(path.c_str(), junk.data(), junk.size(), &rec), CDM_ERR_INVALID_ARG);
+        expect_thread_error("wrong report ID");
+        expect_thread_error("0x55");
+        assert_null(rec);
+        assert_int_equal(cdm_recorder_open(path.c_str(), info.data(), 5, &rec), CDM_ERR_INVALID_ARG);
+        expect_thread_error("short report");
+        expect_thread_error("5 bytes");
+        assert_int_equal(cdm_recorder_open(path.c_str(), version.data(), version.size(), &rec), CDM_ERR_INVALID_ARG);
+        expect_thread_error("wrong protocol version");
+        assert_int_equal(cdm_recorder_open(path.c_str(), info.data(), 0, &rec), CDM_ERR_INVALID_ARG);
+        expect_thread_error("info_report is empty");
+        assert_int_equal(cdm_recorder_open(path.c_str(), nullptr, info.size(), &rec), CDM_ERR_INVALID_ARG);
+        expect_thread_error("info_report is NULL");
+        assert_int_equal(::access(path.c_str(), F_OK), -1); // nothing created
+        assert_int_equal(cdm_recorder_open(path.c_str(), info.data(), info.size(), &rec), CDM_OK);
+        assert_int_equal(cdm_recorder_close(rec), CDM_OK);
+        std::remove(path.c_str());
+    }
+}
+
 } // namespace
 
 int main(void) {
@@ -387,6 +491,8 @@ int main(void) {
         cmocka_unit_test(test_replay_special_files_refused),
         cmocka_unit_test(test_replay_recording_survives_sigkill),
         cmocka_unit_test(test_replay_writer_full_disk_keeps_records),
+        cmocka_unit_test(test_recorder_refuses_time_going_back),
+        cmocka_unit_test(test_recorder_refuses_a_bad_device_info),
     };
     return cmocka_run_group_tests(tests, nullptr, nullptr);
 }

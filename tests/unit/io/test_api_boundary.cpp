@@ -2,8 +2,13 @@
 // unsolvable data refused before any verdict, outputs never over inputs,
 // and no exception escaping (cdm::guarded).
 #include <fcntl.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
+
+#include <cmath>
+#include <csignal>
 
 #include <cstring>
 #include <setjmp.h>
@@ -15,6 +20,7 @@
 #include <string>
 
 #include "api/errors.h"
+#include "calib/dataset.h"
 #include "cdm/cdm.h"
 
 extern "C" {
@@ -177,6 +183,122 @@ static void test_dataset_writer_c_api_atomic(void **) {
     assert_string_equal(t, "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n7,50.0000,0.0000,0.0000,160.0000,161.0000,162.0000,163.0000\n");
 }
 
+// load_dataset's verdict on the file at `p`: its rows, or a failure naming why.
+static size_t rows_read_back(const std::string &p, size_t positions) {
+    cdm::Dataset d;
+    std::string err;
+    if (!cdm::load_dataset(p, d, err)) fail_msg("the writer's file is refused by the reader: %s", err.c_str());
+    assert_int_equal(d.pos.size(), positions);
+    return d.rows;
+}
+
+// The writer refuses, when the row is added, every row load_dataset would
+// refuse (tester's t10: NaN, infinite, negative and zero lengths, a point
+// whose reference moves, were written and the file then refused whole), and
+// a refused row leaves nothing behind: the writer goes on, and the file holds
+// the accepted rows only (tester's t11: after a 1e300 the file was abandoned
+// and every later add said CDM_OK).
+static void test_dataset_writer_refuses_what_the_reader_refuses(void **) {
+    const std::string p = g_dir + "/refused_rows.csv";
+    cdm_dataset_writer *w = nullptr;
+    assert_int_equal(cdm_dataset_writer_open(p.c_str(), nullptr, 0, &w), CDM_OK);
+    struct Bad {
+        double ref[3];
+        double len[4];
+        const char *arg, *value;
+    };
+    const Bad bad[] = {
+        {{30, 0, 0}, {NAN, 200, 200, 200}, "lengths_mm[0] (l1)", "nan"},
+        {{INFINITY, 0, 0}, {200, 200, 200, 200}, "ref_mm[0] (x_ref)", "inf"},
+        {{30, 0, 0}, {200, -1, 200, 200}, "lengths_mm[1] (l2)", "got -1"},
+        {{30, 0, 0}, {200, 200, 0, 200}, "lengths_mm[2] (l3)", "got 0"},
+        // Positive, but the file's four decimals hold it as 0.0000.
+        {{30, 0, 0}, {200, 200, 200, 1e-5}, "lengths_mm[3] (l4)", "0.0000 in the file"},
+        {{30, 0, 0}, {1e300, 200, 200, 200}, "lengths_mm[0] (l1)", "1e+300"},
+        {{30, 6000, 0}, {200, 200, 200, 200}, "ref_mm[1] (y_ref)", "6000"},
+        {{30, 0, -1e300}, {200, 200, 200, 200}, "ref_mm[2] (z_ref)", "-1e+300"},
+    };
+    for (const Bad &b : bad) {
+        assert_int_equal(cdm_dataset_writer_add(w, 3, b.ref, b.len), CDM_ERR_INVALID_ARG);
+        expect_text("point 3");
+        expect_text(b.arg);
+        expect_text(b.value);
+        assert_int_equal(cdm_dataset_writer_add_at(w, 3, b.ref, b.len, 0.5), CDM_ERR_INVALID_ARG);
+        expect_text(b.arg);
+    }
+    // The refused timed rows decided nothing: the first accepted row has no
+    // time, and the file no t_s column.
+    const double ref[3] = {30, 0, 0}, len[4] = {200, 201, 202, 203};
+    assert_int_equal(cdm_dataset_writer_add(w, 3, ref, len), CDM_OK);
+    // A point's reference is the one its first row gave, as the file holds it.
+    const double moved[3] = {40, 0, 0}, same_in_file[3] = {30.00001, 0, 0};
+    assert_int_equal(cdm_dataset_writer_add(w, 3, moved, len), CDM_ERR_INVALID_ARG);
+    expect_text("point 3");
+    expect_text("ref_mm[0] (x_ref)");
+    expect_text("40");
+    expect_text("first row gave 30");
+    assert_int_equal(cdm_dataset_writer_add(w, 3, same_in_file, len), CDM_OK);
+    assert_int_equal(cdm_dataset_writer_add(w, 4, moved, len), CDM_OK);
+    assert_int_equal(cdm_dataset_writer_commit(w), CDM_OK);
+    cdm_dataset_writer_free(w);
+    assert_int_equal(rows_read_back(p, 2), 3);
+}
+
+// After commit the file is complete: more rows would be lost, so they are
+// refused, and so is a second commit (tester's t11: about a thousand adds
+// said CDM_OK into a buffer nobody would write; the second commit was an
+// "internal" error).
+static void test_dataset_writer_refuses_rows_after_commit(void **) {
+    const std::string p = g_dir + "/committed.csv";
+    cdm_dataset_writer *w = nullptr;
+    assert_int_equal(cdm_dataset_writer_open(p.c_str(), nullptr, 0, &w), CDM_OK);
+    const double ref[3] = {30, 0, 0}, len[4] = {200, 201, 202, 203};
+    assert_int_equal(cdm_dataset_writer_add(w, 1, ref, len), CDM_OK);
+    assert_int_equal(cdm_dataset_writer_commit(w), CDM_OK);
+    for (int i = 0; i < 3000; ++i) {
+        if (cdm_dataset_writer_add(w, i, ref, len) != CDM_ERR_INVALID_ARG)
+            fail_msg("add %d after commit: not CDM_ERR_INVALID_ARG (%s)", i, cdm_thread_error());
+        expect_text("already committed");
+    }
+    assert_int_equal(cdm_dataset_writer_add_at(w, 1, ref, len, 1.0), CDM_ERR_INVALID_ARG);
+    expect_text("already committed");
+    assert_int_equal(cdm_dataset_writer_commit(w), CDM_ERR_INVALID_ARG);
+    expect_text("already committed");
+    cdm_dataset_writer_free(w);
+    assert_int_equal(rows_read_back(p, 1), 1);
+}
+
+// A write that fails (here a file-size limit: EFBIG, the same path as
+// ENOSPC) ends the file: every later add and the commit fail with that
+// cause, never CDM_OK, and nothing replaces the target.
+static void test_dataset_writer_write_failure_is_sticky(void **) {
+    const std::string p = g_dir + "/full.csv";
+    const pid_t pid = fork();
+    if (pid == 0) {
+        signal(SIGXFSZ, SIG_IGN);
+        rlimit lim{10000, 10000}; // the first 64 KiB flush does not fit
+        setrlimit(RLIMIT_FSIZE, &lim);
+        cdm_dataset_writer *w = nullptr;
+        if (cdm_dataset_writer_open(p.c_str(), nullptr, 0, &w) != CDM_OK) _exit(2);
+        const double ref[3] = {30, 0, 0}, len[4] = {200, 201, 202, 203};
+        int rc = CDM_OK, i = 0;
+        for (; i < 5000 && rc == CDM_OK; ++i) rc = cdm_dataset_writer_add(w, 1, ref, len);
+        if (rc != CDM_ERR_IO || !strstr(cdm_thread_error(), "File too large")) _exit(3);
+        for (int k = 0; k < 3000; ++k)
+            if (cdm_dataset_writer_add(w, 1, ref, len) != CDM_ERR_IO || !strstr(cdm_thread_error(), "File too large"))
+                _exit(4);
+        if (cdm_dataset_writer_add_at(w, 1, ref, len, 1.0) != CDM_ERR_IO) _exit(5);
+        if (cdm_dataset_writer_commit(w) != CDM_ERR_IO || !strstr(cdm_thread_error(), "File too large")) _exit(6);
+        cdm_dataset_writer_free(w);
+        _exit(0);
+    }
+    int status = 0;
+    waitpid(pid, &status, 0);
+    assert_true(WIFEXITED(status));
+    assert_int_equal(WEXITSTATUS(status), 0);
+    assert_int_equal(::access(p.c_str(), F_OK), -1);
+}
+
 int main(void) {
     char t[] = "/tmp/cdm_api_XXXXXX";
     g_dir = mkdtemp(t);
@@ -190,6 +312,9 @@ int main(void) {
         cmocka_unit_test(test_diagnose_calibration_out_refuses_input_and_device_node),
         cmocka_unit_test(test_diagnose_bad_option_type_names_column),
         cmocka_unit_test(test_dataset_writer_c_api_atomic),
+        cmocka_unit_test(test_dataset_writer_refuses_what_the_reader_refuses),
+        cmocka_unit_test(test_dataset_writer_refuses_rows_after_commit),
+        cmocka_unit_test(test_dataset_writer_write_failure_is_sticky),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -135,6 +135,7 @@ public:
     }
     bool line(const char *b, const char *le, std::string &err);
     bool finish(std::string &err);
+    void find_heights();
     // Per position, the readings' range (ReadingRange), from a first pass.
     std::vector<ReadingRange> &range() { return range_; }
 
@@ -300,6 +301,32 @@ bool Parser::line(const char *b, const char *le, std::string &err) {
     return true;
 }
 
+// Dataset::heights and off_height_points (dataset.h). Equal x_ref: within
+// 1e-6 mm (the CSV's four decimals).
+void Parser::find_heights() {
+    std::vector<std::pair<double, long>> xs;
+    for (const auto &jp : d_.pos) xs.emplace_back(jp.ref[0], jp.point);
+    std::sort(xs.begin(), xs.end());
+    std::vector<double> all, shared;
+    std::vector<long> alone;
+    for (size_t i = 0; i < xs.size();) {
+        size_t k = i + 1;
+        while (k < xs.size() && std::fabs(xs[k].first - xs[i].first) < 1e-6) ++k;
+        all.push_back(xs[i].first);
+        if (k - i >= 2) shared.push_back(xs[i].first);
+        else alone.push_back(xs[i].second);
+        i = k;
+    }
+    d_.off_height_points.clear();
+    if (!shared.empty() && !alone.empty() && alone.size() * 10 <= xs.size()) {
+        d_.heights = std::move(shared);
+        std::sort(alone.begin(), alone.end());
+        d_.off_height_points = std::move(alone);
+    } else {
+        d_.heights = std::move(all);
+    }
+}
+
 bool Parser::finish(std::string &err) {
     const std::string &src = src_;
     if (!header_) {
@@ -318,12 +345,8 @@ bool Parser::finish(std::string &err) {
                 const double c = jp.n > 1 ? jp.cov[a][b] / (jp.n - 1) : 0.0;
                 jp.cov[a][b] = jp.cov[b][a] = c;
             }
-        d_.heights.push_back(jp.ref[0]);
     }
-    std::sort(d_.heights.begin(), d_.heights.end());
-    d_.heights.erase(std::unique(d_.heights.begin(), d_.heights.end(),
-                                 [](double a, double b) { return std::fabs(a - b) < 1e-6; }),
-                     d_.heights.end());
+    find_heights();
     if (!expect_)
         for (int c = 0; c < 4; ++c) d_.resolution[c] = distinct_[c].min_step();
     else

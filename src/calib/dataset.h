@@ -59,7 +59,16 @@ struct Dataset {
     size_t rows = 0;
     std::vector<std::string> ignored_columns;
     std::vector<JigHole> pos;                 // in order of first appearance
-    std::vector<double> heights;              // distinct x_ref, sorted
+    // The fixture heights, sorted: the x_ref values positions share. A
+    // position whose x_ref no other position has (a reference typed or
+    // measured off its height, a probe seated 1 mm high) is not a height of
+    // its own when such positions are a tenth of the jig or fewer: it is
+    // listed in off_height_points, grouped with the nearest height for the
+    // fixture and the neighbours (diag::make_grid), and judged by the model
+    // on the reference as written. Otherwise (references scattered in x)
+    // every distinct x_ref.
+    std::vector<double> heights;
+    std::vector<long> off_height_points;
     // Per cable, the smallest step between distinct readings (> 1e-9 mm;
     // 0 when there is none): the ADC count through the nominal scale, or the
     // CSV's last digit for unquantised data. Exact while a cable shows at

@@ -114,3 +114,29 @@ def test_fit_sets_misplaced_positions_aside(tmp_path):
         j0, j1, j2 = (r["jig_tolerance_mm"][a] for r in (r0, r1, r2))
         assert abs(j1 - j0) <= 0.05 * j0, (a, j0, j1)
         assert j2 > 1.1 * j0, (a, j0, j2)
+
+
+def test_a_reference_off_its_height_is_judged_not_made_a_height(tmp_path):
+    """One reference 1 mm above its fixture height (a probe seated high) and
+    one 4 micrometres off (a value typed from a gauge): neither is a height of
+    its own (each would have had its own fixture offset, absorbing the 1 mm,
+    and no neighbours). The 1 mm one is set aside, as one moved in y or z is;
+    the other is listed and kept. Until 2026-11-24 the diagnosis of this file
+    said "does not explain the data" and set nothing aside."""
+    clean = simulate_jig(tmp_path / "clean.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--holes", "9",
+                         "--heights", "30,50,70", "--samples", "5")
+    bad = tmp_path / "bad.csv"
+    with open(clean) as f, open(bad, "w") as g:
+        g.write(f.readline())
+        for line in f:
+            v = line.rstrip("\n").split(",")
+            dx = {100: 1.0, 20: 0.004}.get(int(v[0]), 0.0)
+            if dx:
+                v[1] = f"{float(v[1]) + dx:.4f}"
+            g.write(",".join(v) + "\n")
+    r = cdm.fit(bad, DEVICE_JSON, ["exit_pulley"])
+    assert [x["point"] for x in r["outliers"]["set_aside"]] == [100], r["outliers"]
+    d = cdm.diagnose(bad, DEVICE_JSON, effects=["exit_pulley"], candidates=False, validation=False)
+    assert d["data"]["heights"] == [30.0, 50.0, 70.0] and d["data"]["off_height_points"] == [20], d["data"]
+    assert [x["point"] for x in d["data"]["outliers"]["set_aside"]] == [100]
+    assert d["explained"], d["verdict"]

@@ -1,6 +1,8 @@
 // The steps cdm_diagnose and cdm_fit share (jobs.h).
 #include "api/jobs.h"
 
+#include <cstdio>
+
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -65,11 +67,14 @@ int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs 
     if (!cdm::io::parse_json(text, src, o, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
     if (o.type != cdm::io::JsonValue::Object)
         return cdm::fail(CDM_ERR_INVALID_ARG, cdm::io::where(src, o) + "options must be a JSON object");
-    auto bad = [&](const cdm::io::JsonValue &v, const std::string &k, const char *want) {
-        return cdm::fail(CDM_ERR_INVALID_ARG, cdm::io::where(src, v) + "option \"" + k + "\" must be " + want +
-                                                  ", got " + v.type_name());
-    };
     using J = cdm::io::JsonValue;
+    auto bad = [&](const cdm::io::JsonValue &v, const std::string &k, const char *want) {
+        // A number out of range is shown as given; anything else by its kind.
+        char num[40] = "";
+        if (v.type == J::Number) std::snprintf(num, sizeof num, "%.17g", v.number);
+        return cdm::fail(CDM_ERR_INVALID_ARG, cdm::io::where(src, v) + "option \"" + k + "\" must be " + want +
+                                                  ", got " + (v.type == J::Number ? std::string(num) : v.type_name()));
+    };
     for (const auto &[k, v] : o.members) {
         if (k == "effects") {
             if (v.type != J::Array) return bad(v, k, "a list of effect names");
@@ -93,6 +98,8 @@ int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs 
         } else if (k == "calibration_out") {
             if (v.type == J::Null) continue;
             if (v.type != J::String) return bad(v, k, "a path");
+            // "" would silently write nothing: the caller asked for a file.
+            if (v.str.empty()) return bad(v, k, "a path (null or absent for none), not an empty string");
             a.calib_out = v.str;
         } else {
             return cdm::fail(CDM_ERR_INVALID_ARG, cdm::io::where(src, v) + "unknown option \"" +

@@ -167,6 +167,9 @@ bool Parser::header(std::string &err) {
     std::vector<std::string> names;
     for (auto &x : f_) {
         std::string n = trim(x.first, x.second);
+        // A UTF-8 byte order mark, as spreadsheet programs write before the
+        // first field of a CSV saved "as UTF-8", belongs to no column name.
+        if (names.empty() && n.rfind("\xEF\xBB\xBF", 0) == 0) n = trim(n.data() + 3, n.data() + n.size());
         auto dup = std::find(names.begin(), names.end(), n);
         if (dup != names.end()) {
             err = at(src, line_, names.size() + 1) + "duplicate column \"" + io::quote_field(n) + "\" (also column " +

@@ -285,9 +285,10 @@ int open_hid(const Uri &u, TransportPtr &out, std::string &err) {
         return CDM_ERR_INVALID_ARG;
     }
     std::string serial;
+    const bool by_serial = u.scheme == "serial" || u.path.rfind("serial=", 0) == 0;
     if (u.scheme == "serial") serial = u.path;
-    else if (u.path.rfind("serial=", 0) == 0) serial = u.path.substr(7);
-    if (u.scheme == "serial" || !serial.empty()) {
+    else if (by_serial) serial = u.path.substr(7);
+    if (by_serial) {
         if (serial.empty()) {
             err = "URI \"" + u.text + "\": empty serial number";
             return CDM_ERR_INVALID_ARG;

@@ -68,6 +68,12 @@ def test_wait_pose_timeout_and_argument_checks():
         assert 0.04 <= time.monotonic() - t0 < 1.0
         with pytest.raises(ValueError, match="timeout"):
             dev.wait_pose(-1)
+        # after beyond the C call's 64 bits is refused, not wrapped to 0
+        with pytest.raises(ValueError, match="after"):
+            dev.wait_pose(0.01, after=2**64)
+        # an infinite timeout is no limit (it raised OverflowError)
+        p = dev.wait_pose(float("inf"))
+        assert p.host_sequence > 0
 
 
 def test_stale_pose_is_returned_with_its_flag():

@@ -231,8 +231,10 @@ class Device(_native.Closing):
         h = self._handle("cdm_wait_pose_after")
         if timeout is not None and (timeout < 0 or math.isnan(timeout)):
             raise ValueError("wait_pose: timeout must be >= 0 seconds or None, got %r" % (timeout,))
-        if after is not None and (isinstance(after, bool) or not isinstance(after, int) or after < 0):
-            raise ValueError("wait_pose: after must be a Pose.host_sequence (int >= 0), got %r" % (after,))
+        if after is not None and (isinstance(after, bool) or not isinstance(after, int) or not 0 <= after < 2**64):
+            raise ValueError("wait_pose: after must be a Pose.host_sequence (int in 0..2^64-1), got %r" % (after,))
+        if timeout is not None and math.isinf(timeout):
+            timeout = None  # no limit, as None says (a deadline at infinity overflows the clock's arithmetic)
         L = _native.lib()
         p = _native.cdm_pose()
         if after is None:

@@ -88,6 +88,21 @@ static void errors_name_line_and_column(void **) {
     expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n", "no data rows");
 }
 
+// A CSV saved "as UTF-8" by a spreadsheet starts with a byte order mark:
+// read as if it were not there (it was "header lacks column \"point\"").
+static void test_dataset_utf8_bom_read(void **) {
+    const std::string t = "\xEF\xBB\xBFpoint,x_ref,y_ref,z_ref,l1,l2,l3,l4\r\n1,30,0,0,100,100,100,100\r\n";
+    Dataset d;
+    std::string err;
+    if (!parse_dataset(t, "bom.csv", d, err)) fail_msg("%s", err.c_str());
+    assert_int_equal(d.pos.size(), 1);
+    assert_int_equal(d.pos[0].point, 1);
+    assert_true(d.ignored_columns.empty());
+    Dataset q; // the BOM before a quoted name too
+    if (!parse_dataset("\xEF\xBB\xBF\"point\",x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,30,0,0,100,100,100,100\n", "q.csv", q, err))
+        fail_msg("%s", err.c_str());
+}
+
 static void test_dataset_duplicate_column_refused(void **) {
     expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4,l2\n1,30,0,0,100,100,100,100,5\n",
                  "bad.csv:1:9: duplicate column \"l2\" (also column 6)");
@@ -357,6 +372,7 @@ int main(void) {
         cmocka_unit_test(write_is_atomic),
         cmocka_unit_test(writer_accepts_exactly_what_the_reader_reads),
         cmocka_unit_test(test_dataset_duplicate_column_refused),
+        cmocka_unit_test(test_dataset_utf8_bom_read),
         cmocka_unit_test(test_dataset_huge_field_not_echoed_whole),
         cmocka_unit_test(test_dataset_insane_magnitudes_refused),
         cmocka_unit_test(test_dataset_missing_file_is_io_failure),

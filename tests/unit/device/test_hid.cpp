@@ -600,6 +600,12 @@ void test_open_through_a_link(void **) {
     assert_null(none);
     for (const std::string &p : {link, node, other_link, other}) std::remove(p.c_str());
     rmdir(dir);
+    // An empty serial is the same mistake in both spellings (hid:serial= was
+    // taken for a path "serial=").
+    for (const char *uri : {"serial:", "hid:serial="}) {
+        assert_int_equal(cdm_open(uri, &none), CDM_ERR_INVALID_ARG);
+        assert_non_null(std::strstr(cdm_thread_error(), "empty serial number"));
+    }
 }
 
 void test_unplug_replug(void **) {

@@ -147,7 +147,17 @@ static void test_diagnose_bad_option_type_names_column(void **) {
     assert_int_equal(cdm_diagnose((g_dir + "/d.csv").c_str(), (g_dir + "/dev.json").c_str(),
                                   "{\"candidates\": 3}", nullptr, nullptr, &r),
                      CDM_ERR_INVALID_ARG);
-    expect_text("cdm_diagnose options:1:16: option \"candidates\" must be true or false, got a number");
+    expect_text("cdm_diagnose options:1:16: option \"candidates\" must be true or false, got 3");
+    // A number out of range is shown as given.
+    assert_int_equal(cdm_diagnose((g_dir + "/d.csv").c_str(), (g_dir + "/dev.json").c_str(),
+                                  "{\"jig_tolerance_mm\": -1}", nullptr, nullptr, &r),
+                     CDM_ERR_INVALID_ARG);
+    expect_text("got -1");
+    // An empty calibration_out would write nothing though a file was asked for.
+    assert_int_equal(cdm_diagnose((g_dir + "/d.csv").c_str(), (g_dir + "/dev.json").c_str(),
+                                  "{\"calibration_out\": \"\"}", nullptr, nullptr, &r),
+                     CDM_ERR_INVALID_ARG);
+    expect_text("not an empty string");
     assert_int_equal(cdm_diagnose((g_dir + "/d.csv").c_str(), (g_dir + "/dev.json").c_str(),
                                   "{\"jig_tolerance_mm\": 1e999}", nullptr, nullptr, &r),
                      CDM_ERR_INVALID_ARG);

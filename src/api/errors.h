@@ -21,10 +21,11 @@ void clear_thread_error();
 // throws (a text that cannot be stored is replaced by a fixed one).
 int fail_noexcept(int code, const char *fn, const char *what) noexcept;
 // Sets the text to a constant (a string literal that lives for the
-// program) without allocating or freeing anything: the real-time calls'
-// (cdm_get_pose, cdm_get_raw) way to say why they failed.
+// program), touching nothing but one initial-exec TLS pointer: no
+// allocation, ever, even on a thread's first call (version_error.cpp). The
+// real-time calls' (cdm_get_pose, cdm_get_raw) way to say why they failed.
 int fail_static(int code, const char *text) noexcept;
-// The same for the real-time calls' entry: empties the text, never frees.
+// The same for the real-time calls' entry: the text reads empty.
 void clear_thread_error_rt() noexcept;
 
 // Runs `body` (returning a cdm status code) so that no exception reaches a C

@@ -6,9 +6,14 @@
 
 namespace {
 thread_local std::string t_error;
-// A constant text (fail_static), shown instead of t_error when set: the
-// real-time calls set it without touching the string's storage.
-thread_local const char *t_static = nullptr;
+// A constant text shown instead of t_error when set ("" for none): what the
+// real-time calls (cdm_get_pose, cdm_get_raw) write, and all they touch. A
+// plain pointer in the initial-exec TLS model: no constructor, no
+// destructor to register, and no lazy allocation of the thread's TLS block
+// on its first use even when libcdm was dlopen'ed (Python's ctypes), where
+// t_error's first use in a thread may allocate (glibc's __tls_get_addr and
+// __cxa_thread_atexit).
+__attribute__((tls_model("initial-exec"))) thread_local const char *t_static = nullptr;
 }
 
 namespace cdm {
@@ -22,13 +27,8 @@ void clear_thread_error() {
     t_static = nullptr;
     t_error.clear();
 }
-// clear() keeps the string's capacity: nothing is freed or allocated.
-void clear_thread_error_rt() noexcept {
-    t_static = nullptr;
-    t_error.clear();
-}
+void clear_thread_error_rt() noexcept { t_static = ""; }
 int fail_static(int code, const char *text) noexcept {
-    t_error.clear();
     t_static = text;
     return code;
 }

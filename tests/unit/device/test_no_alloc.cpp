@@ -247,12 +247,48 @@ void test_streaming_second_on_sim(void **) {
     assert_int_equal(s.all - s.mine, 0);
 }
 
+// A control thread's very first cdm_* call is cdm_get_pose (or
+// cdm_get_raw): nothing on that thread allocates, including the first use
+// of the thread error it sets (an initial-exec TLS pointer: a std::string
+// thread_local's first use registers its destructor, and may allocate).
+// Both a success and a failure (a constant text), each on a new thread.
+void test_first_call_on_a_new_thread(void **) {
+    skip_if_not_counting();
+    cdm_device *dev = nullptr;
+    assert_int_equal(cdm_open("sim:?motion=random&rate=1000", &dev), CDM_OK);
+    cdm_pose warm{};
+    warm.struct_size = sizeof warm;
+    assert_int_equal(cdm_wait_pose_after(dev, 0, 2000, &warm), CDM_OK);
+    for (int fail = 0; fail < 2; ++fail) {
+        uint64_t calls = ~0ull;
+        int rc = 0;
+        std::thread t([&] {
+            cdm_pose p{};
+            p.struct_size = fail ? 4 : sizeof p; // 4: refused, with a text
+            cdm_raw r{};
+            r.struct_size = sizeof r;
+            const uint64_t b = t_calls;
+            rc = cdm_get_pose(dev, &p);
+            int rr = cdm_get_raw(dev, &r);
+            escape(&rr);
+            const char *text = cdm_thread_error();
+            escape(const_cast<char *>(text));
+            calls = t_calls - b;
+        });
+        t.join();
+        assert_int_equal(rc, fail ? CDM_ERR_INVALID_ARG : CDM_OK);
+        assert_int_equal(calls, 0);
+    }
+    cdm_close(dev);
+}
+
 } // namespace
 
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_counter_counts),
         cmocka_unit_test(test_streaming_second_on_sim),
+        cmocka_unit_test(test_first_call_on_a_new_thread),
     };
     return cmocka_run_group_tests(tests, nullptr, nullptr);
 }

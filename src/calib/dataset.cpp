@@ -528,6 +528,25 @@ bool without_points(const Dataset &d, const std::vector<long> &points, Dataset &
         err = d.path + ": no position would be left without points " + std::to_string(skip.size()) + " listed";
         return false;
     }
+    // The heights stay the first read's (find_heights decided them on every
+    // position): setting positions aside must not turn an off-height
+    // reference into a height of its own (the tenth it may be of the jig
+    // grows as the jig shrinks), nor a thinned height into an off-height
+    // value. Only a height none of whose positions is left goes.
+    {
+        std::vector<double> kept;
+        for (double h : d.heights)
+            if (std::any_of(again.pos.begin(), again.pos.end(),
+                            [&](const JigHole &jp) { return std::fabs(jp.ref[0] - h) < 1e-6; }))
+                kept.push_back(h);
+        std::vector<long> off;
+        for (long p : d.off_height_points)
+            if (!std::binary_search(skip.begin(), skip.end(), p)) off.push_back(p);
+        if (!kept.empty()) {
+            again.heights = std::move(kept);
+            again.off_height_points = std::move(off);
+        }
+    }
     again.source = d.source;
     again.glitches = d.glitches;
     again.excluded_rows = d.excluded_rows;

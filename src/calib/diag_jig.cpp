@@ -60,9 +60,13 @@ Eval without_fixture(const Eval &E, const Grid &G, const FixtureOffsets &f) {
     return out;
 }
 
-double fixture_lr_chi2(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &fo, bool &cancelled) {
-    cancelled = false;
-    if (fo.fixture_count < 2 || fo.fixture.size() != pos.size()) return NAN;
+bool fixture_lr(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &fo, FixtureLR &out,
+                std::string &err) {
+    out = FixtureLR{};
+    if (fo.fixture_count < 2 || fo.fixture.size() != pos.size()) {
+        out.why = "no fixture heights";
+        return true;
+    }
     FitOptions with = fo, without = fo;
     without.fixture.clear();
     without.fixture_count = 0;
@@ -70,16 +74,26 @@ double fixture_lr_chi2(const Model &m, const std::vector<PreparedPos> &pos, cons
     if (!with.weigh_with) with.weigh_with = without.weigh_with = &m;
     Model a = m, b = m;
     FitReport ra, rb;
-    const bool oka = fit_model(a, pos, with, ra), okb = oka && fit_model(b, pos, without, rb);
-    if (!oka || !okb) {
-        cancelled = ra.message == "fit cancelled" || rb.message == "fit cancelled";
-        return NAN;
+    const bool oka = fit_model(a, pos, with, ra);
+    if (!oka || !fit_model(b, pos, without, rb)) {
+        err = !oka ? ra.message : rb.message;
+        if (err.empty()) err = "fit cancelled";
+        return false;
     }
-    return std::max(0.0, rb.chi2 - ra.chi2);
+    if (!ra.converged || !rb.converged) {
+        out.why = std::string("the refit ") + (!ra.converged ? "with" : "without") +
+                  " the offsets did not converge (" + (!ra.converged ? ra.message : rb.message) + ")";
+        return true;
+    }
+    const int dof = ra.n_obs - ra.n_free - ra.n_fixture;
+    out.tested = true;
+    out.chi2 = std::max(0.0, rb.chi2 - ra.chi2);
+    out.scale = dof > 0 ? std::max(1.0, ra.chi2 / dof) : 1.0;
+    return true;
 }
 
 JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<PreparedPos> &pos, const V3 &jig,
-                         const V3 &noise, double fixture_lr) {
+                         const V3 &noise, const FixtureLR *lr) {
     JigAnalysis A;
     json &out = A.report;
     out = {{"fixture", nullptr}, {"holes", nullptr}, {"text", json::array()}, {"finding", nullptr}};
@@ -97,14 +111,21 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
     const auto hm = height_means(E, G, jig);
     json fx = {{"heights_mm", json::array()}, {"offsets_mm", json::object()}, {"max_mm", json::object()},
                {"p_value", json::object()}, {"taken_as_jig", true},
-               {"test", std::isnan(fixture_lr)
+               {"test", !lr
                             ? "chi-square of the per-height weighted mean residuals about their common mean, K - 1 "
                               "degrees of freedom, per axis; Bonferroni over the three axes"
                             : "x (the axis the spacers set, fitted as per-height offsets): likelihood ratio, the "
-                              "model refitted without the offsets, delta chi-square against chi-square(K - 1); y, z: "
+                              "model refitted without the offsets, delta chi-square over max(1, chi2/dof of the "
+                              "model) against chi-square(K - 1) (conservative: the offsets' prior and what the "
+                              "device's parameters can take leave fewer than K - 1 free); y, z: "
                               "chi-square of the per-height weighted mean residuals about their common mean, K - 1 "
                               "degrees of freedom; Bonferroni over the three axes"}};
-    if (!std::isnan(fixture_lr)) fx["lr_chi2_x"] = fixture_lr;
+    if (lr && lr->tested) {
+        fx["lr_chi2_x"] = lr->chi2;
+        fx["lr_scale_x"] = lr->scale;
+    } else if (lr) {
+        fx["x_untested"] = lr->why;
+    }
     {
         std::map<int, double> href; // a height index's fixture height (mm): the mean x reference
         std::map<int, int> hn;
@@ -137,7 +158,14 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
         }
         // x: the likelihood ratio when given (its offsets were fitted beside
         // the device's parameters, which can take a trend over the heights).
-        const double stat = (a == 0 && !std::isnan(fixture_lr)) ? fixture_lr : chi2;
+        const bool by_lr = a == 0 && lr;
+        if (by_lr && !lr->tested) { // no number, and nothing named in x
+            fx["offsets_mm"][kAxis[a]] = offs;
+            fx["max_mm"][kAxis[a]] = mx;
+            fx["p_value"][kAxis[a]] = nullptr;
+            continue;
+        }
+        const double stat = by_lr ? lr->chi2 / lr->scale : chi2;
         const double p = std::min(1.0, 3 * chi2_sf(stat, K - 1));
         fx["offsets_mm"][kAxis[a]] = offs;
         fx["max_mm"][kAxis[a]] = mx;

@@ -18,6 +18,7 @@
 #pragma once
 
 #include <cmath>
+#include <string>
 
 #include "calib/fit.h"
 
@@ -55,23 +56,35 @@ struct JigAnalysis {
     nlohmann::json report;
     std::vector<V3> offset;
 };
-// fixture_lr: the chi-square the model gains back when refitted without
-// the fixture's per-height x offsets (fixture_lr_chi2 below), the x axis's
-// test statistic (chi-square, K - 1 degrees of freedom). NaN: x is tested
-// like y and z, by the per-height means against their standard errors,
-// which ignores that the device's parameters were fitted beside the offsets.
+// The x fixture's likelihood ratio (fixture_lr below). lr: null when not
+// computed (x is then tested like y and z, by the per-height means against
+// their standard errors, which ignores that the device's parameters were
+// fitted beside the offsets: calibration_outliers needs only the offsets,
+// which do not depend on it); computed but untested (`why`): x's p_value is
+// null and nothing is named in x.
+struct FixtureLR {
+    bool tested = false;
+    double chi2 = NAN; // chi-square gained back without the offsets
+    double scale = 1;  // the named model's chi2/dof when above 1 (overdispersion)
+    std::string why;   // when not tested
+};
 JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<PreparedPos> &pos, const V3 &jig,
-                         const V3 &noise, double fixture_lr = NAN);
+                         const V3 &noise, const FixtureLR *lr = nullptr);
 
 // The likelihood ratio of the fixture's x offsets for model `m` (fitted
 // with them under `fo`): m refitted with them and without them, from m's
-// parameters, the same weights; their chi-square difference (>= 0). NaN
-// when fo has no fixture, or a fit fails or is cancelled (`cancelled`).
+// parameters, with the same weights; chi2 their chi-square difference (>= 0),
+// scale the with-fit's chi2/dof when above 1 (the test divides by it: a
+// model that misfits inflates every difference). Untested, with the reason,
+// when either refit does not converge (a without-fit stopped early on its
+// way along the valley would inflate the difference), or fo has no fixture.
+// False only when a fit was cancelled or failed (err).
 // A device effect that can mimic a trend over the heights (a scale against
 // cable_stretch or holder_geometry) takes the offsets' place without them:
-// the per-height means alone called such a trend the fixture's (p 1e-54 on
+// the per-height means alone called such a trend the fixture's (p 7e-54 on
 // data with none: an independent tester's case, docs/calibration.md).
-double fixture_lr_chi2(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &fo, bool &cancelled);
+bool fixture_lr(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &fo, FixtureLR &out,
+                std::string &err);
 
 } // namespace diag
 } // namespace cdm

@@ -236,18 +236,13 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     // offsets leave the residual before the trends are looked for, and a
     // repeat at every hole is named as the plate's or the device's.
     const V3 bjig = search ? sctx.jig : jig;
-    double fixture_lr = NAN;
+    FixtureLR flr;
     {
         FitOptions bfo = search ? sctx.fo : use_top ? uc.fo : ctx.fo;
         bfo.progress = [&](double f) { return ctx.report("residual analysis", f); };
-        bool cancelled = false;
-        fixture_lr = fixture_lr_chi2(basis, pos, bfo, cancelled);
-        if (cancelled) {
-            err = "fit cancelled";
-            return false;
-        }
+        if (!fixture_lr(basis, pos, bfo, flr, err)) return false;
     }
-    JigAnalysis ja = jig_analysis(bE, cf.grid, pos, bjig, noise_floor(bE, bjig), fixture_lr);
+    JigAnalysis ja = jig_analysis(bE, cf.grid, pos, bjig, noise_floor(bE, bjig), &flr);
     json &jig_report = ja.report;
     Eval bJ = bE;
     for (size_t j = 0; j < P; ++j) bJ.res[j] -= ja.offset[j];

@@ -103,6 +103,39 @@ static void test_dataset_utf8_bom_read(void **) {
         fail_msg("%s", err.c_str());
 }
 
+// Heights are the x_ref values positions share; a value no other position
+// has (a tenth of the jig or fewer) is off its height, not a height. The
+// decision is the first read's: setting positions aside (without_points)
+// keeps it, though 3 of 29 would be more than a tenth.
+static void test_dataset_off_height_references(void **) {
+    std::string t = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n";
+    int id = 0;
+    for (double h : {30.0, 50.0, 70.0})
+        for (int k = 0; k < 9; ++k)
+            t += std::to_string(++id) + "," + std::to_string(h) + "," + std::to_string(5 * k) + ",0,100,100,100,100\n";
+    for (double x : {31.0, 50.004, 69.5}) t += std::to_string(++id) + "," + std::to_string(x) + ",7,7,100,100,100,100\n";
+    Dataset d;
+    std::string err;
+    if (!parse_dataset(t, "off.csv", d, err)) fail_msg("%s", err.c_str());
+    assert_int_equal(d.heights.size(), 3);
+    assert_true(d.off_height_points == std::vector<long>({28, 29, 30}));
+    Dataset w;
+    if (!without_points(d, {1}, w, err)) fail_msg("%s", err.c_str());
+    assert_int_equal(w.pos.size(), 29);
+    assert_int_equal(w.heights.size(), 3);
+    assert_true(w.off_height_points == std::vector<long>({28, 29, 30}));
+    // Without one of them, the other two stay off their heights.
+    if (!without_points(d, {29}, w, err)) fail_msg("%s", err.c_str());
+    assert_true(w.off_height_points == std::vector<long>({28, 30}));
+    // Scattered in x (every value once): every value is a height, as before.
+    Dataset sc;
+    if (!parse_dataset("point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n1,30,0,0,1,1,1,1\n2,31,0,0,1,1,1,1\n3,32,0,0,1,1,1,1\n",
+                       "sc.csv", sc, err))
+        fail_msg("%s", err.c_str());
+    assert_int_equal(sc.heights.size(), 3);
+    assert_true(sc.off_height_points.empty());
+}
+
 static void test_dataset_duplicate_column_refused(void **) {
     expect_error("point,x_ref,y_ref,z_ref,l1,l2,l3,l4,l2\n1,30,0,0,100,100,100,100,5\n",
                  "bad.csv:1:9: duplicate column \"l2\" (also column 6)");
@@ -373,6 +406,7 @@ int main(void) {
         cmocka_unit_test(writer_accepts_exactly_what_the_reader_reads),
         cmocka_unit_test(test_dataset_duplicate_column_refused),
         cmocka_unit_test(test_dataset_utf8_bom_read),
+        cmocka_unit_test(test_dataset_off_height_references),
         cmocka_unit_test(test_dataset_huge_field_not_echoed_whole),
         cmocka_unit_test(test_dataset_insane_magnitudes_refused),
         cmocka_unit_test(test_dataset_missing_file_is_io_failure),

@@ -74,6 +74,11 @@ struct RecordCtx {
     bool have_t0 = false;
     uint64_t t0_us = 0;
     uint64_t short_dwells = 0;
+    // Samples the dataset writer refused (a reading the reader would
+    // refuse: a glitch to a non-positive length): left out, the session
+    // goes on; the first reason is told at the end.
+    uint64_t refused_samples = 0;
+    std::string first_refusal;
     std::atomic<bool> done{false};
     // both
     uint64_t reports = 0;
@@ -92,12 +97,18 @@ void close_dwell(RecordCtx &c) {
     int point = 0;
     double ref[3] = {0, 0, 0};
     cdm_jig_plan_get(c.plan, c.next_point, &point, ref);
-    for (size_t k = 0; k < c.dwell.size(); ++k)
-        if (!c.write_failed && cdm_dataset_writer_add_at(c.csv, point, ref, c.dwell[k].data(), c.dwell_t[k]) != CDM_OK) {
+    for (size_t k = 0; k < c.dwell.size() && !c.write_failed; ++k) {
+        const int rc = cdm_dataset_writer_add_at(c.csv, point, ref, c.dwell[k].data(), c.dwell_t[k]);
+        if (rc == CDM_ERR_INVALID_ARG) {
+            // One sample the file could not hold (the writer wrote nothing
+            // of it): the rest of the session is kept.
+            if (c.refused_samples++ == 0) c.first_refusal = cdm_thread_error();
+        } else if (rc != CDM_OK) {
             c.write_failed = true;
             c.write_err = cdm_thread_error();
             c.done = true;
         }
+    }
     c.dwell.clear();
     c.dwell_t.clear();
     if (++c.next_point == c.plan_n) c.done = true;
@@ -113,10 +124,15 @@ void record_sample(void *user, const cdm_sample *s) {
                                   s->source_time_ns});
             return;
         }
-        if (!c->write_failed && cdm_recorder_write_sample(c->rec, s) != CDM_OK) {
-            c->write_failed = true;
-            c->write_err = cdm_thread_error(); // this thread's: the reader's
-            c->done = true;
+        if (!c->write_failed) {
+            const int rc = cdm_recorder_write_sample(c->rec, s);
+            if (rc == CDM_ERR_INVALID_ARG) { // one sample refused (nothing of it written): the rest is kept
+                if (c->refused_samples++ == 0) c->first_refusal = cdm_thread_error();
+            } else if (rc != CDM_OK) {
+                c->write_failed = true;
+                c->write_err = cdm_thread_error(); // this thread's: the reader's
+                c->done = true;
+            }
         }
         return;
     }
@@ -218,7 +234,11 @@ int open_recorder(cdm_device *dev, const std::string &tmp, const char *format, R
         s.raw = &r.raw;
         s.pose = &r.pose;
         s.source_time_ns = r.source_ns;
-        if (!ctx.write_failed && cdm_recorder_write_sample(rec, &s) != CDM_OK) {
+        if (ctx.write_failed) continue;
+        const int wrc = cdm_recorder_write_sample(rec, &s);
+        if (wrc == CDM_ERR_INVALID_ARG) { // one sample refused (nothing of it written): the rest is kept
+            if (ctx.refused_samples++ == 0) ctx.first_refusal = cdm_thread_error();
+        } else if (wrc != CDM_OK) {
             ctx.write_failed = true;
             ctx.write_err = cdm_thread_error();
             ctx.done = true;
@@ -290,6 +310,9 @@ int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, cons
                      file.c_str());
         return kExitFailure;
     }
+    if (ctx.refused_samples)
+        std::fprintf(stderr, "cdm: record: %llu samples left out: the file could not hold them (first: %s)\n",
+                     (unsigned long long)ctx.refused_samples, ctx.first_refusal.c_str());
     if (ctx.jig) {
         std::printf("wrote %s: %zu of %zu jig positions x %d samples (%llu reports, %llu dwells too short and "
                     "repeated, %llu dropped)\n",

@@ -313,7 +313,9 @@ CDM_API int cdm_get_pose(cdm_device *dev, cdm_pose *out);
 /**
  * Blocks until a pose newer than the newest at the time of the call arrives,
  * or timeout_ms passes (CDM_ERR_TIMEOUT; *out then holds the newest pose).
- * timeout_ms < 0 waits without limit. Same returns as cdm_get_pose. Any thread.
+ * timeout_ms < 0 waits without limit. Same returns as cdm_get_pose. Any
+ * thread but the device's own reader thread (its callbacks), where it
+ * returns CDM_ERR_INVALID_ARG at once.
  */
 CDM_API int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out);
 
@@ -325,7 +327,8 @@ CDM_API int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out);
  * waits without limit; 0 only looks. Pass 0 to get the first pose. Returns
  * at once with CDM_ERR_END_OF_STREAM once a replay has ended. Same other
  * returns as cdm_get_pose. out->struct_size must cover host_sequence (112).
- * Any thread.
+ * Any thread but the device's own reader thread (its callbacks), where it
+ * returns CDM_ERR_INVALID_ARG at once.
  */
 CDM_API int cdm_wait_pose_after(cdm_device *dev, uint64_t after_host_sequence, int timeout_ms, cdm_pose *out);
 

@@ -147,7 +147,7 @@ struct PoseTexts {
             fn ": no position yet: every report so far was out of the workspace (flags NO_POSITION, "               \
                "OUT_OF_WORKSPACE)",                                                                                  \
             fn ": the newest pose is older than the stale deadline (flag STALE)",                                   \
-            fn ": the device is disconnected; the last pose is held (cdm_device_error says why)",                   \
+            fn ": the device is disconnected; the last pose, if any, is held (cdm_device_error says why)",          \
             fn ": the stream has ended (flag END_OF_STREAM)", fn ": no newer pose within the timeout",              \
             fn ": called on the device's own reader thread (from its callback), where no pose can arrive while "    \
                "it waits; use cdm_get_pose there"                                                                    \
@@ -191,6 +191,7 @@ int cdm_get_pose(cdm_device *dev, cdm_pose *out) {
 
 int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out) {
     return guarded([&] {
+        cdm::clear_thread_error(); // after CDM_OK the text is empty, as after cdm_get_pose
         if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_wait_pose: NULL argument");
         if (out->struct_size < kPoseSize10) return bad_size("cdm_wait_pose", "cdm_pose", out->struct_size, kPoseSize10);
         cdm_pose p;
@@ -202,6 +203,7 @@ int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out) {
 
 int cdm_wait_pose_after(cdm_device *dev, uint64_t after_host_sequence, int timeout_ms, cdm_pose *out) {
     return guarded([&] {
+        cdm::clear_thread_error(); // after CDM_OK the text is empty, as after cdm_get_pose
         if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_wait_pose_after: NULL argument");
         // The caller must be able to see host_sequence, or it cannot ask again.
         if (out->struct_size < kPoseSize11)

@@ -1,7 +1,7 @@
 // The steps cdm_diagnose and cdm_fit share (jobs.h).
 #include "api/jobs.h"
 
-#include <cstdio>
+#include <charconv>
 
 #include <cmath>
 #include <cstdlib>
@@ -70,10 +70,12 @@ int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs 
     using J = cdm::io::JsonValue;
     auto bad = [&](const cdm::io::JsonValue &v, const std::string &k, const char *want) {
         // A number out of range is shown as given; anything else by its kind.
-        char num[40] = "";
-        if (v.type == J::Number) std::snprintf(num, sizeof num, "%.17g", v.number);
+        // (shortest form that reads back the same: -0.1, not -0.10000000000000001)
+        char num[40];
+        char *end = num;
+        if (v.type == J::Number) end = std::to_chars(num, num + sizeof num, v.number).ptr;
         return cdm::fail(CDM_ERR_INVALID_ARG, cdm::io::where(src, v) + "option \"" + k + "\" must be " + want +
-                                                  ", got " + (v.type == J::Number ? std::string(num) : v.type_name()));
+                                                  ", got " + (v.type == J::Number ? std::string(num, size_t(end - num)) : v.type_name()));
     };
     for (const auto &[k, v] : o.members) {
         if (k == "effects") {

@@ -386,7 +386,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
                    {"rows", data.rows},
                    {"positions", P},
                    {"heights", data.heights},
-                   // x_ref values no other position shares, grouped with the nearest height
+                   // points whose x_ref no other position shares, grouped with the nearest height
                    {"off_height_points", data.off_height_points},
                    {"ignored_columns", data.ignored_columns},
                    {"out_of_workspace_samples", nom.bad_samples},

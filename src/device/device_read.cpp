@@ -4,7 +4,6 @@
 // snapshot, no allocation, no blocking); only the waits take the mutex.
 #include "device/device.h"
 
-#include <thread>
 
 #include <algorithm>
 #include <cmath>
@@ -99,12 +98,13 @@ bool cdm_device::wait_until(const std::function<bool()> &ready, int timeout_ms) 
 // A wait on the reader thread itself (from a sample or event callback)
 // would wait for a pose only that thread can publish: until the timeout,
 // and without one until cdm_close (an independent tester's finding). It
-// returns CDM_ERR_INVALID_ARG at once, *out zeroed.
+// returns CDM_ERR_INVALID_ARG at once, *out zeroed (orientation the identity).
 bool cdm_device::on_reader_thread() const { return std::this_thread::get_id() == thread_.get_id(); }
 
 int cdm_device::wait_pose(int timeout_ms, cdm_pose &out) {
     if (on_reader_thread()) {
         out = cdm_pose{};
+        out.orientation[0] = 1.0; // identity, as before the first report: never the zero quaternion
         return CDM_ERR_INVALID_ARG;
     }
     const uint64_t start = events_.load();
@@ -119,6 +119,7 @@ int cdm_device::wait_pose(int timeout_ms, cdm_pose &out) {
 int cdm_device::wait_pose_after(uint64_t after, int timeout_ms, cdm_pose &out) {
     if (on_reader_thread()) {
         out = cdm_pose{};
+        out.orientation[0] = 1.0; // identity, as before the first report: never the zero quaternion
         return CDM_ERR_INVALID_ARG;
     }
     // Ready on a newer pose, or once no newer pose can ever come.

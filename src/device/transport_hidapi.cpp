@@ -258,20 +258,21 @@ private:
     std::unique_ptr<UdevMonitor> mon_; // while disconnected; reader thread only
 };
 
-// Opens the master at `path`; another name for an enumerated master's node
-// opens that node, and the handle knows its serial (reconnects by it).
+// Opens the master at `path`, as given (a udev symlink stays the name a
+// serial-less master is reconnected by, and a node with its own
+// permissions is opened with them); when it names an enumerated master's
+// node, the handle knows that master's serial and reconnects by it.
 int open_path(const std::string &path, const std::string &uri_text, TransportPtr &out, std::string &err) {
     MasterNode node;
     const bool known = master_named_by(path, node);
-    const std::string at = known ? node.path : path;
     std::string why;
     hid_device *d = nullptr;
-    const int rc = checked_open(at, d, why);
+    const int rc = checked_open(path, d, why);
     if (rc != CDM_OK) {
         err = "URI \"" + uri_text + "\": " + why + " (is it a master, and may this user open it? see udev/70-cdm.rules)";
         return rc;
     }
-    out = std::make_unique<HidTransport>(d, at, known ? node.serial : std::string());
+    out = std::make_unique<HidTransport>(d, path, known ? node.serial : std::string());
     return CDM_OK;
 }
 

@@ -229,6 +229,7 @@ void cdm_device::set_model(const ModelPtr &model) {
 }
 
 void cdm_device::run() {
+    reader_id_.store(std::this_thread::get_id(), std::memory_order_release);
     // Any report the replay format can hold (kMaxReport): a longer one
     // from a newer firmware is parsed for its first 64 bytes.
     uint8_t buf[replay::kMaxReport];

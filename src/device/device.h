@@ -182,4 +182,7 @@ private:
 
     std::atomic<bool> stop_{false};
     std::thread thread_;
+    // The reader thread's id, stored by the thread itself (thread_ may still
+    // be being assigned when a first callback runs): on_reader_thread.
+    std::atomic<std::thread::id> reader_id_{};
 };

@@ -99,7 +99,9 @@ bool cdm_device::wait_until(const std::function<bool()> &ready, int timeout_ms) 
 // would wait for a pose only that thread can publish: until the timeout,
 // and without one until cdm_close (an independent tester's finding). It
 // returns CDM_ERR_INVALID_ARG at once, *out zeroed (orientation the identity).
-bool cdm_device::on_reader_thread() const { return std::this_thread::get_id() == thread_.get_id(); }
+bool cdm_device::on_reader_thread() const {
+    return std::this_thread::get_id() == reader_id_.load(std::memory_order_acquire);
+}
 
 int cdm_device::wait_pose(int timeout_ms, cdm_pose &out) {
     if (on_reader_thread()) {

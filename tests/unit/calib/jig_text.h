@@ -1,5 +1,6 @@
-// Test helper: a simulated jig dataset as CSV lines, to be tampered with
-// (spikes in the readings, misplaced references) before it is parsed. Include after <cmocka.h>.
+// Test helpers: the diagnosis tests' simulated jig, and a simulated jig
+// dataset as CSV lines, to be tampered with (spikes in the readings,
+// misplaced references) before it is parsed. Include after <cmocka.h>.
 #pragma once
 
 #include <cstdio>
@@ -13,6 +14,17 @@
 
 namespace cdm {
 namespace test {
+
+// The half-resolution jig the diagnosis tests simulate: 13 x 13 holes at
+// 10 mm, 40 samples, 5 heights, noise seed `seed`.
+inline JigSimOptions half_jig(uint64_t seed) {
+    JigSimOptions o;
+    o.n = 13;
+    o.pitch_mm = 10;
+    o.samples = 40;
+    o.seed = seed;
+    return o;
+}
 
 // The simulator's CSV as lines (header first).
 inline std::vector<std::string> simulated_lines(const JigSimOptions &o, const Model &truth = Model{DeviceGeometry{}}) {

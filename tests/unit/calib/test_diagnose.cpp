@@ -33,20 +33,12 @@ extern "C" {
 
 using namespace cdm;
 
-static JigSimOptions small_jig(uint64_t seed) {
-    JigSimOptions o;
-    o.n = 13;
-    o.pitch_mm = 10;
-    o.samples = 40;
-    o.seed = seed;
-    return o;
-}
 
 static nlohmann::json run(const Model &truth, uint64_t seed, std::vector<std::string> effects, bool candidates,
                           bool scattered = false, double hole_mm = 0, double fixture_mm = 0) {
     Dataset d;
     std::string err;
-    JigSimOptions so = small_jig(seed);
+    JigSimOptions so = test::half_jig(seed);
     so.scattered = scattered;
     so.jig_hole_mm = hole_mm;
     so.jig_fixture_mm = fixture_mm;
@@ -314,7 +306,7 @@ static void sparse_noisy_jig(void **) {
         std::vector<std::string> want;
         const Model truth = make_truth(c, seed, want);
         std::string err;
-        JigSimOptions so = small_jig(++seed);
+        JigSimOptions so = test::half_jig(++seed);
         so.heights = {30, 50, 70};
         so.samples = 10;
         so.noise_mm = 0.25;
@@ -337,7 +329,7 @@ static void sparse_noisy_jig(void **) {
         std::string err;
         assert_true(truth.add_effect("cable_gain", {{"g1", 0.002}, {"g2", -0.0015}, {"g3", 0.001}, {"g4", -0.002}}, err));
         assert_true(truth.add_effect("exit_pulley", {{"radius_mm", 1.0}}, err));
-        JigSimOptions so = small_jig(800 + uint64_t(k));
+        JigSimOptions so = test::half_jig(800 + uint64_t(k));
         so.heights = {30, 50, 70};
         so.samples = 10;
         so.noise_mm = 0.25;
@@ -577,7 +569,7 @@ static void per_sample_statistics_without_samples(void **) {
     Model truth{DeviceGeometry{}};
     std::string err;
     assert_true(truth.add_effect_random("exit_pulley", 3, err));
-    JigSimOptions so = small_jig(9);
+    JigSimOptions so = test::half_jig(9);
     so.n = 5;
     so.samples = 25;
     Dataset d;
@@ -638,7 +630,7 @@ static void spikes_change_nothing_but_their_count(void **) {
     std::string err;
     assert_true(truth.add_effect("cable_gain", {{"g1", 0.001}, {"g2", -0.001}, {"g3", 0.0008}, {"g4", -0.0006}}, err));
     assert_true(truth.add_effect("exit_pulley", {{"radius_mm", 1.0}}, err));
-    std::vector<std::string> lines = test::simulated_lines(small_jig(31), truth);
+    std::vector<std::string> lines = test::simulated_lines(test::half_jig(31), truth);
     nlohmann::json r[2];
     int injected = 0;
     for (int spiky = 0; spiky < 2; ++spiky) {
@@ -683,7 +675,7 @@ static void misplaced_positions_are_set_aside(void **) {
     Model truth{DeviceGeometry{}};
     std::string err;
     assert_true(truth.add_effect("exit_pulley", {{"radius_mm", 1.5}}, err));
-    const std::vector<std::string> clean = test::simulated_lines(small_jig(41), truth);
+    const std::vector<std::string> clean = test::simulated_lines(test::half_jig(41), truth);
     std::vector<std::string> lines = clean;
     const long bad[3] = {100, 431, 702};
     test::misplace(lines, bad[0], 0.6, -0.4);
@@ -716,7 +708,7 @@ static void misplaced_positions_are_set_aside(void **) {
 
     // A jig of 48 positions has none to spare (2 % of them is less than
     // one): the misplaced point stays, and the diagnosis still runs.
-    JigSimOptions tiny = small_jig(43);
+    JigSimOptions tiny = test::half_jig(43);
     tiny.n = 4;
     tiny.heights = {30, 50, 70};
     std::vector<std::string> few = test::simulated_lines(tiny, truth);
@@ -742,7 +734,7 @@ static void many_misplaced_positions_are_set_aside(void **) {
     Model truth{DeviceGeometry{}};
     std::string err;
     assert_true(truth.add_effect("exit_pulley", {{"radius_mm", 1.5}}, err));
-    std::vector<std::string> lines = test::simulated_lines(small_jig(47), truth);
+    std::vector<std::string> lines = test::simulated_lines(test::half_jig(47), truth);
     std::mt19937_64 rng(47);
     std::vector<long> bad;
     for (long p = 0; p < 845; ++p) bad.push_back(p);

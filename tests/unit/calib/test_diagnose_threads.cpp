@@ -17,6 +17,7 @@
 extern "C" {
 #include <cmocka.h>
 }
+#include "jig_text.h"
 
 using namespace cdm;
 
@@ -32,14 +33,9 @@ static nlohmann::json diagnose_with(const Dataset &d, int threads) {
     return out;
 }
 
-// The half-resolution jig both tests use: 13 x 13 holes at 10 mm, 40
-// samples, the given noise seed.
+// The half-resolution jig both tests use (jig_text.h), noise seed `seed`.
 static Dataset half_jig(const Model &truth, uint64_t seed) {
-    JigSimOptions so;
-    so.n = 13;
-    so.pitch_mm = 10;
-    so.samples = 40;
-    so.seed = seed;
+    const JigSimOptions so = test::half_jig(seed);
     Dataset d;
     std::string err;
     if (!simulate_jig(truth, so, d, err)) fail_msg("simulate: %s", err.c_str());

@@ -50,8 +50,10 @@ void copy_out(const T &src, T *dst) {
     dst->struct_size = cs;
 }
 
+// As cdm::guarded (errors.h): the text is this call's, empty on success.
 template <class F>
 int guarded(F &&f) {
+    cdm::clear_thread_error();
     try {
         return f();
     } catch (const std::bad_alloc &) {
@@ -74,7 +76,6 @@ extern "C" {
 
 int cdm_enumerate(cdm_device_list **out) {
     return guarded([&] {
-        cdm::clear_thread_error();
         if (!out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_enumerate: out is NULL");
         *out = nullptr;
         auto list = std::make_unique<cdm_device_list>();
@@ -103,7 +104,6 @@ void cdm_device_list_free(cdm_device_list *list) { delete list; }
 
 int cdm_open_ex(const char *uri, const cdm_open_options *options, cdm_device **out) {
     return guarded([&] {
-        cdm::clear_thread_error();
         if (!out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_open: out is NULL");
         *out = nullptr;
         cdm_open_options opts{};
@@ -191,7 +191,6 @@ int cdm_get_pose(cdm_device *dev, cdm_pose *out) {
 
 int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out) {
     return guarded([&] {
-        cdm::clear_thread_error(); // after CDM_OK the text is empty, as after cdm_get_pose
         if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_wait_pose: NULL argument");
         if (out->struct_size < kPoseSize10) return bad_size("cdm_wait_pose", "cdm_pose", out->struct_size, kPoseSize10);
         cdm_pose p;
@@ -203,7 +202,6 @@ int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out) {
 
 int cdm_wait_pose_after(cdm_device *dev, uint64_t after_host_sequence, int timeout_ms, cdm_pose *out) {
     return guarded([&] {
-        cdm::clear_thread_error(); // after CDM_OK the text is empty, as after cdm_get_pose
         if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_wait_pose_after: NULL argument");
         // The caller must be able to see host_sequence, or it cannot ask again.
         if (out->struct_size < kPoseSize11)

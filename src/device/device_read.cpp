@@ -4,7 +4,6 @@
 // snapshot, no allocation, no blocking); only the waits take the mutex.
 #include "device/device.h"
 
-
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -103,12 +102,16 @@ bool cdm_device::on_reader_thread() const {
     return std::this_thread::get_id() == reader_id_.load(std::memory_order_acquire);
 }
 
+namespace {
+int refused_on_reader_thread(cdm_pose &out) {
+    out = cdm_pose{};
+    out.orientation[0] = 1.0; // identity, as before the first report: never the zero quaternion
+    return CDM_ERR_INVALID_ARG;
+}
+} // namespace
+
 int cdm_device::wait_pose(int timeout_ms, cdm_pose &out) {
-    if (on_reader_thread()) {
-        out = cdm_pose{};
-        out.orientation[0] = 1.0; // identity, as before the first report: never the zero quaternion
-        return CDM_ERR_INVALID_ARG;
-    }
+    if (on_reader_thread()) return refused_on_reader_thread(out);
     const uint64_t start = events_.load();
     bool woke = true;
     if (!(state_flags_.load() & CDM_POSE_END_OF_STREAM))
@@ -119,11 +122,7 @@ int cdm_device::wait_pose(int timeout_ms, cdm_pose &out) {
 }
 
 int cdm_device::wait_pose_after(uint64_t after, int timeout_ms, cdm_pose &out) {
-    if (on_reader_thread()) {
-        out = cdm_pose{};
-        out.orientation[0] = 1.0; // identity, as before the first report: never the zero quaternion
-        return CDM_ERR_INVALID_ARG;
-    }
+    if (on_reader_thread()) return refused_on_reader_thread(out);
     // Ready on a newer pose, or once no newer pose can ever come.
     const bool woke = wait_until(
         [&] {

@@ -262,9 +262,13 @@ private:
 // serial-less master is reconnected by, and a node with its own
 // permissions is opened with them); when it names an enumerated master's
 // node, the handle knows that master's serial and reconnects by it.
-int open_path(const std::string &path, const std::string &uri_text, TransportPtr &out, std::string &err) {
+// serial: already known (the path came from find_by_serial): not looked up
+// again.
+int open_path(const std::string &path, const std::string &uri_text, TransportPtr &out, std::string &err,
+              const std::string *serial = nullptr) {
     MasterNode node;
-    const bool known = master_named_by(path, node);
+    if (serial) node.serial = *serial;
+    const bool known = serial || master_named_by(path, node);
     std::string why;
     hid_device *d = nullptr;
     const int rc = checked_open(path, d, why);
@@ -299,7 +303,7 @@ int open_hid(const Uri &u, TransportPtr &out, std::string &err) {
             err = "URI \"" + u.text + "\": no master (USB 1209:cd01) with serial " + serial + " is connected";
             return CDM_ERR_NO_DEVICE;
         }
-        return open_path(path, u.text, out, err);
+        return open_path(path, u.text, out, err, &serial);
     }
     if (u.path.empty()) {
         err = "URI \"" + u.text + "\": hid: needs a path (hid:/dev/hidrawN) or a serial (hid:serial=SN)";

@@ -534,11 +534,16 @@ bool without_points(const Dataset &d, const std::vector<long> &points, Dataset &
     // grows as the jig shrinks), nor a thinned height into an off-height
     // value. Only a height none of whose positions is left goes.
     {
+        // (sorted x values and a search per height: a scattered jig has as
+        // many heights as positions)
+        std::vector<double> xs;
+        for (const JigHole &jp : again.pos) xs.push_back(jp.ref[0]);
+        std::sort(xs.begin(), xs.end());
         std::vector<double> kept;
-        for (double h : d.heights)
-            if (std::any_of(again.pos.begin(), again.pos.end(),
-                            [&](const JigHole &jp) { return std::fabs(jp.ref[0] - h) < 1e-6; }))
-                kept.push_back(h);
+        for (double h : d.heights) {
+            const auto it = std::lower_bound(xs.begin(), xs.end(), h - 1e-6);
+            if (it != xs.end() && std::fabs(*it - h) < 1e-6) kept.push_back(h);
+        }
         std::vector<long> off;
         for (long p : d.off_height_points)
             if (!std::binary_search(skip.begin(), skip.end(), p)) off.push_back(p);

@@ -30,24 +30,24 @@ struct Line {
     char *p = buf;
     bool fits = true;
     char *end() { return buf + sizeof buf; }
-    // Appends ",v" with `decimals` decimals; `field` receives those characters.
-    void fixed(double v, int decimals, std::string *field = nullptr) {
+    const char *field = buf; // the last field appended
+    // Appends ",v" with `decimals` decimals.
+    void fixed(double v, int decimals) {
         if (!fits || p == end()) return void(fits = false);
         *p++ = ',';
-        char *const start = p;
+        field = p;
         const auto r = std::to_chars(p, end(), v, std::chars_format::fixed, decimals);
         fits = r.ec == std::errc();
         p = r.ptr;
-        if (fits && field) field->assign(start, p);
     }
+    // What the reader gets back from the last field appended.
+    double read_back() const {
+        double v = NAN;
+        std::from_chars(field, p, v);
+        return v;
+    }
+    std::string last() const { return std::string(field, size_t(p - field)); }
 };
-
-// What the reader gets back from a field the writer printed.
-double read_back(const std::string &field) {
-    double v = NAN;
-    std::from_chars(field.data(), field.data() + field.size(), v);
-    return v;
-}
 
 } // namespace
 
@@ -87,15 +87,14 @@ bool DatasetWriter::add_row(long point, const double ref[3], const double len[4]
         return refuse(dataset_fault_text(f, 0, kArg[0], std::to_string(point)));
     line.p = std::to_chars(line.buf, line.end(), point).ptr;
     double written[kDatasetValues] = {double(point)};
-    std::string field;
     for (int k = 1; k < kDatasetValues; ++k) {
         const double v = k < 4 ? ref[k - 1] : len[k - 4];
         if (!std::isfinite(v)) return refuse(dataset_fault_text(DatasetFault::NotFinite, k, kArg[k], shortest(v)));
-        line.fixed(v, 4, &field);
+        line.fixed(v, 4);
         if (!line.fits) break;
-        written[k] = read_back(field);
+        written[k] = line.read_back();
         if (const DatasetFault f = dataset_value_fault(k, written[k]); f != DatasetFault::None) {
-            const std::string shown = written[k] == v ? shortest(v) : shortest(v) + ", " + field + " in the file";
+            const std::string shown = written[k] == v ? shortest(v) : shortest(v) + ", " + line.last() + " in the file";
             return refuse(dataset_fault_text(f, k, kArg[k], shown));
         }
     }

@@ -2,7 +2,6 @@
 #include "api/jobs.h"
 
 #include <charconv>
-
 #include <cmath>
 #include <cstdlib>
 #include <cstring>

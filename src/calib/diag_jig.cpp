@@ -70,7 +70,10 @@ bool fixture_lr(const Model &m, const std::vector<PreparedPos> &pos, const FitOp
     FitOptions with = fo, without = fo;
     without.fixture.clear();
     without.fixture_count = 0;
-    // The same weights for both: those of m, or of what fo names.
+    // The same weights for both: those of m, or of what fo names. (m's own
+    // fit is not reused for the with-side: it was weighed with the model it
+    // started from, so its chi-square is on other weights; refitted from
+    // its own optimum, only the offsets move, in a few evaluations.)
     if (!with.weigh_with) with.weigh_with = without.weigh_with = &m;
     Model a = m, b = m;
     FitReport ra, rb;
@@ -158,17 +161,15 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
         }
         // x: the likelihood ratio when given (its offsets were fitted beside
         // the device's parameters, which can take a trend over the heights).
+        fx["offsets_mm"][kAxis[a]] = offs;
+        fx["max_mm"][kAxis[a]] = mx;
         const bool by_lr = a == 0 && lr;
         if (by_lr && !lr->tested) { // no number, and nothing named in x
-            fx["offsets_mm"][kAxis[a]] = offs;
-            fx["max_mm"][kAxis[a]] = mx;
             fx["p_value"][kAxis[a]] = nullptr;
             continue;
         }
         const double stat = by_lr ? lr->chi2 / lr->scale : chi2;
         const double p = std::min(1.0, 3 * chi2_sf(stat, K - 1));
-        fx["offsets_mm"][kAxis[a]] = offs;
-        fx["max_mm"][kAxis[a]] = mx;
         fx["p_value"][kAxis[a]] = p;
         if (p < kFindingLevel && mx >= small && mx > fx_worst) {
             fx_worst = mx;

@@ -18,17 +18,15 @@
 #pragma once
 
 #include <cmath>
-#include <string>
-
-#include "calib/fit.h"
-
 #include <map>
+#include <string>
 #include <utility>
 
 #include <nlohmann/json.hpp>
 
 #include "calib/diag_eval.h"
 #include "calib/diag_spatial.h"
+#include "calib/fit.h"
 
 namespace cdm {
 namespace diag {

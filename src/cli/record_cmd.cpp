@@ -84,6 +84,20 @@ struct RecordCtx {
     uint64_t reports = 0;
 };
 
+// A write's outcome. A sample the writer refused (CDM_ERR_INVALID_ARG:
+// nothing of it was written) is counted and the session goes on; any other
+// failure (I/O) ends it. The texts are this thread's: the reader's.
+void after_write(RecordCtx &c, int rc) {
+    if (rc == CDM_OK) return;
+    if (rc == CDM_ERR_INVALID_ARG) {
+        if (c.refused_samples++ == 0) c.first_refusal = cdm_thread_error();
+        return;
+    }
+    c.write_failed = true;
+    c.write_err = cdm_thread_error();
+    c.done = true;
+}
+
 void close_dwell(RecordCtx &c) {
     c.in_dwell = false;
     if (c.next_point >= c.plan_n) return;
@@ -97,18 +111,8 @@ void close_dwell(RecordCtx &c) {
     int point = 0;
     double ref[3] = {0, 0, 0};
     cdm_jig_plan_get(c.plan, c.next_point, &point, ref);
-    for (size_t k = 0; k < c.dwell.size() && !c.write_failed; ++k) {
-        const int rc = cdm_dataset_writer_add_at(c.csv, point, ref, c.dwell[k].data(), c.dwell_t[k]);
-        if (rc == CDM_ERR_INVALID_ARG) {
-            // One sample the file could not hold (the writer wrote nothing
-            // of it): the rest of the session is kept.
-            if (c.refused_samples++ == 0) c.first_refusal = cdm_thread_error();
-        } else if (rc != CDM_OK) {
-            c.write_failed = true;
-            c.write_err = cdm_thread_error();
-            c.done = true;
-        }
-    }
+    for (size_t k = 0; k < c.dwell.size() && !c.write_failed; ++k)
+        after_write(c, cdm_dataset_writer_add_at(c.csv, point, ref, c.dwell[k].data(), c.dwell_t[k]));
     c.dwell.clear();
     c.dwell_t.clear();
     if (++c.next_point == c.plan_n) c.done = true;
@@ -124,16 +128,7 @@ void record_sample(void *user, const cdm_sample *s) {
                                   s->source_time_ns});
             return;
         }
-        if (!c->write_failed) {
-            const int rc = cdm_recorder_write_sample(c->rec, s);
-            if (rc == CDM_ERR_INVALID_ARG) { // one sample refused (nothing of it written): the rest is kept
-                if (c->refused_samples++ == 0) c->first_refusal = cdm_thread_error();
-            } else if (rc != CDM_OK) {
-                c->write_failed = true;
-                c->write_err = cdm_thread_error(); // this thread's: the reader's
-                c->done = true;
-            }
-        }
+        if (!c->write_failed) after_write(*c, cdm_recorder_write_sample(c->rec, s));
         return;
     }
     if (c->done) return;
@@ -234,15 +229,7 @@ int open_recorder(cdm_device *dev, const std::string &tmp, const char *format, R
         s.raw = &r.raw;
         s.pose = &r.pose;
         s.source_time_ns = r.source_ns;
-        if (ctx.write_failed) continue;
-        const int wrc = cdm_recorder_write_sample(rec, &s);
-        if (wrc == CDM_ERR_INVALID_ARG) { // one sample refused (nothing of it written): the rest is kept
-            if (ctx.refused_samples++ == 0) ctx.first_refusal = cdm_thread_error();
-        } else if (wrc != CDM_OK) {
-            ctx.write_failed = true;
-            ctx.write_err = cdm_thread_error();
-            ctx.done = true;
-        }
+        if (!ctx.write_failed) after_write(ctx, cdm_recorder_write_sample(rec, &s));
     }
     ctx.pending.clear();
     return kExitOk;

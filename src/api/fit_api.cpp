@@ -34,6 +34,8 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
               {"n_free", cf.report.n_free}, {"evaluations", cf.report.evals}, {"seconds", cf.report.seconds},
               {"algorithm", cf.report.algorithm}, {"message", cf.report.message}}},
             {"jig_tolerance_mm", {cf.jig(0), cf.jig(1), cf.jig(2)}},
+            // The part of it each plate hole shares at every height (since 1.1).
+            {"plate_holes_mm", {cf.fit_options.hole_sigma(0), cf.fit_options.hole_sigma(1), cf.fit_options.hole_sigma(2)}},
             {"nominal_error_mm", cdm::diag::stats3(cf.nominal.err)},
             {"error_mm", cdm::diag::stats3(cf.fitted.err)},
             // The samples the dataset's screen set aside (the diagnosis' data.glitches).

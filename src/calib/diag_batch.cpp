@@ -52,6 +52,7 @@ std::string fit_key(const DiagContext &ctx, const Model &m) {
     auto bytes = [&](const void *p, size_t n) { k.append(static_cast<const char *>(p), n); };
     model_key(k, m);
     bytes(ctx.fo.jig_sigma.data(), 3 * sizeof(double));
+    bytes(ctx.fo.hole_sigma.data(), 3 * sizeof(double));
     if (const Model *w = ctx.fo.weigh_with) { // the weights' model, bit for bit
         k += "\4weighed ";
         model_key(k, *w);

@@ -179,7 +179,10 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         c.dchi2 = base_chi2 - c.rep.chi2;
         c.bic = -c.dchi2 + c.k * std::log(ctx.n_obs);
         c.p = chi2_sf(std::max(0.0, c.dchi2), c.k);
-        c.v = judge(c.E, ctx.G, ctx.own_jig(c.E), c.rep.n_free);
+        {
+            const V3 oj = ctx.own_jig(c.E);
+            c.v = judge(c.E, ctx.G, oj, c.rep.n_free, ctx.own_hole(c.E, oj));
+        }
         c.fp.resize(P);
         double sxy = 0, sxx = 0, syy = 0, ss = 0;
         size_t nn = 0;

@@ -46,7 +46,7 @@ struct DiagContext {
     const DeviceGeometry &g;
     const std::vector<PreparedPos> &pos;
     const Grid &G;
-    V3 jig;              // jig tolerance per axis (mm) the fit weighs with
+    V3 jig;              // jig tolerance per axis (mm): fo's jig_sigma and hole_sigma together
     bool user_jig;       // given by the user (else estimated)
     double jig_cap;      // cap on a model's own white-scatter estimate
     FitOptions fo;       // the fit's noise model; every comparison uses it
@@ -74,6 +74,12 @@ struct DiagContext {
         V3 est = estimate_nugget(E, G), j;
         for (int a = 0; a < 3; ++a) j(a) = std::min(est(a), jig_cap);
         return j;
+    }
+    // The part of own_jig(E) = j that the plate's holes share at every
+    // height (zero with the user's tolerance: that is taken as independent).
+    V3 own_hole(const Eval &E, const V3 &j) const {
+        if (user_jig) return V3::Zero();
+        return estimate_hole_std(E, G).cwiseMin(j);
     }
 };
 

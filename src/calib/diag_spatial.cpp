@@ -47,6 +47,14 @@ Grid make_grid(const std::vector<PreparedPos> &pos, const std::vector<double> &h
         if (cols[k] - cols[k - 1] > 1e-6) pitch = std::min(pitch, cols[k] - cols[k - 1]);
     if (!std::isfinite(pitch)) pitch = 5;
     G.pitch = pitch;
+    G.hole_index.assign(P, -1);
+    if (G.layered) {
+        std::map<std::array<long, 2>, int> hole; // the same reference to 0.1 um
+        for (size_t j = 0; j < P; ++j) {
+            const std::array<long, 2> k{std::lround(pos[j].ref(1) * 1e4), std::lround(pos[j].ref(2) * 1e4)};
+            G.hole_index[j] = hole.emplace(k, int(hole.size())).first->second;
+        }
+    }
     std::map<std::array<long, 3>, int> key;
     auto K = [&](int hi, double y, double z) {
         return std::array<long, 3>{hi, std::lround(y / pitch), std::lround(z / pitch)};
@@ -149,6 +157,47 @@ V3 estimate_nugget(const Eval &E, const Grid &G) {
     return out;
 }
 
+// The same second differences at two heights of the same holes share the
+// holes' errors and nothing else: the noise, the seating and a height's own
+// errors are independent across heights, and a smooth effect nearly cancels
+// in each. So E[dd_k dd_k'] = 1.5 s_hole^2, an unbiased estimate with no
+// noise to subtract (clipped at zero).
+V3 estimate_hole_std(const Eval &E, const Grid &G) {
+    V3 out = V3::Zero();
+    if (!G.layered || G.hole_index.size() != E.res.size()) return out;
+    V3 sum = V3::Zero();
+    double n = 0;
+    auto add = [&](const std::vector<int> &cen, const std::vector<std::array<int, 2>> &pr) {
+        std::map<std::array<int, 3>, std::vector<V3>> by_holes;
+        for (size_t k = 0; k < cen.size(); ++k) {
+            const int j = cen[k], l = pr[k][0], r = pr[k][1];
+            if (!E.ok[size_t(j)] || !E.ok[size_t(l)] || !E.ok[size_t(r)]) continue;
+            by_holes[{G.hole_index[size_t(j)], G.hole_index[size_t(l)], G.hole_index[size_t(r)]}].push_back(
+                E.res[size_t(j)] - 0.5 * (E.res[size_t(l)] + E.res[size_t(r)]));
+        }
+        for (auto &kv : by_holes) {
+            const auto &d = kv.second;
+            for (size_t a = 0; a < d.size(); ++a)
+                for (size_t b = a + 1; b < d.size(); ++b) {
+                    sum += d[a].cwiseProduct(d[b]);
+                    n += 1;
+                }
+        }
+    };
+    add(G.ycentre, G.ypair);
+    add(G.zcentre, G.zpair);
+    if (n < 20) return out;
+    for (int a = 0; a < 3; ++a) out(a) = std::sqrt(std::max(0.0, sum(a) / (1.5 * n)));
+    return out;
+}
+
+void set_jig_noise(FitOptions &fo, const V3 &jig, const V3 &hole) {
+    for (int a = 0; a < 3; ++a) {
+        fo.hole_sigma(a) = std::clamp(hole(a), 0.0, jig(a));
+        fo.jig_sigma(a) = std::sqrt(jig(a) * jig(a) - fo.hole_sigma(a) * fo.hole_sigma(a));
+    }
+}
+
 // Moran's I of the standardised residuals over the plate's neighbour graph,
 // per axis, with each height's mean removed (a per-height offset is the
 // height fixture's, and the chi-square sees it). Positive I = neighbours
@@ -191,7 +240,65 @@ double moran_z(const std::vector<double> &zv, const std::vector<char> &ok, const
     return VI > 0 ? (I - EI) / std::sqrt(VI) : 0;
 }
 
-Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free) {
+// How much the plate's holes, each seen at several heights, widen the
+// judge's two statistics (a variance ratio, 1 without holes). Per axis, the
+// standardised residuals z of one hole at two heights correlate by
+// rho = hole^2 / sqrt(s2_j s2_k) (s2: a position's whole variance).
+//  - chi-square: a quadratic form in correlated normals, approximated by
+//    Satterthwaite's c chi-square(dof / c), c = tr(R^2) / tr(R), R the
+//    correlation matrix (block diagonal by hole and axis);
+//  - Moran's I: its terms z_j z_k for the same two holes at two heights
+//    share rho_jj' rho_kk', so its variance is that of independent
+//    residuals times the mean over neighbour pairs of the sum of those
+//    products over the pair's copies at every height (itself included).
+struct HoleInflation {
+    double chi2 = 1;
+    V3 moran = V3::Ones();
+};
+static HoleInflation hole_inflation(const Eval &E, const Grid &G, const V3 &jig, const V3 &hole) {
+    HoleInflation out;
+    if (!(hole.array() > 0).any() || G.hole_index.size() != E.res.size()) return out;
+    const size_t P = E.res.size();
+    std::map<int, std::vector<size_t>> by_hole;
+    for (size_t j = 0; j < P; ++j)
+        if (E.ok[j] && G.hole_index[j] >= 0) by_hole[G.hole_index[j]].push_back(j);
+    double trR = 0, trR2 = 0;
+    for (int a = 0; a < 3; ++a) {
+        const double h2 = hole(a) * hole(a);
+        auto sd = [&](size_t j) { return std::sqrt(E.var_mean[j](a) + jig(a) * jig(a)); };
+        auto rho = [&](size_t j, size_t k) { return j == k ? 1.0 : h2 / (sd(j) * sd(k)); };
+        for (size_t j = 0; j < P; ++j)
+            if (E.ok[j]) trR += 1, trR2 += 1;
+        for (auto &kv : by_hole)
+            for (size_t j : kv.second)
+                for (size_t k : kv.second)
+                    if (j != k) trR2 += rho(j, k) * rho(j, k);
+        // Neighbour pairs grouped by their two holes.
+        std::map<std::pair<int, int>, std::vector<std::pair<size_t, size_t>>> edges;
+        size_t n_edges = 0;
+        for (size_t j = 0; j < P; ++j) {
+            if (!E.ok[j] || G.hole_index[j] < 0) continue;
+            for (int kk : G.nb[j]) {
+                const size_t k = size_t(kk);
+                if (k <= j || !E.ok[k] || G.hole_index[k] < 0) continue;
+                const int hj = G.hole_index[j], hk = G.hole_index[k];
+                if (hj <= hk) edges[{hj, hk}].push_back({j, k});
+                else edges[{hk, hj}].push_back({k, j});
+                ++n_edges;
+            }
+        }
+        if (n_edges == 0) continue;
+        double sum = 0;
+        for (auto &kv : edges)
+            for (auto &e : kv.second)
+                for (auto &f : kv.second) sum += rho(e.first, f.first) * rho(e.second, f.second);
+        out.moran(a) = std::max(1.0, sum / double(n_edges));
+    }
+    if (trR > 0) out.chi2 = std::max(1.0, trR2 / trR);
+    return out;
+}
+
+Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free, const V3 &hole) {
     Verdict v;
     const size_t P = E.res.size();
     v.failing.assign(P, 0);
@@ -225,9 +332,12 @@ Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free) {
         }
     }
     v.dof = std::max(1, int(3 * used) - n_free - nuisance);
-    v.chi2_p = chi2_sf(v.chi2, v.dof);
+    const HoleInflation infl = hole_inflation(E, G, jig, hole);
+    v.chi2_p = chi2_sf(v.chi2 / infl.chi2, v.dof / infl.chi2);
+    v.chi2_scale = infl.chi2;
+    v.moran_scale = infl.moran.maxCoeff();
     double best = -INFINITY;
-    for (int a = 0; a < 3; ++a) best = std::max(best, moran_z(z[a], E.ok, G));
+    for (int a = 0; a < 3; ++a) best = std::max(best, moran_z(z[a], E.ok, G) / std::sqrt(infl.moran(a)));
     v.moran_z = best;
     v.moran_p = std::min(1.0, 3 * normal_sf(best)); // Bonferroni over the three axes
     v.explained = v.chi2_p >= 1e-3 && v.moran_p >= 1e-3;

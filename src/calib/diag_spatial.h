@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "calib/diag_eval.h"
+#include "calib/fit.h"
 
 namespace cdm {
 namespace diag {
@@ -17,6 +18,9 @@ struct Grid {
     std::vector<std::array<int, 2>> ypair, zpair;     // second-difference triples: centre j, (l, r)
     std::vector<int> ycentre, zcentre;
     std::vector<int> height_index;
+    // The plate's hole each position is in: positions of a layered jig with
+    // the same (y, z) reference, at whatever height (-1: scattered layout).
+    std::vector<int> hole_index;
     double pitch = 5;
     bool layered = true; // positions on a few fixture heights (the seed's jig)
 };
@@ -24,11 +28,24 @@ Grid make_grid(const std::vector<PreparedPos> &pos, const std::vector<double> &h
 
 // White (position-to-position) scatter beyond the noise, per axis.
 V3 estimate_nugget(const Eval &E, const Grid &G);
+// The part of that scatter each hole shares at every height (the plate's
+// drilling error), per axis: the covariance across heights of the same
+// second differences (a triple of holes seen at two heights or more).
+// Zero for a scattered layout or when nothing repeats.
+V3 estimate_hole_std(const Eval &E, const Grid &G);
+// The fit's noise model from a jig's white scatter per position (`jig`,
+// holes included) and the part of it each hole shares (`hole`, at most
+// jig): fo.hole_sigma = hole, fo.jig_sigma = what is left per position.
+void set_jig_noise(FitOptions &fo, const V3 &jig, const V3 &hole);
 
 struct Verdict {
     double chi2 = 0, chi2_p = 1;
     int dof = 1;
     double moran_z = 0, moran_p = 1;
+    // The plate's holes' correlation across heights (judge's `hole`): the
+    // chi-square's Satterthwaite scale c (chi2 / c ~ chi-square(dof / c))
+    // and the largest variance ratio Moran's z was divided by (1: none).
+    double chi2_scale = 1, moran_scale = 1;
     bool explained = false;
     std::vector<char> failing;
     int n_failing = 0;
@@ -39,7 +56,11 @@ double moran_z(const std::vector<double> &zv, const std::vector<char> &ok, const
 // Chi-square of the residuals against noise + jig tolerance (per-height
 // fixture offsets removed) and the spatial-structure test; n_free fitted
 // parameters.
-Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free);
+// hole: the part of jig each plate hole shares at every height (the fit's
+// FitOptions::hole_sigma): the residuals of a hole's positions then
+// correlate, and both tests widen by the variance that adds (Satterthwaite's
+// scaled chi-square; Moran's z over its inflated standard deviation).
+Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free, const V3 &hole = V3::Zero());
 
 // A position the model and its neighbours both disown: its residual fails
 // the chi-square against the noise and the jig's tolerance (3 dof, 1 %

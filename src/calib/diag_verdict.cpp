@@ -46,8 +46,14 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
         }
     const double xr = E.err[0].n > 0 ? std::sqrt(E.err[0].ss / E.err[0].n) : 0.0;
     const std::string rms = "x RMS " + fmt_num(xr, 3) + " mm at the noise floor " + fmt_num(noise(0), 3) + " mm";
+    // With the plate's holes shared by every height the tests are widened
+    // for it (judge()), and the text says so beside the numbers.
+    const bool widened = v.chi2_scale > 1.005 || v.moran_scale > 1.005;
     const std::string tests = "chi2/dof " + fmt_num(v.chi2 / v.dof, 2) + " (" + fmt_p(v.chi2_p) +
-                              "), spatial structure z = " + fmt_num(v.moran_z, 1) + " (" + fmt_p(v.moran_p) + ")";
+                              "), spatial structure z = " + fmt_num(v.moran_z, 1) + " (" + fmt_p(v.moran_p) + ")" +
+                              (widened ? "; both tests widened for the plate's hole errors, which repeat at every "
+                                         "height (chi-square scale " + fmt_num(v.chi2_scale, 2) + ")"
+                                       : "");
     J.explained = v.explained && material.empty() && negligible.empty();
     J.negligible_only = v.explained && material.empty() && !negligible.empty();
     if (J.explained) {

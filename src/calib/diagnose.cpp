@@ -137,7 +137,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     int model_free = rep.n_free;
     for (size_t k = 0; k < model.effect_count(); ++k)
         if (model.effect_desc(k).stage == Stage::Position) model_free -= int(model.effect_desc(k).params.size());
-    const Verdict vcur = judge(cur, cf.grid, jig, rep.n_free);
+    const Verdict vcur = judge(cur, cf.grid, jig, rep.n_free, cf.fit_options.hole_sigma);
     // The fitted model's reading-space chi-square, the reference every
     // candidate and every review refit is compared with.
     const double chi2_cur = model_chi2(model, pos, cf.fit_options);
@@ -188,11 +188,13 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
         // and after the first search, at most.
         for (int pass = 0; pass < 4 + 3; ++pass) {
             if (!user_jig && rounds < 3) {
-                const V3 j2 = sctx.own_jig(sr.E);
-                if (!((j2 - sctx.jig).array().abs() <= 0.05 * sctx.jig.array().abs().max(1e-6)).all()) {
+                const V3 j2 = sctx.own_jig(sr.E), h2 = sctx.own_hole(sr.E, j2);
+                const auto tol = 0.05 * sctx.jig.array().abs().max(1e-6);
+                if (!((j2 - sctx.jig).array().abs() <= tol).all() ||
+                    !((h2 - sctx.fo.hole_sigma).array().abs() <= tol).all()) {
                     ++rounds;
                     sctx.jig = j2;
-                    sctx.fo.jig_sigma = j2;
+                    set_jig_noise(sctx.fo, j2, h2);
                     Model start = sr.model;
                     FitReport r0;
                     if (!sctx.fit(start, "search (noise model re-estimated)", r0)) {
@@ -278,7 +280,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     std::string verdict, unexplained_summary;
     json recommended = nullptr;
     if (search) {
-        const Verdict vr = judge(sr.E, cf.grid, sctx.jig, sr.rep.n_free);
+        const Verdict vr = judge(sr.E, cf.grid, sctx.jig, sr.rep.n_free, sctx.fo.hole_sigma);
         const Judgement jr = judge_model(vr, sr.E, &sr.cands, &findings, noise_floor(sr.E, sctx.jig));
         json path = json::array(), alternatives = json::array();
         for (auto &st : sr.path) {
@@ -299,7 +301,9 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
                        {"noise_floor_mm", vec3(noise_floor(sr.E, sctx.jig))},
                        {"jig_tolerance_mm", vec3(sctx.jig)},
                        {"chi2_p_value", vr.chi2_p},
-                       {"structure", {{"statistic", vr.moran_z}, {"p_value", vr.moran_p}}},
+                       {"chi2_scale", vr.chi2_scale},
+                       {"structure", {{"statistic", vr.moran_z}, {"p_value", vr.moran_p}, {"variance_scale", vr.moran_scale}}},
+                       {"plate_holes_mm", vec3(sctx.fo.hole_sigma)},
                        {"significant_left", jr.significant},
                        {"alternatives", alternatives},
                        {"alternatives_bic_change", alt_bic},
@@ -421,13 +425,24 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
                                                   "from second differences along the plate; capped at 0.05 mm"
                                                 : "no repeated samples: the pots' noise and the jig's scatter cannot be "
                                                   "told apart, both are in this estimate"}};
+    out["jig_tolerance_mm"]["plate_holes"] = vec3(cf.fit_options.hole_sigma);
+    out["jig_tolerance_mm"]["plate_holes_note"] =
+        "the part of the tolerance each hole shares at every height, from the covariance across heights of the "
+        "same second differences: the fit weighs each hole's readings as one block (generalised least squares) "
+        "and the chi-square and structure tests are widened for it";
     out["chi2_per_dof"] = vcur.chi2 / vcur.dof;
     out["dof"] = vcur.dof;
     out["chi2_p_value"] = vcur.chi2_p;
+    out["chi2_test"] = {{"scale", vcur.chi2_scale},
+                        {"method", "chi2 / scale against chi-square(dof / scale) (Satterthwaite; scale 1: chi-square(dof)); "
+                                   "the scale is tr(R^2)/tr(R), R the residuals' correlation from the plate's holes"}};
     out["structure"] = {{"statistic", vcur.moran_z},
                         {"p_value", vcur.moran_p},
+                        {"variance_scale", vcur.moran_scale},
                         {"method", "Moran's I of the standardised position residuals over the plate's neighbour "
-                                   "graph, per axis, per-height means removed; z-score, max over axes, Bonferroni p"}};
+                                   "graph, per axis, per-height means removed; z-score (over the square root of "
+                                   "variance_scale, the variance the plate's holes add by repeating at every height), "
+                                   "max over axes, Bonferroni p"}};
     out["explained"] = jm.explained;
     out["negligible_only"] = jm.negligible_only;
     out["significant_left"] = jm.significant;

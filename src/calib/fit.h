@@ -36,6 +36,16 @@ std::vector<PreparedPos> prepare(const Dataset &d);
 
 struct FitOptions {
     Eigen::Vector3d jig_sigma{0.03, 0.03, 0.03}; // mm, per axis, std of each position's own error
+    // The plate's error per hole (mm, per axis), shared by the hole's
+    // positions at every height: a random effect, so that the fit is
+    // generalised least squares with each hole's readings as one block
+    // (fit_problem.h). hole[j]: position j's hole (-1 or empty: none);
+    // jig_sigma is then what is left per position. Treating those errors as
+    // independent gave a candidate able to follow part of a plate's pattern
+    // several times the chi-square independent errors would
+    // (docs/calibration.md, "The jig as it is").
+    std::vector<int> hole;
+    Eigen::Vector3d hole_sigma = Eigen::Vector3d::Zero();
     std::vector<char> use;                       // positions that take part (empty: all)
     // The jig as it is: each fixture height's own x error (jig frame, the
     // axis the spacer sets), fitted as nuisance offsets beside the model's

@@ -20,6 +20,7 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
         return false;
     }
     out.grid = diag::make_grid(pos, data.heights);
+    out.fit_options.hole = out.grid.hole_index; // weighed by FitOptions::hole_sigma, estimated below
     // The jig as it is (diag_jig.h): each fixture height's own x error is
     // fitted beside the model, so that no device effect is bent to follow
     // a spacer's error.
@@ -72,11 +73,13 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
         return false;
     }
     out.fitted = diag::evaluate(model, pos);
-    // Jig tolerance from the white part of the residual, then refit with it.
+    // Jig tolerance from the white part of the residual, and the part of it
+    // the plate's holes share at every height; then refit with them.
     if (!user_jig) {
         V3 est = diag::estimate_nugget(out.fitted, out.grid);
         for (int a = 0; a < 3; ++a) out.jig(a) = std::min(est(a), jig_cap);
-        out.fit_options.jig_sigma = out.jig;
+        out.hole = diag::estimate_hole_std(out.fitted, out.grid).cwiseMin(out.jig);
+        diag::set_jig_noise(out.fit_options, out.jig, out.hole);
         if (model.effect_count() > 0) {
             if (!fit()) {
                 err = out.report.message.empty() ? "fit cancelled" : out.report.message;

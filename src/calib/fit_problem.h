@@ -1,7 +1,7 @@
 // The least-squares problem a fit solves: the model's readings against
 // the per-position means, weighted (sqrt(w) * (mean - y)), with their
-// Jacobian over the fitted parameters and the fixture heights' x offsets;
-// the gauge (full = base + Q * free), the bounds and the weak prior.
+// Jacobian over the fitted parameters and the fixture heights' x offsets,
+// each plate hole's block decorrelated (generalised least squares); the gauge (full = base + Q * free), the bounds and the weak prior.
 // Private to src/calib: fit.cpp runs the optimiser on it, fit_queries.cpp
 // answers the diagnosis's questions about a model (its chi-square, its
 // Jacobian, an effect's overlap with the others).
@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -76,9 +77,77 @@ struct Problem {
             wo.hold.clear();
             Problem wp(wm, pos, wo); // the same positions (opt.use)
             w = wp.w;
+            holes = wp.holes;
             failure = wp.failure;
         } else {
             compute_weights();
+        }
+    }
+
+    // The plate's holes (FitOptions::hole): a hole's error e (3-vector, sd
+    // hole_sigma per axis) moves each of its positions' readings by dP e, so
+    // the weighted residuals of a hole's m positions have the covariance
+    // I + U U' (U: 4m x 3, the sqrt(w) dP hole_sigma rows) instead of I.
+    // Generalised least squares multiplies them by (I + U U')^(-1/2)
+    // = I - Q diag(c) Q', Q the orthonormal directions of U and
+    // c = 1 - 1/sqrt(1 + s^2) for its singular values s: the chi-square is
+    // then the Gaussian likelihood's, the number of residuals unchanged.
+    // Fixed for a problem, like the weights (and taken with them from
+    // weigh_with), so the Jacobian is transformed the same way.
+    struct HoleBlock {
+        std::vector<int> r; // indices into rows
+        Eigen::MatrixXd Q;  // 4m x k
+        Eigen::VectorXd c;  // k
+    };
+    std::vector<HoleBlock> holes;
+
+    bool hole_model() const {
+        return opt.hole.size() == pos.size() && (opt.hole_sigma.array() > 0).any();
+    }
+    void build_holes(const std::vector<Eigen::Matrix<double, 4, 3>> &dPs) {
+        holes.clear();
+        std::map<int, std::vector<int>> by;
+        for (size_t r = 0; r < rows.size(); ++r)
+            if (opt.hole[size_t(rows[r])] >= 0) by[opt.hole[size_t(rows[r])]].push_back(int(r));
+        for (auto &kv : by) {
+            HoleBlock b;
+            b.r = kv.second;
+            const int m = int(b.r.size());
+            Eigen::MatrixXd U(4 * m, 3);
+            for (int i = 0; i < m; ++i)
+                for (int c = 0; c < 4; ++c)
+                    for (int a = 0; a < 3; ++a)
+                        U(4 * i + c, a) = std::sqrt(w(4 * b.r[size_t(i)] + c)) * dPs[size_t(b.r[size_t(i)])](c, a) *
+                                          opt.hole_sigma(a);
+            // U = Q S V': the eigenvectors V of U'U (3 x 3), Q = U V / s.
+            Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(U.transpose() * U);
+            std::vector<int> keep;
+            for (int k = 0; k < 3; ++k)
+                if (es.eigenvalues()(k) > 1e-12 * std::max(1.0, es.eigenvalues().maxCoeff())) keep.push_back(k);
+            if (keep.empty()) continue;
+            b.Q.resize(4 * m, int(keep.size()));
+            b.c.resize(int(keep.size()));
+            for (size_t q = 0; q < keep.size(); ++q) {
+                const double s2 = es.eigenvalues()(keep[q]);
+                b.Q.col(int(q)) = U * es.eigenvectors().col(keep[q]) / std::sqrt(s2);
+                b.c(int(q)) = 1.0 - 1.0 / std::sqrt(1.0 + s2);
+            }
+            holes.push_back(std::move(b));
+        }
+    }
+    // res (and J's rows) of each hole block times (I + U U')^(-1/2).
+    void decorrelate(Eigen::VectorXd &res, Eigen::MatrixXd *J) const {
+        for (const auto &b : holes) {
+            const int m = int(b.r.size());
+            Eigen::VectorXd v(4 * m);
+            for (int i = 0; i < m; ++i) v.segment<4>(4 * i) = res.segment<4>(4 * b.r[size_t(i)]);
+            v -= b.Q * b.c.cwiseProduct(b.Q.transpose() * v);
+            for (int i = 0; i < m; ++i) res.segment<4>(4 * b.r[size_t(i)]) = v.segment<4>(4 * i);
+            if (!J) continue;
+            Eigen::MatrixXd B(4 * m, J->cols());
+            for (int i = 0; i < m; ++i) B.middleRows<4>(4 * i) = J->middleRows<4>(4 * b.r[size_t(i)]);
+            B -= b.Q * (b.c.asDiagonal() * (b.Q.transpose() * B));
+            for (int i = 0; i < m; ++i) J->middleRows<4>(4 * b.r[size_t(i)]) = B.middleRows<4>(4 * i);
         }
     }
     int n_params() const { return ev.size() + F; }
@@ -183,6 +252,8 @@ struct Problem {
         w.resize(4 * int(rows.size()));
         const bool batched = ev.has_batch();
         const bool batch_ok = batched && eval_rows(false, true);
+        std::vector<Eigen::Matrix<double, 4, 3>> dPs;
+        if (hole_model()) dPs.resize(rows.size());
         for (size_t r = 0; r < rows.size(); ++r) {
             const auto &pp = pos[rows[r]];
             Eigen::Vector4d y;
@@ -196,7 +267,9 @@ struct Problem {
                 for (int a = 0; a < 3; ++a) jig += dP(c, a) * dP(c, a) * opt.jig_sigma(a) * opt.jig_sigma(a);
                 w(4 * r + c) = 1.0 / (pp.var_mean(c) + jig);
             }
+            if (!dPs.empty()) dPs[r] = dP;
         }
+        if (!dPs.empty()) build_holes(dPs);
     }
 
     // Weighted residuals (sqrt(w) * (mean - y)) and Jacobian of y. False
@@ -234,6 +307,7 @@ struct Problem {
             // jig's rotation (a few mrad) is left out of this column.
             if (F > 0) J->block<4, 1>(4 * long(r), ev.size() + opt.fixture[j]) = sw * dP.col(0).array();
         }
+        decorrelate(res, J);
         return true;
     }
 

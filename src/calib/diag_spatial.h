@@ -30,8 +30,9 @@ Grid make_grid(const std::vector<PreparedPos> &pos, const std::vector<double> &h
 V3 estimate_nugget(const Eval &E, const Grid &G);
 // The part of that scatter each hole shares at every height (the plate's
 // drilling error), per axis: the covariance across heights of the same
-// second differences (a triple of holes seen at two heights or more).
-// Zero for a scattered layout or when nothing repeats.
+// second differences (a triple of holes seen at two heights or more), in
+// y and z (the plate's plane; x is left at zero). Zero for a scattered
+// layout or where it is not significant.
 V3 estimate_hole_std(const Eval &E, const Grid &G);
 // The fit's noise model from a jig's white scatter per position (`jig`,
 // holes included) and the part of it each hole shares (`hole`, at most

@@ -9,7 +9,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
 #include <string>
 #include <vector>
 
@@ -70,6 +69,12 @@ struct Problem {
         build_gauge();
         for (size_t j = 0; j < pos.size(); ++j)
             if (opt.use.empty() || opt.use[j]) rows.push_back(int(j));
+        // A hole's positions next to each other: its block of residuals and
+        // Jacobian rows is then contiguous (decorrelate works in place).
+        if (hole_model())
+            std::stable_sort(rows.begin(), rows.end(), [&](int a, int b) {
+                return unsigned(opt.hole[size_t(a)]) < unsigned(opt.hole[size_t(b)]); // -1 (none) last
+            });
         if (opt.weigh_with) {
             Model wm = *opt.weigh_with;
             FitOptions wo = opt;
@@ -95,9 +100,9 @@ struct Problem {
     // Fixed for a problem, like the weights (and taken with them from
     // weigh_with), so the Jacobian is transformed the same way.
     struct HoleBlock {
-        std::vector<int> r; // indices into rows
-        Eigen::MatrixXd Q;  // 4m x k
-        Eigen::VectorXd c;  // k
+        int start = 0, m = 0; // rows[start, start + m): the hole's positions (contiguous: see rows)
+        Eigen::MatrixXd Q;    // 4m x k
+        Eigen::VectorXd c;    // k
     };
     std::vector<HoleBlock> holes;
 
@@ -106,18 +111,19 @@ struct Problem {
     }
     void build_holes(const std::vector<Eigen::Matrix<double, 4, 3>> &dPs) {
         holes.clear();
-        std::map<int, std::vector<int>> by;
-        for (size_t r = 0; r < rows.size(); ++r)
-            if (opt.hole[size_t(rows[r])] >= 0) by[opt.hole[size_t(rows[r])]].push_back(int(r));
-        for (auto &kv : by) {
+        for (size_t r0 = 0, r1; r0 < rows.size(); r0 = r1) {
+            const int h = opt.hole[size_t(rows[r0])];
+            for (r1 = r0 + 1; r1 < rows.size() && opt.hole[size_t(rows[r1])] == h;) ++r1;
+            if (h < 0) continue;
             HoleBlock b;
-            b.r = kv.second;
-            const int m = int(b.r.size());
+            b.start = int(r0);
+            b.m = int(r1 - r0);
+            const int m = b.m;
             Eigen::MatrixXd U(4 * m, 3);
             for (int i = 0; i < m; ++i)
                 for (int c = 0; c < 4; ++c)
                     for (int a = 0; a < 3; ++a)
-                        U(4 * i + c, a) = std::sqrt(w(4 * b.r[size_t(i)] + c)) * dPs[size_t(b.r[size_t(i)])](c, a) *
+                        U(4 * i + c, a) = std::sqrt(w(4 * (b.start + i) + c)) * dPs[size_t(b.start + i)](c, a) *
                                           opt.hole_sigma(a);
             // U = Q S V': the eigenvectors V of U'U (3 x 3), Q = U V / s.
             Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(U.transpose() * U);
@@ -136,18 +142,23 @@ struct Problem {
         }
     }
     // res (and J's rows) of each hole block times (I + U U')^(-1/2).
+    // The directions are orthonormal, so I - Q diag(c) Q' is the product of
+    // the rank-one I - c_q q q' in any order: one dot product and one axpy
+    // per direction and column, over the block's contiguous rows (Eigen's
+    // general products cost more than they save at 20 x 3).
     void decorrelate(Eigen::VectorXd &res, Eigen::MatrixXd *J) const {
         for (const auto &b : holes) {
-            const int m = int(b.r.size());
-            Eigen::VectorXd v(4 * m);
-            for (int i = 0; i < m; ++i) v.segment<4>(4 * i) = res.segment<4>(4 * b.r[size_t(i)]);
-            v -= b.Q * b.c.cwiseProduct(b.Q.transpose() * v);
-            for (int i = 0; i < m; ++i) res.segment<4>(4 * b.r[size_t(i)]) = v.segment<4>(4 * i);
-            if (!J) continue;
-            Eigen::MatrixXd B(4 * m, J->cols());
-            for (int i = 0; i < m; ++i) B.middleRows<4>(4 * i) = J->middleRows<4>(4 * b.r[size_t(i)]);
-            B -= b.Q * (b.c.asDiagonal() * (b.Q.transpose() * B));
-            for (int i = 0; i < m; ++i) J->middleRows<4>(4 * b.r[size_t(i)]) = B.middleRows<4>(4 * i);
+            const long r0 = 4L * b.start, len = 4L * b.m;
+            for (int q = 0; q < b.Q.cols(); ++q) {
+                const auto dir = b.Q.col(q);
+                auto v = res.segment(r0, len);
+                v -= (b.c(q) * dir.dot(v)) * dir;
+                if (!J) continue;
+                for (long col = 0; col < J->cols(); ++col) {
+                    auto x = J->col(col).segment(r0, len);
+                    x -= (b.c(q) * dir.dot(x)) * dir;
+                }
+            }
         }
     }
     int n_params() const { return ev.size() + F; }

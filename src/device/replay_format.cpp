@@ -4,6 +4,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <vector>
@@ -36,6 +37,18 @@ int parse(std::vector<uint8_t> bytes, const std::string &name, File &out, std::s
     // channel becomes the records.
     if (n >= 5 && bytes[0] == 0x89 && std::memcmp(bytes.data() + 1, "MCAP", 4) == 0)
         return recording::parse_mcap(std::move(bytes), name, out, err);
+    // A text file (a jig CSV given to replay: by mistake) is said to be one,
+    // with where it belongs, rather than only "magic missing".
+    const size_t head = std::min<size_t>(n, 256);
+    const bool text = n > 0 && std::all_of(bytes.begin(), bytes.begin() + long(head), [](uint8_t c) {
+        return c == '\n' || c == '\r' || c == '\t' || (c >= 0x20 && c != 0x7F);
+    });
+    if (text && (n < sizeof kMagic || std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0))
+        return parse_error(name, 0,
+                           "a text file, not a cdm recording (magic \"CDMRPLAY\" missing): replay: plays the replay "
+                           "format or MCAP (`cdm record FILE`, `cdm record FILE.mcap`), not a CSV; a jig dataset "
+                           "CSV is read by `cdm calib diagnose` or `cdm calib fit`",
+                           err);
     if (n < kHeaderSize)
         return parse_error(name, n, "file ends inside the " + std::to_string(kHeaderSize) + "-byte header", err);
     if (std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0)

@@ -720,8 +720,12 @@ def section_summary(diag, page):
         pa = jt.get("per_axis")
         pa = (" per axis " + ", ".join(f"{a} {fmt_mm(_num(v))}" for a, v in zip(AXES, pa))
               if isinstance(pa, list) and len(pa) == 3 else "")
+        ph = jt.get("plate_holes")
+        ph = (f"; of it shared by a hole at every height (weighed as one block per hole): "
+              + ", ".join(f"{a} {fmt_mm(_num(v))}" for a, v in zip(AXES, ph))
+              if isinstance(ph, list) and len(ph) == 3 and any(_finite(v) and _num(v) > 0 for v in ph) else "")
         facts.append(("Jig tolerance", f"{fmt_mm(jt.get('value'))} mm "
-                      f"({_e(jt.get('source', 'source not given'))}){pa}"))
+                      f"({_e(jt.get('source', 'source not given'))}){pa}{ph}"))
     fit = _dict(diag, "fit")
     if fit is not None:
         conv = fit.get("converged")

@@ -199,6 +199,14 @@ void test_corrupt_files(void **) {
     b[0] = 'X';
     write(b);
     expect_parse_error(bad, "magic");
+    // A jig CSV given to replay: by mistake is said to be a text file, and
+    // where it belongs.
+    {
+        const std::string csv = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4\n0,30,0,0,1,2,3,4\n";
+        write(std::vector<uint8_t>(csv.begin(), csv.end()));
+        expect_parse_error(bad, "a text file, not a cdm recording");
+        expect_parse_error(bad, "cdm calib diagnose");
+    }
     b = bytes;
     b[8] = 2;
     write(b);

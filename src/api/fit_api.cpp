@@ -4,6 +4,7 @@
 
 #include "api/errors.h"
 #include "api/jobs.h"
+#include "calib/diag_stats.h"
 #include "calib/diagnose.h"
 #include "calib/fit_calibration.h"
 #include "calib/fit_outliers.h"
@@ -28,7 +29,28 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
         eff.push_back({{"name", d.name}, {"params", pj}});
     }
     const int dof = std::max(1, cf.report.n_obs - cf.report.n_free);
+    // Whether the fitted effects explain the data, by the diagnosis's own
+    // two tests (judge: the position chi-square against the noise and the
+    // jig, and the spatial structure), so that a fit of the wrong effects is
+    // not reported only as "converged". Candidates are not tried here.
+    const cdm::diag::Verdict v =
+        cdm::diag::judge(cf.fitted, cf.grid, cf.jig, cf.report.n_free, cf.fit_options.hole_sigma);
+    std::string text =
+        v.explained ? "the fitted effects explain the data to the noise and the jig's tolerance (no other effect "
+                      "tried: `cdm calib diagnose` does)"
+                    : "the fitted effects do not explain the data: chi2/dof " + cdm::diag::fmt_num(v.chi2 / v.dof, 2) +
+                          " (" + cdm::diag::fmt_p(v.chi2_p) + "), spatial structure z = " +
+                          cdm::diag::fmt_num(v.moran_z, 1) + " (" + cdm::diag::fmt_p(v.moran_p) +
+                          "); the calibration corrects only what they can: `cdm calib diagnose` says what is missing";
+    json check = {{"explained", v.explained},
+                  {"chi2_per_dof", v.chi2 / v.dof},
+                  {"chi2_p_value", v.chi2_p},
+                  {"structure", {{"statistic", v.moran_z}, {"p_value", v.moran_p}}},
+                  {"test", "the diagnosis's: position chi-square against noise + jig tolerance and Moran's I of the "
+                           "residual over the plate, each at p >= 1e-3"},
+                  {"text", text}};
     return {{"effects", eff},
+            {"model_check", check},
             {"fit",
              {{"converged", cf.report.converged}, {"chi2", cf.report.chi2}, {"dof", dof},
               {"n_free", cf.report.n_free}, {"evaluations", cf.report.evals}, {"seconds", cf.report.seconds},

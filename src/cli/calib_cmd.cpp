@@ -237,6 +237,8 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
             std::printf("glitches set aside: %zu samples at %zu positions (beyond %.1f sd)\n",
                         r["glitches"]["count"].get<size_t>(), r["glitches"]["positions"].get<size_t>(),
                         r["glitches"]["threshold_sd"].get<double>());
+        if (r.contains("model_check") && !r["model_check"]["explained"].get<bool>())
+            std::printf("warning: %s\n", r["model_check"]["text"].get<std::string>().c_str());
         std::printf("calibration written to %s\n", a.calib_out.c_str());
     } else {
         print_summary(r);

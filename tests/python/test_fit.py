@@ -140,3 +140,18 @@ def test_a_reference_off_its_height_is_judged_not_made_a_height(tmp_path):
     assert d["data"]["heights"] == [30.0, 50.0, 70.0] and d["data"]["off_height_points"] == [20], d["data"]
     assert [x["point"] for x in d["data"]["outliers"]["set_aside"]] == [100]
     assert d["explained"], d["verdict"]
+
+
+def test_fit_says_when_its_effects_do_not_explain_the_data(jig, tmp_path):
+    """A fit of the wrong effects converges too: cdm_fit's model_check says,
+    by the diagnosis's own two tests, that they do not explain the data (the
+    jig hides an exit pulley of a few mm: cable offsets leave chi2/dof over
+    100), and that the right one does."""
+    right = cdm.fit(jig / "ds.csv", DEVICE_JSON, ["exit_pulley"], calibration_out=tmp_path / "a.json")
+    wrong = cdm.fit(jig / "ds.csv", DEVICE_JSON, ["cable_offset"], calibration_out=tmp_path / "b.json")
+    assert wrong["fit"]["converged"]
+    assert right["model_check"]["explained"] is True
+    assert right["model_check"]["chi2_p_value"] >= 1e-3 and right["model_check"]["structure"]["p_value"] >= 1e-3
+    w = wrong["model_check"]
+    assert w["explained"] is False and w["chi2_per_dof"] > 10
+    assert "do not explain the data" in w["text"] and "cdm calib diagnose" in w["text"]

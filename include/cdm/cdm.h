@@ -582,9 +582,11 @@ CDM_API int cdm_dataset_writer_add(cdm_dataset_writer *w, int point, const doubl
  * nothing). Otherwise as cdm_dataset_writer_add. */
 CDM_API int cdm_dataset_writer_add_at(cdm_dataset_writer *w, int point, const double ref_mm[3],
                                       const double lengths_mm[4], double t_s);
-/* Writes the rest, fsyncs and renames over `path` (no row: the header
- * alone). Once only: a second commit is CDM_ERR_INVALID_ARG ("already
- * committed"); after an add or commit that failed with CDM_ERR_IO, that
+/* Writes the rest, fsyncs and renames over `path`. Once only: a second
+ * commit is CDM_ERR_INVALID_ARG ("already committed"); so is a commit with
+ * no row added ("no row was added": the reader would refuse such a file,
+ * and it would replace what `path` held), which writes nothing and leaves
+ * the writer open for rows; after an add or commit that failed with CDM_ERR_IO, that
  * error again with the first failure's text. The writer still needs
  * cdm_dataset_writer_free. */
 CDM_API int cdm_dataset_writer_commit(cdm_dataset_writer *w);

@@ -168,7 +168,10 @@ public:
     // C API's names) and its value.
     bool add_row(long point, const double ref[3], const double lengths[4], std::string &err, double t_s = NAN,
                  bool *usage = nullptr);
-    // A second commit() is refused (*usage); after a failure, see above.
+    // A second commit() is refused (*usage), and so is a commit with no row
+    // (the file would be one the reader refuses, in place of what `path`
+    // held): nothing is written, and rows can still be added. After a
+    // failure, see above.
     bool commit(std::string &err, bool *usage = nullptr);
 
 private:

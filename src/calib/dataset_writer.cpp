@@ -138,7 +138,14 @@ bool DatasetWriter::commit(std::string &err, bool *usage) {
         err = failed_ + " (an earlier failure ended this dataset: nothing more is written)";
         return false;
     }
-    if (timed_ < 0) buf_ = std::string(kHeader) + "\n"; // no rows: the header alone
+    // No row: a file the reader refuses ("no rows"), and it would replace
+    // whatever `path` held (an earlier session's dataset lost to one that
+    // recorded nothing). Refused; the writer can still take rows.
+    if (timed_ < 0) {
+        err = path_ + ": no row was added: nothing to commit, the file is left as it was";
+        if (usage) *usage = true;
+        return false;
+    }
     if ((!buf_.empty() && !f_.write(buf_, err)) || !f_.commit(err)) {
         failed_ = err;
         return false;

@@ -183,6 +183,13 @@ static void test_dataset_writer_c_api_atomic(void **) {
     assert_int_equal(::read(fd, b, sizeof b), 3);
     ::close(fd);
     assert_int_equal(cdm_dataset_writer_open(p.c_str(), nullptr, 0, &w), CDM_OK);
+    // A commit with no row would replace the old file with one the reader
+    // refuses: refused, nothing written, the writer still takes rows.
+    assert_int_equal(cdm_dataset_writer_commit(w), CDM_ERR_INVALID_ARG);
+    expect_text("no row was added");
+    fd = ::open(p.c_str(), O_RDONLY);
+    assert_int_equal(::read(fd, b, sizeof b), 3);
+    ::close(fd);
     assert_int_equal(cdm_dataset_writer_add(w, 7, ref, len), CDM_OK);
     assert_int_equal(cdm_dataset_writer_commit(w), CDM_OK);
     cdm_dataset_writer_free(w);

@@ -39,13 +39,18 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
         v.explained ? "the fitted effects explain the data to the noise and the jig's tolerance (no other effect "
                       "tried: `cdm calib diagnose` does)"
                     : "the fitted effects do not explain the data: chi2/dof " + cdm::diag::fmt_num(v.chi2 / v.dof, 2) +
-                          " (" + cdm::diag::fmt_p(v.chi2_p) + "), spatial structure z = " +
+                          " (" + cdm::diag::fmt_p(v.chi2_p) +
+                          (v.chi2_scale > 1.005 ? ", widened x" + cdm::diag::fmt_num(v.chi2_scale, 2) +
+                                                      " for the plate's holes"
+                                                : "") +
+                          "), spatial structure z = " +
                           cdm::diag::fmt_num(v.moran_z, 1) + " (" + cdm::diag::fmt_p(v.moran_p) +
                           "); the calibration corrects only what they can: `cdm calib diagnose` says what is missing";
     json check = {{"explained", v.explained},
                   {"chi2_per_dof", v.chi2 / v.dof},
                   {"chi2_p_value", v.chi2_p},
-                  {"structure", {{"statistic", v.moran_z}, {"p_value", v.moran_p}}},
+                  {"chi2_scale", v.chi2_scale},
+                  {"structure", {{"statistic", v.moran_z}, {"p_value", v.moran_p}, {"variance_scale", v.moran_scale}}},
                   {"test", "the diagnosis's: position chi-square against noise + jig tolerance and Moran's I of the "
                            "residual over the plate, each at p >= 1e-3"},
                   {"text", text}};

@@ -47,6 +47,8 @@ Grid make_grid(const std::vector<PreparedPos> &pos, const std::vector<double> &h
         if (cols[k] - cols[k - 1] > 1e-6) pitch = std::min(pitch, cols[k] - cols[k - 1]);
     if (!std::isfinite(pitch)) pitch = 5;
     G.pitch = pitch;
+    G.cell.resize(P);
+    for (size_t j = 0; j < P; ++j) G.cell[j] = {std::lround(pos[j].ref(1) / pitch), std::lround(pos[j].ref(2) / pitch)};
     G.hole_index.assign(P, -1);
     if (G.layered) {
         std::map<std::array<long, 2>, int> hole; // the same reference to 0.1 um
@@ -160,26 +162,32 @@ V3 estimate_nugget(const Eval &E, const Grid &G) {
 // The same second differences at two heights of the same holes share the
 // holes' errors and nothing else: the noise, the seating and a height's own
 // errors are independent across heights, and a smooth effect nearly cancels
-// in each. So E[dd_k dd_k'] = 1.5 s_hole^2, an unbiased estimate with no
-// noise to subtract. Each triple of holes gives the mean of its products
-// over pairs of heights; the estimate is their mean over the triples, kept
-// only where it is more than 3 standard errors above zero (their spread
-// over the triples: neighbouring triples share positions, so this standard
-// error is somewhat small, and 3 rather than 2). A variance component the
-// data do not show costs a block of generalised least squares in every fit
-// and changes nothing (0.25 of the diagnosis's time on a clean jig).
+// in each. So E[dd_k dd_k'] = 1.5 s_hole^2, with no noise to subtract. Each
+// triple of holes gives the mean of its products over pairs of heights.
+// Neighbouring triples along a plate row share holes (their products
+// correlate by about 4/9), so the triples are not independent samples: the
+// standard error is taken over the plate's rows (the y triples of one row)
+// and columns (the z triples of one column), which share no triple, and the
+// estimate is the mean over those lines. It is kept only where it is more
+// than 3 of those standard errors above zero: a variance component the data
+// do not show would cost every fit a block of generalised least squares and
+// change nothing.
 V3 estimate_hole_std(const Eval &E, const Grid &G) {
     V3 out = V3::Zero();
     if (!G.layered || G.hole_index.size() != E.res.size()) return out;
-    std::vector<V3> g; // per triple of holes: the mean product over pairs of heights
-    auto add = [&](const std::vector<int> &cen, const std::vector<std::array<int, 2>> &pr) {
+    std::vector<V3> line_mean; // per plate row (y triples) and column (z triples)
+    if (G.cell.size() != E.res.size()) return out;
+    auto add = [&](const std::vector<int> &cen, const std::vector<std::array<int, 2>> &pr, int across) {
         std::map<std::array<int, 3>, std::vector<V3>> by_holes;
+        std::map<std::array<int, 3>, long> line_of;
         for (size_t k = 0; k < cen.size(); ++k) {
             const int j = cen[k], l = pr[k][0], r = pr[k][1];
             if (!E.ok[size_t(j)] || !E.ok[size_t(l)] || !E.ok[size_t(r)]) continue;
-            by_holes[{G.hole_index[size_t(j)], G.hole_index[size_t(l)], G.hole_index[size_t(r)]}].push_back(
-                E.res[size_t(j)] - 0.5 * (E.res[size_t(l)] + E.res[size_t(r)]));
+            const std::array<int, 3> key{G.hole_index[size_t(j)], G.hole_index[size_t(l)], G.hole_index[size_t(r)]};
+            by_holes[key].push_back(E.res[size_t(j)] - 0.5 * (E.res[size_t(l)] + E.res[size_t(r)]));
+            line_of[key] = G.cell[size_t(j)][size_t(across)];
         }
+        std::map<long, std::pair<V3, double>> lines;
         for (auto &kv : by_holes) {
             const auto &d = kv.second;
             V3 sum = V3::Zero();
@@ -189,17 +197,21 @@ V3 estimate_hole_std(const Eval &E, const Grid &G) {
                     sum += d[a].cwiseProduct(d[b]);
                     n += 1;
                 }
-            if (n > 0) g.push_back(sum / n);
+            if (n == 0) continue;
+            auto &ln = lines.try_emplace(line_of[kv.first], V3::Zero(), 0.0).first->second;
+            ln.first += sum / n;
+            ln.second += 1;
         }
+        for (auto &kv : lines) line_mean.push_back(kv.second.first / kv.second.second);
     };
-    add(G.ycentre, G.ypair);
-    add(G.zcentre, G.zpair);
-    const double N = double(g.size());
-    if (N < 20) return out;
+    add(G.ycentre, G.ypair, 1); // a row: one z
+    add(G.zcentre, G.zpair, 0); // a column: one y
+    const double N = double(line_mean.size());
+    if (N < 8) return out;
     V3 mean = V3::Zero(), var = V3::Zero();
-    for (auto &v : g) mean += v;
+    for (auto &v : line_mean) mean += v;
     mean /= N;
-    for (auto &v : g) var += (v - mean).cwiseProduct(v - mean);
+    for (auto &v : line_mean) var += (v - mean).cwiseProduct(v - mean);
     var /= N - 1;
     // y and z only: a hole is drilled off in the plate's plane; along x (the
     // plate's normal, set by the fixture) the plate is flat, and what

@@ -21,6 +21,8 @@ struct Grid {
     // The plate's hole each position is in: positions of a layered jig with
     // the same (y, z) reference, at whatever height (-1: scattered layout).
     std::vector<int> hole_index;
+    // Each position's plate cell: (y, z) in pitches, rounded.
+    std::vector<std::array<long, 2>> cell;
     double pitch = 5;
     bool layered = true; // positions on a few fixture heights (the seed's jig)
 };

@@ -52,7 +52,8 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
     const std::string tests = "chi2/dof " + fmt_num(v.chi2 / v.dof, 2) + " (" + fmt_p(v.chi2_p) +
                               "), spatial structure z = " + fmt_num(v.moran_z, 1) + " (" + fmt_p(v.moran_p) + ")" +
                               (widened ? "; both tests widened for the plate's hole errors, which repeat at every "
-                                         "height (chi-square scale " + fmt_num(v.chi2_scale, 2) + ")"
+                                         "height (chi-square scale " + fmt_num(v.chi2_scale, 2) +
+                                             ", structure variance x" + fmt_num(v.moran_scale, 2) + ")"
                                        : "");
     J.explained = v.explained && material.empty() && negligible.empty();
     J.negligible_only = v.explained && material.empty() && !negligible.empty();

@@ -427,9 +427,14 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
                                                   "told apart, both are in this estimate"}};
     out["jig_tolerance_mm"]["plate_holes"] = vec3(cf.fit_options.hole_sigma);
     out["jig_tolerance_mm"]["plate_holes_note"] =
-        "the part of the tolerance each hole shares at every height, from the covariance across heights of the "
-        "same second differences: the fit weighs each hole's readings as one block (generalised least squares) "
-        "and the chi-square and structure tests are widened for it";
+        (cf.fit_options.hole_sigma.array() > 0).any()
+            ? "the part of the tolerance each hole shares at every height, from the covariance across heights of "
+              "the same second differences: the fit weighs each hole's readings as one block (generalised least "
+              "squares) and the chi-square and structure tests are widened for it"
+        : user_jig ? "none: the tolerance given is taken as each position's own"
+        : !cf.grid.layered ? "none: the positions are not on a plate measured at fixture heights"
+                           : "none significant (3 standard errors over the plate's rows and columns): every position's "
+                             "error is taken as its own";
     out["chi2_per_dof"] = vcur.chi2 / vcur.dof;
     out["dof"] = vcur.dof;
     out["chi2_p_value"] = vcur.chi2_p;

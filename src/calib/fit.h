@@ -39,11 +39,11 @@ struct FitOptions {
     // The plate's error per hole (mm, per axis), shared by the hole's
     // positions at every height: a random effect, so that the fit is
     // generalised least squares with each hole's readings as one block
-    // (fit_problem.h). hole[j]: position j's hole (-1 or empty: none);
-    // jig_sigma is then what is left per position. Treating those errors as
-    // independent gave a candidate able to follow part of a plate's pattern
-    // several times the chi-square independent errors would
-    // (docs/calibration.md, "The jig as it is").
+    // (fit_problem.h). hole[j]: position j's hole (-1: a hole of its own;
+    // empty: no hole model); jig_sigma is then what is left per position.
+    // Treating those errors as independent gave a candidate able to follow
+    // part of a plate's pattern several times the chi-square independent
+    // errors would (docs/calibration.md, "The holes in the fit").
     std::vector<int> hole;
     Eigen::Vector3d hole_sigma = Eigen::Vector3d::Zero();
     std::vector<char> use;                       // positions that take part (empty: all)
@@ -127,7 +127,10 @@ double model_chi2(const Model &m, const std::vector<PreparedPos> &pos, const Fit
 // parameters, and their Jacobian with respect to every fitted parameter
 // (columns: the effects in model order, each effect's parameters in order,
 // Position-stage effects left out; then, with FitOptions::fixture, one per
-// fixture height) — what the NLopt objective uses. False +
+// fixture height) — what the NLopt objective uses. Rows: 4 per used
+// position, in position order; with a hole model (FitOptions::hole_sigma)
+// the positions are grouped by hole and each hole's rows decorrelated, so
+// row 4r is no longer position r's alone. False +
 // err naming the effect when a user effect's apply fails.
 bool fit_residual_jacobian(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt,
                            Eigen::VectorXd &res, Eigen::MatrixXd &J, std::string &err);

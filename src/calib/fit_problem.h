@@ -112,9 +112,10 @@ struct Problem {
     void build_holes(const std::vector<Eigen::Matrix<double, 4, 3>> &dPs) {
         holes.clear();
         for (size_t r0 = 0, r1; r0 < rows.size(); r0 = r1) {
+            // A position in no known hole (-1) is its own: its share of the
+            // hole variance is still its error's (jig_sigma is the rest).
             const int h = opt.hole[size_t(rows[r0])];
-            for (r1 = r0 + 1; r1 < rows.size() && opt.hole[size_t(rows[r1])] == h;) ++r1;
-            if (h < 0) continue;
+            for (r1 = r0 + 1; h >= 0 && r1 < rows.size() && opt.hole[size_t(rows[r1])] == h;) ++r1;
             HoleBlock b;
             b.start = int(r0);
             b.m = int(r1 - r0);

@@ -68,6 +68,12 @@ public:
             err = path_ + ": a CSV recording holds poses: every row needs one";
             return CDM_ERR_INVALID_ARG;
         }
+        // After a failed write the file is ended: a row is not buffered to
+        // grow the memory of a caller that keeps writing.
+        if (!fail_.empty()) {
+            err = fail_;
+            return CDM_ERR_IO;
+        }
         // Not replayed, but a recording all the same: its host_time_ns
         // column keeps the order the replayable formats must keep.
         if (!replay::host_time_in_order(host_ns, last_ns_, rows_, err)) return CDM_ERR_INVALID_ARG;

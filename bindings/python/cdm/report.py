@@ -702,13 +702,21 @@ def section_summary(diag, page):
 
     # Scalar facts.
     facts = []
+    ct = _dict(diag, "chi2_test")
+    scale = ct.get("scale") if ct is not None else None
+    widened = _finite(scale) and scale > 1.005
     facts.append(("chi²/dof", fmt_g(diag.get("chi2_per_dof"), 4)
                   + (f" (dof {diag['dof']})" if _finite(diag.get("dof")) else "")
                   + (f", p-value {fmt_g(diag['chi2_p_value'], 3)}"
-                     if _finite(diag.get("chi2_p_value")) else "")))
+                     if _finite(diag.get("chi2_p_value")) else "")
+                  + (f" against chi-square(dof / {fmt_g(scale, 3)}) after dividing by {fmt_g(scale, 3)}: "
+                     "widened for the plate's hole errors, which repeat at every height (Satterthwaite)"
+                     if widened else "")))
     st = _dict(diag, "structure")
     if st is not None:
+        vs = st.get("variance_scale")
         facts.append(("Spatial structure statistic", fmt_g(st.get("statistic"), 4)
+                      + (f" (divided by √{fmt_g(vs, 3)} for the plate's holes)" if _finite(vs) and vs > 1.005 else "")
                       + (f" ({_e(st['method'])})" if isinstance(st.get("method"), str) else "")))
         facts.append(("Structure p-value", fmt_g(st.get("p_value"), 3)))
     else:

@@ -318,7 +318,8 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
         out["text"].push_back("the residual repeats at the same hole at every height: the plate's holes are off by "
                               "about " + what + " (analysis of variance by hole: " + tests +
                               "; independent from hole to hole): the jig's error, not the device's; the fit weighs "
-                              "it as the jig's tolerance");
+                              "it as the jig's (each hole's readings one block where its share is significant: "
+                              "jig_tolerance_mm.plate_holes)");
     }
     out["holes"] = ho;
     return A;

@@ -174,22 +174,21 @@ V3 estimate_nugget(const Eval &E, const Grid &G) {
 // change nothing.
 V3 estimate_hole_std(const Eval &E, const Grid &G) {
     V3 out = V3::Zero();
-    if (!G.layered || G.hole_index.size() != E.res.size()) return out;
+    if (!G.layered || G.hole_index.size() != E.res.size() || G.cell.size() != E.res.size()) return out;
     std::vector<V3> line_mean; // per plate row (y triples) and column (z triples)
-    if (G.cell.size() != E.res.size()) return out;
     auto add = [&](const std::vector<int> &cen, const std::vector<std::array<int, 2>> &pr, int across) {
-        std::map<std::array<int, 3>, std::vector<V3>> by_holes;
-        std::map<std::array<int, 3>, long> line_of;
+        // A triple of holes: its plate line and its second differences, one per height.
+        std::map<std::array<int, 3>, std::pair<long, std::vector<V3>>> by_holes;
         for (size_t k = 0; k < cen.size(); ++k) {
             const int j = cen[k], l = pr[k][0], r = pr[k][1];
             if (!E.ok[size_t(j)] || !E.ok[size_t(l)] || !E.ok[size_t(r)]) continue;
-            const std::array<int, 3> key{G.hole_index[size_t(j)], G.hole_index[size_t(l)], G.hole_index[size_t(r)]};
-            by_holes[key].push_back(E.res[size_t(j)] - 0.5 * (E.res[size_t(l)] + E.res[size_t(r)]));
-            line_of[key] = G.cell[size_t(j)][size_t(across)];
+            auto &t = by_holes[{G.hole_index[size_t(j)], G.hole_index[size_t(l)], G.hole_index[size_t(r)]}];
+            t.first = G.cell[size_t(j)][size_t(across)];
+            t.second.push_back(E.res[size_t(j)] - 0.5 * (E.res[size_t(l)] + E.res[size_t(r)]));
         }
         std::map<long, std::pair<V3, double>> lines;
         for (auto &kv : by_holes) {
-            const auto &d = kv.second;
+            const auto &d = kv.second.second;
             V3 sum = V3::Zero();
             double n = 0;
             for (size_t a = 0; a < d.size(); ++a)
@@ -198,7 +197,7 @@ V3 estimate_hole_std(const Eval &E, const Grid &G) {
                     n += 1;
                 }
             if (n == 0) continue;
-            auto &ln = lines.try_emplace(line_of[kv.first], V3::Zero(), 0.0).first->second;
+            auto &ln = lines.try_emplace(kv.second.first, V3::Zero(), 0.0).first->second;
             ln.first += sum / n;
             ln.second += 1;
         }
@@ -293,6 +292,20 @@ static HoleInflation hole_inflation(const Eval &E, const Grid &G, const V3 &jig,
     std::map<int, std::vector<size_t>> by_hole;
     for (size_t j = 0; j < P; ++j)
         if (E.ok[j] && G.hole_index[j] >= 0) by_hole[G.hole_index[j]].push_back(j);
+    // Neighbour pairs grouped by their two holes (the same for every axis).
+    std::map<std::pair<int, int>, std::vector<std::pair<size_t, size_t>>> edges;
+    size_t n_edges = 0;
+    for (size_t j = 0; j < P; ++j) {
+        if (!E.ok[j] || G.hole_index[j] < 0) continue;
+        for (int kk : G.nb[j]) {
+            const size_t k = size_t(kk);
+            if (k <= j || !E.ok[k] || G.hole_index[k] < 0) continue;
+            const int hj = G.hole_index[j], hk = G.hole_index[k];
+            if (hj <= hk) edges[{hj, hk}].push_back({j, k});
+            else edges[{hk, hj}].push_back({k, j});
+            ++n_edges;
+        }
+    }
     double trR = 0, trR2 = 0;
     for (int a = 0; a < 3; ++a) {
         const double h2 = hole(a) * hole(a);
@@ -304,21 +317,7 @@ static HoleInflation hole_inflation(const Eval &E, const Grid &G, const V3 &jig,
             for (size_t j : kv.second)
                 for (size_t k : kv.second)
                     if (j != k) trR2 += rho(j, k) * rho(j, k);
-        // Neighbour pairs grouped by their two holes.
-        std::map<std::pair<int, int>, std::vector<std::pair<size_t, size_t>>> edges;
-        size_t n_edges = 0;
-        for (size_t j = 0; j < P; ++j) {
-            if (!E.ok[j] || G.hole_index[j] < 0) continue;
-            for (int kk : G.nb[j]) {
-                const size_t k = size_t(kk);
-                if (k <= j || !E.ok[k] || G.hole_index[k] < 0) continue;
-                const int hj = G.hole_index[j], hk = G.hole_index[k];
-                if (hj <= hk) edges[{hj, hk}].push_back({j, k});
-                else edges[{hk, hj}].push_back({k, j});
-                ++n_edges;
-            }
-        }
-        if (n_edges == 0) continue;
+        if (n_edges == 0 || h2 == 0) continue;
         double sum = 0;
         for (auto &kv : edges)
             for (auto &e : kv.second)

@@ -78,8 +78,7 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
     if (!user_jig) {
         V3 est = diag::estimate_nugget(out.fitted, out.grid);
         for (int a = 0; a < 3; ++a) out.jig(a) = std::min(est(a), jig_cap);
-        out.hole = diag::estimate_hole_std(out.fitted, out.grid).cwiseMin(out.jig);
-        diag::set_jig_noise(out.fit_options, out.jig, out.hole);
+        diag::set_jig_noise(out.fit_options, out.jig, diag::estimate_hole_std(out.fitted, out.grid));
         if (model.effect_count() > 0) {
             if (!fit()) {
                 err = out.report.message.empty() ? "fit cancelled" : out.report.message;

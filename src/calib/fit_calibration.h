@@ -32,8 +32,9 @@ struct CalibrationFit {
     Model model;
     FitReport report;
     FitOptions fit_options;         // with the jig tolerance used
-    diag::V3 jig = diag::V3::Zero(); // per axis, mm: each position's white scatter (holes included)
-    diag::V3 hole = diag::V3::Zero(); // the part of it a plate's hole shares at every height
+    // per axis, mm: each position's white scatter, holes included (the part
+    // a plate's hole shares at every height: fit_options.hole_sigma)
+    diag::V3 jig = diag::V3::Zero();
     std::vector<PreparedPos> pos;
     diag::Grid grid;
     diag::Eval nominal, fitted;     // the nominal triangulation and the fitted model

@@ -1,7 +1,8 @@
 // The least-squares problem a fit solves: the model's readings against
 // the per-position means, weighted (sqrt(w) * (mean - y)), with their
 // Jacobian over the fitted parameters and the fixture heights' x offsets,
-// each plate hole's block decorrelated (generalised least squares); the gauge (full = base + Q * free), the bounds and the weak prior.
+// each plate hole's block decorrelated (generalised least squares); the
+// gauge (full = base + Q * free), the bounds and the weak prior.
 // Private to src/calib: fit.cpp runs the optimiser on it, fit_queries.cpp
 // answers the diagnosis's questions about a model (its chi-square, its
 // Jacobian, an effect's overlap with the others).

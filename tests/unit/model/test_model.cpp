@@ -402,6 +402,53 @@ static void fit_ends_at_its_minimum(void **) {
         fail_msg("a refit from the result lowered chi2 from %.6f to %.6f", rep.chi2, rep2.chi2);
 }
 
+// A parameter whose best value lies past its bound ends on the bound, with
+// the others at their best for it there: the fit's Gauss-Newton steps solve
+// the linearised problem within the bounds (fit.cpp, bounded_gauss_newton),
+// and must neither stop short of the bound nor leave a parameter off its
+// best. The data hold pot 1's zero 23 mm off, past cable_offset's 20 mm
+// bound, beside gain errors that share the readings' direction. The fit
+// must end converged with o1 on 20 mm (to 1e-6 mm: SLSQP's constraint
+// tolerance is 1e-9, and the end point is clamped), at the chi-square of the
+// same fit with o1 held at 20 mm, and a refit from its result may gain no
+// more than fit_ends_at_its_minimum allows (0.01: the diagnosis prints
+// tenths).
+static void fit_on_a_bound_is_the_constrained_minimum(void **) {
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    assert_true(truth.add_effect("cable_gain", {{"g1", 0.004}, {"g2", -0.003}, {"g4", 0.002}}, err));
+    std::vector<PreparedPos> pos = noise_free_jig(truth);
+    for (auto &pp : pos) pp.mean(0) += 23.0;
+    FitOptions fo;
+    fo.jig_sigma.setZero();
+    auto start = [&](double o1) {
+        Model m{DeviceGeometry{}};
+        assert_true(m.add_effect("cable_offset", {{"o1", o1}}, err));
+        assert_true(m.add_effect("cable_gain", {}, err));
+        return m;
+    };
+    Model m = start(0.0);
+    size_t off = 0;
+    while (m.effect_desc(off).name != "cable_offset") ++off;
+    assert_true(m.effect_desc(off).params[0].upper == 20.0);
+    FitReport rep;
+    assert_true(fit_model(m, pos, fo, rep));
+    if (!rep.converged) fail_msg("not converged: %s", rep.message.c_str());
+    const double o1 = m.effect_params(off)[0];
+    if (!(std::fabs(o1 - 20.0) <= 1e-6)) fail_msg("o1 ended at %.9f mm, not on its 20 mm bound", o1);
+    Model held_m = start(20.0);
+    FitOptions held = fo;
+    held.hold = {{off, 0}};
+    FitReport rh;
+    assert_true(fit_model(held_m, pos, held, rh));
+    if (!(std::fabs(rep.chi2 - rh.chi2) <= 0.01))
+        fail_msg("chi2 %.6f with o1 on its bound, %.6f with it held there", rep.chi2, rh.chi2);
+    Model again = m;
+    FitReport r2;
+    assert_true(fit_model(again, pos, fo, r2));
+    if (!(rep.chi2 - r2.chi2 <= 0.01)) fail_msg("a refit from the result lowered chi2 from %.6f to %.6f", rep.chi2, r2.chi2);
+}
+
 // FitOptions::abandon_above: a fit stops once its best point lies past the
 // value, ends on that point (so a reader sees the period past it) and says
 // so, having spent fewer evaluations than the whole fit; set above anything
@@ -520,6 +567,7 @@ int main(void) {
         cmocka_unit_test(held_parameter_in_a_gauge),
         cmocka_unit_test(weights_from_the_named_model),
         cmocka_unit_test(fit_ends_at_its_minimum),
+        cmocka_unit_test(fit_on_a_bound_is_the_constrained_minimum),
         cmocka_unit_test(abandoned_fit_stops_at_its_bound),
         cmocka_unit_test(effect_accessors),
         cmocka_unit_test(catalogue_table_matches_docs),

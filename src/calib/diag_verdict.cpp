@@ -75,6 +75,14 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
         } else if (!v.explained) {
             J.words += ": the residual is larger or more structured than the noise and the jig's tolerance allow";
         }
+        // What is significant but small is named too: not a reason for the
+        // verdict, yet a number on the same page (the candidate table) that
+        // a reader would otherwise find unexplained.
+        if (!negligible.empty()) {
+            J.words += ". Also significant, but under a tenth of the noise floor (" + fmt_num(small, 4) + " mm): ";
+            for (size_t k = 0; k < negligible.size() && k < 3; ++k) J.words += (k ? "; " : "") + negligible[k];
+            if (negligible.size() > 3) J.words += "; and " + std::to_string(negligible.size() - 3) + " more";
+        }
     }
     return J;
 }

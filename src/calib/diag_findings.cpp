@@ -155,7 +155,14 @@ Ls wls(const Eigen::MatrixXd &X, const Eigen::VectorXd &y, const Eigen::VectorXd
 // height explains) the slope must be significant, and the session-long
 // slope across heights must agree with it (3 standard errors): one drift over
 // the whole session, not a height effect that happens to follow the order.
-json drift_finding(const std::vector<PreparedPos> &pos, const LengthView &lv) {
+// lv: the residual with the jig's estimated errors out (the within-height
+// slope); across: the same before the jig's errors (the fixture's
+// per-height offsets, the holes') are taken out. With heights measured one after the other a drift's step from
+// height to height is exactly what a fixture offset can take, so the
+// session-long slope is judged on the residual as it was: where it agrees
+// with the slope inside every height, one drift explains both, and the
+// fixture's offsets were following it.
+json drift_finding(const std::vector<PreparedPos> &pos, const LengthView &lv, const LengthView &across) {
     const size_t P = pos.size();
     std::vector<size_t> idx;
     for (size_t j = 0; j < P; ++j) {
@@ -178,14 +185,17 @@ json drift_finding(const std::vector<PreparedPos> &pos, const LengthView &lv) {
     const long n = long(idx.size());
     const double th = (tmax - tmin) / 3600.0; // session length, h
     Eigen::VectorXd y(n), w(n);
+    Eigen::VectorXd ya(n);
     for (long r = 0; r < n; ++r) {
         const size_t j = idx[size_t(r)];
-        double s = 0, v = 0;
+        double s = 0, sa = 0, v = 0;
         for (int c = 0; c < 4; ++c) {
             s += lv.lres[j][size_t(c)] / 4;
+            sa += across.lres[j][size_t(c)] / 4;
             v += pos[j].var_mean(c) / 16;
         }
         y(r) = s;
+        ya(r) = std::isfinite(sa) ? sa : s;
         w(r) = 1.0 / std::max(v, 1e-12);
     }
     auto hour = [&](size_t j) { return (pos[j].t_s - tmin) / 3600.0; };
@@ -210,7 +220,7 @@ json drift_finding(const std::vector<PreparedPos> &pos, const LengthView &lv) {
         Xp(r, 0) = 1;
         Xp(r, 1) = hour(idx[size_t(r)]);
     }
-    Ls pooled = wls(Xp, y, w);
+    Ls pooled = wls(Xp, ya, w);
     const double bw = within.beta(kh), sw = within.se(kh), bp = pooled.beta(1), sp = pooled.se(1);
     if (!(sw > 0) || !(sp > 0) || within.dof < 3) return nullptr;
     const double zt = std::fabs(bw) / sw;
@@ -240,7 +250,8 @@ json drift_finding(const std::vector<PreparedPos> &pos, const LengthView &lv) {
 
 } // namespace
 
-json residual_findings(const std::vector<PreparedPos> &pos, const LengthView &lv, const Eval &bE, const V3 &jig) {
+json residual_findings(const std::vector<PreparedPos> &pos, const LengthView &lv, const Eval &bE, const V3 &jig,
+                       const LengthView &across) {
     const size_t P = pos.size();
     json findings = json::array();
     const PeriodPeak pk = length_period(lv);
@@ -256,7 +267,7 @@ json residual_findings(const std::vector<PreparedPos> &pos, const LengthView &lv
                                          "or shaft, a pot track ripple: drum_eccentricity), or the reading is off "
                                          "in a band of cable length (a worn track); plot the length residual "
                                          "against the length"}});
-    json drift = drift_finding(pos, lv);
+    json drift = drift_finding(pos, lv, across);
     if (!drift.is_null()) findings.push_back(drift);
     // Trends of the position residual against physical variables.
     // kind and cable travel in the finding beside the English name, so

@@ -46,9 +46,12 @@ struct PeriodPeak {
 };
 PeriodPeak length_period(const LengthView &v);
 
-// lv: the length view of the evaluation bE's model; jig: tolerance.
+// lv: the length view of the evaluation bE's model, the jig's estimated
+// errors taken out; jig: tolerance; across: the same view before the
+// jig's errors (the fixture's per-height offsets, the holes') were taken
+// out (the drift's session-long slope is judged on it: drift_finding).
 nlohmann::json residual_findings(const std::vector<PreparedPos> &pos, const LengthView &lv, const Eval &bE,
-                                 const V3 &jig);
+                                 const V3 &jig, const LengthView &across);
 
 } // namespace diag
 } // namespace cdm

@@ -46,7 +46,7 @@ std::map<std::pair<int, int>, HeightMean> height_means(const Eval &E, const Grid
 FixtureOffsets fixture_offsets(const Eval &E, const Grid &G, const V3 &jig) {
     FixtureOffsets f;
     for (auto &kv : height_means(E, G, jig))
-        if (std::fabs(kv.second.mean()) <= kFixtureMaxMm) f[kv.first] = kv.second.mean();
+        f[kv.first] = std::clamp(kv.second.mean(), -kFixtureMaxMm, kFixtureMaxMm);
     return f;
 }
 
@@ -177,14 +177,18 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
         }
     }
     out["fixture"] = fx;
-    if (fx_axis >= 0 && fx["taken_as_jig"].get<bool>()) {
+    if (fx_axis >= 0) {
         std::string per;
         for (auto &v : fx["offsets_mm"][kAxis[fx_axis]]) per += (per.empty() ? "" : ", ") + fmt_num(v.get<double>(), 3, true);
         out["text"].push_back("each fixture height has its own offset, up to " + fmt_num(fx_worst, 3) + " mm in " +
                               kAxis[fx_axis] + " (per height: " + per + " mm; " +
                               fmt_p(fx["p_value"][kAxis[fx_axis]].get<double>()) +
                               "): the height fixture's spacers, the jig's error, taken out of the fit and the "
-                              "tests (up to " + fmt_num(kFixtureMaxMm, 2) + " mm per height)");
+                              "tests (up to " + fmt_num(kFixtureMaxMm, 2) + " mm per height" +
+                              (fx["taken_as_jig"].get<bool>()
+                                   ? std::string(")")
+                                   : std::string("; a height past that, more than a machined spacer plausibly "
+                                                 "is off, keeps the rest in the residual: check the fixture)")));
     }
 
     // --- the holes: one-way analysis of variance of the residual (the

@@ -9,7 +9,8 @@
 // model's position residuals:
 //  - fixture: the per-height mean residual per axis (taken out by the fit,
 //    FitOptions::fixture, in x, and by the judge on every axis), up to
-//    kFixtureMaxMm; larger ones are not a spacer's and stay the model's;
+//    kFixtureMaxMm: a larger mean is taken out up to that bound, as the
+//    fit's bounded offset is, and the rest stays the model's;
 //  - holes: a variance component, from a one-way analysis of variance of
 //    the residual by hole (per-height means removed); named as the plate's
 //    only when the hole means are spatially white (Moran's I over the
@@ -32,8 +33,10 @@ namespace cdm {
 namespace diag {
 
 // (height index, axis) -> the fixture's offset (mm): the weighted per-height
-// mean residual, for every (height, axis) whose mean is within
-// kFixtureMaxMm. Empty for a layout without fixture heights.
+// mean residual, clamped to +-kFixtureMaxMm (the fit's bound on its
+// offsets: a cliff at the bound, where 0.149 mm was all the jig's and
+// 0.151 mm none of it, made the judge disagree with the fit it judged).
+// Empty for a layout without fixture heights.
 using FixtureOffsets = std::map<std::pair<int, int>, double>;
 FixtureOffsets fixture_offsets(const Eval &E, const Grid &G, const V3 &jig);
 

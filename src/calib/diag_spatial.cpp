@@ -342,7 +342,7 @@ Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free, const V3 
     // every hole), like the holes' error a property of the jig, not of the
     // model (diag_jig.h). Per-height mean residuals up to kFixtureMaxMm are
     // taken as the fixture's and removed before the chi-square, at the cost
-    // of their degrees of freedom; larger ones stay.
+    // of their degrees of freedom; what lies past that bound stays.
     const FixtureOffsets fixture = fixture_offsets(E, G, jig);
     const int nuisance = int(fixture.size());
     for (size_t j = 0; j < P; ++j) {

@@ -248,7 +248,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     json &jig_report = ja.report;
     Eval bJ = bE;
     for (size_t j = 0; j < P; ++j) bJ.res[j] -= ja.offset[j];
-    json findings = residual_findings(pos, shifted(lv, ja.offset), bJ, bjig);
+    json findings = residual_findings(pos, shifted(lv, ja.offset), bJ, bjig, lv);
     if (opt.outliers) outliers = find_outliers(bJ, cf.grid, bjig, already, read, &declined);
     if (!jig_report["finding"].is_null()) findings.push_back(jig_report["finding"]);
 

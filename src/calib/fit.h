@@ -94,12 +94,19 @@ struct FitReport {
     bool abandoned = false;         // stopped by FitOptions::abandon_above (not converged)
 };
 
-// The largest per-height error taken as the height fixture's (mm): 3x a
-// machined 0.05 mm tolerance. The judge (diag_spatial.cpp) uses the same.
-constexpr double kFixtureMaxMm = 0.15;
+// The largest per-height error taken as the height fixture's (mm): five
+// standard deviations of the spacers' tolerance below, which a Gaussian
+// spacer error passes once in 1.7 million heights. The prior does the
+// regularising; the cap is a sanity bound. At three (0.15 mm, until
+// 2026-11-24) one height in 370 passed it, so one 5-height jig in 74: an
+// independent tester's plate had a height at 0.153 mm, and the model was
+// then "not explained" with two spurious effects recommended. The judge
+// (diag_jig.cpp, fixture_offsets) takes the per-height means up to the same
+// bound, so a mean past it is clamped there as the fit's offset is.
+constexpr double kFixtureMaxMm = 0.25;
 // The fixture heights' offsets are a random effect with this standard
-// deviation (a machined spacer's tolerance; the cap above is three of
-// them): the fit's prior on them (fit_problem.h, prior_sd).
+// deviation (a machined spacer's tolerance): the fit's prior on them
+// (fit_problem.h, prior_sd).
 constexpr double kFixturePriorSdMm = 0.05;
 
 // Fits every parameter of every effect in `m` except the ellipsoid's, from

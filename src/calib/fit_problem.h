@@ -355,7 +355,7 @@ struct Problem {
     // or holder_geometry), the offsets stay at what the spacers plausibly
     // are and the device's parameters take the rest. With a weak prior the
     // fit drifted along that valley to offsets of 0.19 mm on data with none,
-    // or stopped at the 0.15 mm cap with chi2/dof 1.9 (an independent
+    // or stopped at the then 0.15 mm cap with chi2/dof 1.9 (an independent
     // tester's cases, docs/calibration.md). Where the data do see an offset
     // (a height's mean, known to a few micrometres) this prior moves it by
     // well under one percent.

@@ -493,6 +493,36 @@ static void plate_is_named_as_the_jig(void **) {
     }
 }
 
+// A fixture height off by three standard deviations of the spacers'
+// tolerance (an independent tester's plate: fixture 0.05 mm per height, one
+// height at 0.153 mm, holes 0.04 mm, seats 0.01 mm, hidden cable_gain).
+// With the bound at three (0.15 mm) the fit stopped the offset on it and the
+// judge, taking a height's mean out only within the bound, took none of it:
+// "not explained" (chi2/dof 4.7), and the search added jig_misalignment and
+// pot_drift to chase the height. The bound is now five (0.25 mm) and the
+// judge clamps a mean past it as the fit does: the search lands on the
+// truth, explained.
+static void a_three_sigma_fixture_height_is_the_jigs(void **) {
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    assert_true(truth.add_effect("cable_gain", ParamValues{{"g1", -0.004860096290106038}, {"g2", 0.009673002994543035},
+                                                           {"g3", -0.007781211680338852}, {"g4", -0.0076124605468636305}},
+                                 err));
+    Dataset d;
+    JigSimOptions so = test::half_jig(51);
+    so.jig_hole_mm = 0.04;
+    so.jig_fixture_mm = 0.05;
+    so.jig_tolerance_mm = 0.01;
+    assert_true(simulate_jig(truth, so, d, err));
+    const auto r = diagnosed(d, truth);
+    double worst = 0;
+    for (auto &v : r["jig"]["fixture"]["offsets_mm"]["x"]) worst = std::max(worst, std::fabs(v.get<double>()));
+    if (!(worst > 0.15)) fail_msg("premise: no fixture height past 0.15 mm (largest %g)", worst);
+    assert_lands_on(r, {"cable_gain"});
+    if (!r["recommended"]["explained"].get<bool>() && !r["recommended"]["negligible_only"].get<bool>())
+        fail_msg("a fixture height at %g mm left the true model unexplained: %s", worst, r["verdict"].dump().c_str());
+}
+
 // A plate whose hole errors (0.04 mm in y and z, the same at every height)
 // dominate what is left per position (0.01 mm): the fit weighs each hole's
 // readings as one block (FitOptions::hole_sigma) and the verdict's tests
@@ -917,6 +947,7 @@ int main(void) {
         cmocka_unit_test(small_drift_beside_a_finding_is_named),
         cmocka_unit_test(plate_is_named_as_the_jig),
         cmocka_unit_test(strong_plate_holes_add_nothing),
+        cmocka_unit_test(a_three_sigma_fixture_height_is_the_jigs),
         cmocka_unit_test(smooth_repeat_is_not_the_plate),
         cmocka_unit_test(spikes_change_nothing_but_their_count),
         cmocka_unit_test(misplaced_positions_are_set_aside),

@@ -233,6 +233,14 @@ BoundedStep bounded_gauss_newton(const Eigen::MatrixXd &H, const Eigen::VectorXd
         in[c] = all[c].s * (x0(all[c].a) - all[c].bound) >= -kActive;
     BoundedStep st;
     st.u = Eigen::VectorXd::Zero(n);
+    // After a full step (no bound in the way) u is the minimum on the working
+    // set: the next iteration goes straight to the multipliers. Testing the
+    // recomputed step's length instead failed on badly scaled problems
+    // (parameters in mm, rad and 1/mm; cond(H) up to 1e12), where that step
+    // is round-off of size eps cond(H) |u|: the loop crept on to its budget
+    // and the fit went to SLSQP without a Gauss-Newton step (an independent
+    // review found it 1-4 times per diagnosis).
+    bool on_minimum = false;
     for (int it = 0; it < 4 * n + 20; ++it) {
         std::vector<size_t> w;
         for (size_t c = 0; c < all.size(); ++c)
@@ -249,8 +257,11 @@ BoundedStep bounded_gauss_newton(const Eigen::MatrixXd &H, const Eigen::VectorXd
         }
         const Eigen::VectorXd r = H * st.u + g; // the model's gradient at u
         Eigen::VectorXd p = Eigen::VectorXd::Zero(n);
-        if (N.cols() > 0) p = -N * (N.transpose() * H * N).ldlt().solve(N.transpose() * r);
-        if (p.norm() <= 1e-12 * (1.0 + st.u.norm())) {
+        if (N.cols() > 0 && !on_minimum) p = -N * (N.transpose() * H * N).ldlt().solve(N.transpose() * r);
+        // Whether p gains anything, scale-free: the decrease it promises.
+        const double gain = -(r.dot(p) + 0.5 * p.dot(H * p));
+        if (on_minimum || !(gain > 1e-15 * (1.0 + std::fabs(g.dot(st.u) + 0.5 * st.u.dot(H * st.u))))) {
+            on_minimum = false;
             // Stationary on the working set: a constraint with a negative
             // multiplier (A' lambda = -r, lambda >= 0) is left.
             if (w.empty()) {
@@ -287,7 +298,10 @@ BoundedStep bounded_gauss_newton(const Eigen::MatrixXd &H, const Eigen::VectorXd
             }
         }
         st.u += alpha * p;
-        if (blocking >= 0) in[size_t(blocking)] = 1;
+        if (blocking >= 0)
+            in[size_t(blocking)] = 1;
+        else
+            on_minimum = true;
     }
     st.pred = -(g.dot(st.u) + 0.5 * st.u.dot(H * st.u));
     return st;
@@ -384,12 +398,19 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
                 const double f1 = objective(unsigned(nfree), zeta.data(), grad.data(), &G);
                 ++steps;
                 if (!pb.failure.empty()) return fail();
+                const bool take_step = f1 < f0 && f0 - f1 >= 0.25 * st.pred && G.best_has_J && !pb.cancelled;
+                // objective() left the problem at the trial point: back to
+                // the pass start unless the step is taken, the point the
+                // rest of the pass holds the residuals of, so that neither a
+                // cancel nor the convergence check below commits a trial
+                // that was refused.
+                if (!take_step) pb.set_full(full);
                 if (pb.cancelled) {
                     rep.message = "fit cancelled";
                     ok = false;
                     break;
                 }
-                if (f1 < f0 && f0 - f1 >= 0.25 * st.pred && G.best_has_J) {
+                if (take_step) {
                     pb.set_full(G.best_full);
                     have_at = G.best_full;
                     have_res = std::move(G.best_res);

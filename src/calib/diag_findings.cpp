@@ -157,11 +157,11 @@ Ls wls(const Eigen::MatrixXd &X, const Eigen::VectorXd &y, const Eigen::VectorXd
 // the whole session, not a height effect that happens to follow the order.
 // lv: the residual with the jig's estimated errors out (the within-height
 // slope); across: the same before the jig's errors (the fixture's
-// per-height offsets, the holes') are taken out. With heights measured one after the other a drift's step from
-// height to height is exactly what a fixture offset can take, so the
-// session-long slope is judged on the residual as it was: where it agrees
-// with the slope inside every height, one drift explains both, and the
-// fixture's offsets were following it.
+// per-height offsets, the holes') are taken out. With heights measured one
+// after the other a drift's step from height to height is exactly what a
+// fixture offset can take, so the session-long slope is judged on the
+// residual as it was: where it agrees with the slope inside every height,
+// one drift explains both, and the fixture's offsets were following it.
 json drift_finding(const std::vector<PreparedPos> &pos, const LengthView &lv, const LengthView &across) {
     const size_t P = pos.size();
     std::vector<size_t> idx;

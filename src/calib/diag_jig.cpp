@@ -140,6 +140,7 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
     }
     std::string fx_words;
     double fx_worst = 0;
+    double past = 0; // the largest per-height mean past kFixtureMaxMm (mm)
     int fx_axis = -1;
     for (int a = 0; a < 3; ++a) {
         double sw = 0, swm = 0;
@@ -157,7 +158,10 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
             chi2 += d * d / (m.se() * m.se());
             mx = std::max(mx, std::fabs(d));
             offs.push_back(d);
-            if (std::fabs(m.mean()) > kFixtureMaxMm) fx["taken_as_jig"] = false;
+            if (std::fabs(m.mean()) > kFixtureMaxMm) {
+                fx["taken_as_jig"] = false;
+                past = std::max(past, std::fabs(m.mean()));
+            }
         }
         // x: the likelihood ratio when given (its offsets were fitted beside
         // the device's parameters, which can take a trend over the heights).
@@ -187,8 +191,10 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
                               "tests (up to " + fmt_num(kFixtureMaxMm, 2) + " mm per height" +
                               (fx["taken_as_jig"].get<bool>()
                                    ? std::string(")")
-                                   : std::string("; a height past that, more than a machined spacer plausibly "
-                                                 "is off, keeps the rest in the residual: check the fixture)")));
+                                   : "; a height's mean residual of " + fmt_num(past, 3) +
+                                         " mm is past that, more than a machined spacer plausibly is off: the part "
+                                         "past " + fmt_num(kFixtureMaxMm, 2) + " mm stays in the residual; check "
+                                         "the fixture)"));
     }
 
     // --- the holes: one-way analysis of variance of the residual (the

@@ -2,9 +2,10 @@
 //
 // Algorithm: Gauss-Newton steps within the bounds first (bounded_gauss_newton:
 // the linearised problem's minimum, a small box-constrained quadratic
-// programme), taken while each gains what it promised and the next promises
-// much less; on a problem nearly linear in its parameters (most of a model
-// search's fits) two or three such steps reach the minimum. Then, for
+// programme), each taken when it gains at least a quarter of its promise,
+// while the next promises at most a tenth of the last (at most
+// kGaussNewtonSteps); on a problem nearly linear in its parameters (most of
+// a model search's fits) two or three such steps reach the minimum. Then, for
 // whatever is left (a ripple's period, nearly degenerate anchors),
 // NLOPT_LD_SLSQP (sequential quadratic programming with a BFGS
 // Hessian, bounds as linear constraints) in *whitened* coordinates: at the
@@ -432,7 +433,7 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
             // Already at the minimum? In the whitened coordinates the
             // Gauss-Newton Hessian is the identity, so a Gauss-Newton step
             // would lower the objective by |g|^2 / 2. When that is below
-            // SLSQP's own relative tolerance (1e-12), a pass can only
+            // SLSQP's own relative tolerance (1e-12), or kConvergedF, a pass can only
             // confirm the point (it used to, with 15-20 evaluations of
             // round-off-level changes after every converged pass: a quarter
             // of a search's evaluations), so the fit stops here. A point on a bound has a gradient and is

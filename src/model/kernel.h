@@ -60,6 +60,10 @@ struct CableLayout {
 template <class T> using EffectParams = std::array<const T *, kBuiltinCount>;
 
 namespace detail {
+template <class E> bool geometry_on(const CableLayout &lay) {
+    if constexpr (E::kStage == Stage::Geometry) return lay.slot[BuiltinIndexOf<E>::value] >= 0;
+    return false;
+}
 template <class E, class T>
 void geometry_step(const CableLayout &lay, const T *q, int i, const Sample<T> &s, CableGeom<T> &g) {
     if constexpr (E::kStage == Stage::Geometry) {
@@ -98,14 +102,26 @@ template <class E, class T> void position_step(const EffectParams<T> &p, T x[3])
 template <class T>
 T cable_reading(const DeviceGeometry &g, int i, const Sample<T> &s, const CableLayout &lay, const T *q) {
     using std::sqrt;
-    CableGeom<T> geo;
-#define CDM_STEP(E) detail::geometry_step<E, T>(lay, q, i, s, geo);
-    CDM_BUILTIN_EFFECTS(CDM_STEP)
-#undef CDM_STEP
     const auto A0 = g.anchor(i);
     const auto h0 = g.holder(i);
     T d[3];
-    for (int k = 0; k < 3; ++k) d[k] = s.P[k] + T(h0[k]) + geo.dh[k] - T(A0[k]) - geo.dA[k];
+    bool geo_on = false;
+#define CDM_STEP(E) geo_on = geo_on || detail::geometry_on<E>(lay);
+    CDM_BUILTIN_EFFECTS(CDM_STEP)
+#undef CDM_STEP
+    if (geo_on) {
+        CableGeom<T> geo;
+#define CDM_STEP(E) detail::geometry_step<E, T>(lay, q, i, s, geo);
+        CDM_BUILTIN_EFFECTS(CDM_STEP)
+#undef CDM_STEP
+        for (int k = 0; k < 3; ++k) d[k] = s.P[k] + T(h0[k]) + geo.dh[k] - T(A0[k]) - geo.dA[k];
+    } else {
+        // No Geometry-stage effect: the same sums without the zero terms
+        // (adding an exact zero changes no bit) and with the device's
+        // constants added to the value alone (their derivatives are zero),
+        // which spares the derivative vectors' arithmetic on the hot path.
+        for (int k = 0; k < 3; ++k) d[k] = T(s.P[k] + h0[k]) - A0[k];
+    }
     T len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     const PathIn<T> in{g.exit_axis[i].data(), d};
 #define CDM_STEP(E) detail::path_step<E, T>(lay, q, i, s, in, len);

@@ -60,10 +60,6 @@ struct CableLayout {
 template <class T> using EffectParams = std::array<const T *, kBuiltinCount>;
 
 namespace detail {
-template <class E> bool geometry_on(const CableLayout &lay) {
-    if constexpr (E::kStage == Stage::Geometry) return lay.slot[BuiltinIndexOf<E>::value] >= 0;
-    return false;
-}
 template <class E, class T>
 void geometry_step(const CableLayout &lay, const T *q, int i, const Sample<T> &s, CableGeom<T> &g) {
     if constexpr (E::kStage == Stage::Geometry) {
@@ -104,23 +100,20 @@ T cable_reading(const DeviceGeometry &g, int i, const Sample<T> &s, const CableL
     using std::sqrt;
     const auto A0 = g.anchor(i);
     const auto h0 = g.holder(i);
-    T d[3];
-    bool geo_on = false;
-#define CDM_STEP(E) geo_on = geo_on || detail::geometry_on<E>(lay);
+    CableGeom<T> geo;
+#define CDM_STEP(E) detail::geometry_step<E, T>(lay, q, i, s, geo);
     CDM_BUILTIN_EFFECTS(CDM_STEP)
 #undef CDM_STEP
-    if (geo_on) {
-        CableGeom<T> geo;
-#define CDM_STEP(E) detail::geometry_step<E, T>(lay, q, i, s, geo);
-        CDM_BUILTIN_EFFECTS(CDM_STEP)
-#undef CDM_STEP
-        for (int k = 0; k < 3; ++k) d[k] = s.P[k] + T(h0[k]) + geo.dh[k] - T(A0[k]) - geo.dA[k];
-    } else {
-        // No Geometry-stage effect: the same sums without the zero terms
-        // (adding an exact zero changes no bit) and with the device's
-        // constants added to the value alone (their derivatives are zero),
-        // which spares the derivative vectors' arithmetic on the hot path.
-        for (int k = 0; k < 3; ++k) d[k] = T(s.P[k] + h0[k]) - A0[k];
+    // d = P + h0 + dh - A0 - dA, in that order; a displacement no hook moved
+    // is zero and left out, and the drawing's constants are added to the
+    // value alone (their derivatives are zero): the same bits, without the
+    // derivative vectors' arithmetic on zeros.
+    T d[3];
+    for (int k = 0; k < 3; ++k) {
+        d[k] = T(s.P[k] + h0[k]);
+        if (geo.moved_h) d[k] += geo.dh[k];
+        d[k] = T(d[k] - A0[k]);
+        if (geo.moved_A) d[k] -= geo.dA[k];
     }
     T len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     const PathIn<T> in{g.exit_axis[i].data(), d};

@@ -24,7 +24,7 @@ struct AnchorPosition : EffectBase {
         for (int k = 0; k < 3; ++k) idx[k] = 3 * cable + k;
     }
     template <class T> static void geometry(const T *q, int, const Sample<T> &, CableGeom<T> &g) {
-        for (int k = 0; k < 3; ++k) g.dA[k] += q[k];
+        g.move_anchor(q);
     }
     // With the jig transform fitted, a common rigid motion of the four
     // anchors (3 translations, 3 small rotations about their centroid) is the

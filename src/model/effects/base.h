@@ -36,10 +36,22 @@ template <class T> struct Sample {
 };
 
 // Geometry stage: displacement of cable i's anchor (exit point) and holder
-// attachment point from the drawing, mm. Zero on entry; hooks add to it.
+// attachment point from the drawing, mm. Zero on entry; hooks add to it with
+// move_anchor / move_holder. A displacement no hook moved is left out of the
+// sums (adding an exact zero changes no bit), so the hot path neither zeroes
+// nor adds derivative vectors that stay zero.
 template <class T> struct CableGeom {
-    T dA[3] = {T(0), T(0), T(0)};
-    T dh[3] = {T(0), T(0), T(0)};
+    T dA[3]; // valid when moved_A
+    T dh[3]; // valid when moved_h
+    bool moved_A = false, moved_h = false;
+    void move_anchor(const T *v) { add(dA, moved_A, v); }
+    void move_holder(const T *v) { add(dh, moved_h, v); }
+
+  private:
+    static void add(T *to, bool &moved, const T *v) {
+        for (int k = 0; k < 3; ++k) to[k] = moved ? T(to[k] + v[k]) : v[k];
+        moved = true;
+    }
 };
 
 // Path stage: the vector from the (displaced) anchor to the (displaced)

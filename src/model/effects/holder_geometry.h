@@ -22,7 +22,7 @@ struct HolderGeometry : EffectBase {
         for (int k = 0; k < 3; ++k) idx[k] = 3 * cable + k;
     }
     template <class T> static void geometry(const T *q, int, const Sample<T> &, CableGeom<T> &g) {
-        for (int k = 0; k < 3; ++k) g.dh[k] += q[k];
+        g.move_holder(q);
     }
     // The points' common translation is the jig's (or the anchors').
     static bool gauge(const GaugeContext &c, Eigen::MatrixXd &basis) {

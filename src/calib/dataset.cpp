@@ -310,15 +310,27 @@ void Parser::find_heights() {
     std::vector<std::pair<double, long>> xs;
     for (const auto &jp : d_.pos) xs.emplace_back(jp.ref[0], jp.point);
     std::sort(xs.begin(), xs.end());
-    std::vector<double> all, shared;
-    std::vector<long> alone;
+    // Runs of equal x_ref: [first, end) in xs.
+    std::vector<std::pair<size_t, size_t>> runs;
+    size_t largest = 0;
     for (size_t i = 0; i < xs.size();) {
         size_t k = i + 1;
         while (k < xs.size() && std::fabs(xs[k].first - xs[i].first) < 1e-6) ++k;
-        all.push_back(xs[i].first);
-        if (k - i >= 2) shared.push_back(xs[i].first);
-        else alone.push_back(xs[i].second);
+        runs.emplace_back(i, k);
+        largest = std::max(largest, k - i);
         i = k;
+    }
+    std::vector<double> all, shared;
+    std::vector<long> alone;
+    for (auto [i, k] : runs) {
+        all.push_back(xs[i].first);
+        // A height is an x_ref that at least two positions and a quarter as
+        // many as the fullest height share: two references moved to the same
+        // wrong x (a typed value, a spacer left in for two holes) are not a
+        // fixture height of two positions with an offset of its own.
+        if (k - i >= 2 && 4 * (k - i) >= largest) shared.push_back(xs[i].first);
+        else
+            for (size_t j = i; j < k; ++j) alone.push_back(xs[j].second);
     }
     d_.off_height_points.clear();
     if (!shared.empty() && !alone.empty() && alone.size() * 10 <= xs.size()) {

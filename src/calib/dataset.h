@@ -59,10 +59,12 @@ struct Dataset {
     size_t rows = 0;
     std::vector<std::string> ignored_columns;
     std::vector<JigHole> pos;                 // in order of first appearance
-    // The fixture heights, sorted: the x_ref values positions share. A
-    // position whose x_ref no other position has (a reference typed or
-    // measured off its height, a probe seated 1 mm high) is not a height of
-    // its own when such positions are a tenth of the jig or fewer: it is
+    // The fixture heights, sorted: the x_ref values positions share, each by
+    // at least two positions and a quarter as many as the fullest height. A
+    // position whose x_ref no other position has, or only a few do (a
+    // reference typed or measured off its height, a probe seated 1 mm high),
+    // is not a height of its own when such positions are a tenth of the jig
+    // or fewer: it is
     // listed in off_height_points, grouped with the nearest height for the
     // fixture and the neighbours (diag::make_grid), and judged by the model
     // on the reference as written. Otherwise (references scattered in x)

@@ -142,6 +142,32 @@ def test_a_reference_off_its_height_is_judged_not_made_a_height(tmp_path):
     assert d["explained"], d["verdict"]
 
 
+def test_two_references_at_the_same_wrong_height_are_not_a_height(tmp_path):
+    """Two references 1 mm above their fixture height with the same x_ref (a
+    spacer left in for two holes): a group of two positions is not a
+    fixture height (that would give it an offset of its own, absorbing the
+    error, and no neighbours on the plate; the diagnosis said "does not
+    explain the data" and named a 0.5 mm spacer). Both are off their height,
+    grouped with the nearest one, and set aside like one such reference."""
+    clean = simulate_jig(tmp_path / "clean.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--holes", "9",
+                         "--heights", "30,50,70", "--samples", "5")
+    bad = tmp_path / "bad.csv"
+    with open(clean) as f, open(bad, "w") as g:
+        g.write(f.readline())
+        for line in f:
+            v = line.rstrip("\n").split(",")
+            if int(v[0]) in (100, 112):  # both at the 50 mm height of the 9 x 9 plate
+                assert abs(float(v[1]) - 50.0) < 1e-9, v
+                v[1] = f"{float(v[1]) + 1.0:.4f}"
+            g.write(",".join(v) + "\n")
+    d = cdm.diagnose(bad, DEVICE_JSON, effects=["exit_pulley"], candidates=False, validation=False)
+    # (off_height_points lists those of the data the statistics are on: the
+    # two are set aside, so none is left.)
+    assert d["data"]["heights"] == [30.0, 50.0, 70.0] and d["data"]["off_height_points"] == [], d["data"]
+    assert [x["point"] for x in d["data"]["outliers"]["set_aside"]] == [100, 112], d["data"]["outliers"]
+    assert d["explained"], d["verdict"]
+
+
 def test_fit_says_when_its_effects_do_not_explain_the_data(jig, tmp_path):
     """A fit of the wrong effects converges too: cdm_fit's model_check says,
     by the diagnosis's own two tests, that they do not explain the data (the

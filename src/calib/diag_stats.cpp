@@ -42,8 +42,13 @@ std::string fmt_num(double v, int prec, bool sign) {
 
 std::string fmt_p(double p) {
     char b[64];
-    if (p >= 0.001)
+    // Between 0.001 and 0.01, four decimals: the tests' level is 1e-3
+    // (kFindingLevel), and "p = 0.001" beside "explains the data" (p was
+    // 0.0012) read as a p at the level.
+    if (p >= 0.01)
         std::snprintf(b, sizeof b, "p = %.3f", p);
+    else if (p >= 0.001)
+        std::snprintf(b, sizeof b, "p = %.4f", p);
     else if (p > 0)
         std::snprintf(b, sizeof b, "p = %.1e", p);
     else

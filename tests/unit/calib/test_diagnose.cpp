@@ -200,6 +200,14 @@ static void check_consistent(const nlohmann::json &r) {
         static const std::regex kMore("; and ([0-9]+) more");
         for (std::sregex_iterator it(head.begin(), head.end(), kMore), end; it != end; ++it)
             more += std::stoul((*it)[1].str());
+        // The two tests' p-values as printed beside "explains the data"
+        // read as not below the level (significant: p < 1e-3).
+        if (rec["explained"].get<bool>()) {
+            static const std::regex kP("\\(p = ([0-9.e+-]+)\\)");
+            int k = 0;
+            for (std::sregex_iterator it(head.begin(), head.end(), kP), end; it != end && k < 2; ++it, ++k)
+                if (std::stod((*it)[1].str()) < 1e-3) fail_msg("explained beside a printed p below 1e-3: %s", head.c_str());
+        }
         if (named + more < significant)
             fail_msg("the verdict names %zu of the %zu candidates significant on the recommended model (and %zu more); "
                      "not named: %s: %s",

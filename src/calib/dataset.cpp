@@ -324,11 +324,14 @@ void Parser::find_heights() {
     std::vector<long> alone;
     for (auto [i, k] : runs) {
         all.push_back(xs[i].first);
-        // A height is an x_ref that at least two positions and a quarter as
-        // many as the fullest height share: two references moved to the same
-        // wrong x (a typed value, a spacer left in for two holes) are not a
-        // fixture height of two positions with an offset of its own.
-        if (k - i >= 2 && 4 * (k - i) >= largest) shared.push_back(xs[i].first);
+        // A height is an x_ref that at least two positions share, and
+        // either a quarter as many as the fullest height or a twentieth of
+        // the jig: two references moved to the same wrong x (a typed value,
+        // a spacer left in for two holes) are not a fixture height of two
+        // positions with an offset of its own and no neighbours, while a
+        // height the recording stopped part-way through still is one.
+        const size_t m = k - i;
+        if (m >= 2 && (4 * m >= largest || 20 * m >= xs.size())) shared.push_back(xs[i].first);
         else
             for (size_t j = i; j < k; ++j) alone.push_back(xs[j].second);
     }

@@ -168,6 +168,25 @@ def test_two_references_at_the_same_wrong_height_are_not_a_height(tmp_path):
     assert d["explained"], d["verdict"]
 
 
+def test_a_height_recorded_part_way_is_still_a_height(tmp_path):
+    """A recording that stopped 15 positions into its last height (of 81):
+    those 15 share their x_ref and are a fixture height of their own (their
+    own offset, neighbours among themselves), not references off the height
+    20 mm below. 15 is under a quarter of a full height but over a twentieth
+    of the jig (177 positions)."""
+    full = simulate_jig(tmp_path / "full.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--holes", "9",
+                        "--heights", "30,50,70", "--samples", "5")
+    part = tmp_path / "part.csv"
+    with open(full) as f, open(part, "w") as g:
+        g.write(f.readline())
+        for line in f:
+            if int(line.split(",", 1)[0]) < 2 * 81 + 15:
+                g.write(line)
+    d = cdm.diagnose(part, DEVICE_JSON, effects=["exit_pulley"], candidates=False, validation=False)
+    assert d["data"]["heights"] == [30.0, 50.0, 70.0] and d["data"]["off_height_points"] == [], d["data"]
+    assert d["data"]["positions"] == 177, d["data"]
+
+
 def test_fit_says_when_its_effects_do_not_explain_the_data(jig, tmp_path):
     """A fit of the wrong effects converges too: cdm_fit's model_check says,
     by the diagnosis's own two tests, that they do not explain the data (the

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <set>
 #include <unordered_map>
 #include <utility>
 
@@ -307,33 +308,60 @@ bool Parser::line(const char *b, const char *le, std::string &err) {
 // Dataset::heights and off_height_points (dataset.h). Equal x_ref: within
 // 1e-6 mm (the CSV's four decimals).
 void Parser::find_heights() {
-    std::vector<std::pair<double, long>> xs;
-    for (const auto &jp : d_.pos) xs.emplace_back(jp.ref[0], jp.point);
+    struct X {
+        double x;
+        long point;
+        size_t pos; // index in d_.pos
+        bool operator<(const X &o) const { return x < o.x || (x == o.x && point < o.point); }
+    };
+    std::vector<X> xs;
+    for (size_t j = 0; j < d_.pos.size(); ++j) xs.push_back({d_.pos[j].ref[0], d_.pos[j].point, j});
     std::sort(xs.begin(), xs.end());
     // Runs of equal x_ref: [first, end) in xs.
     std::vector<std::pair<size_t, size_t>> runs;
     size_t largest = 0;
     for (size_t i = 0; i < xs.size();) {
         size_t k = i + 1;
-        while (k < xs.size() && std::fabs(xs[k].first - xs[i].first) < 1e-6) ++k;
+        while (k < xs.size() && std::fabs(xs[k].x - xs[i].x) < 1e-6) ++k;
         runs.emplace_back(i, k);
         largest = std::max(largest, k - i);
         i = k;
     }
+    // A plate hole: (y_ref, z_ref) at the CSV's resolution.
+    auto hole = [&](size_t j) {
+        return std::make_pair(std::llround(d_.pos[j].ref[1] * 1e5), std::llround(d_.pos[j].ref[2] * 1e5));
+    };
+    // The full heights: shared by at least two positions and a quarter as
+    // many as the fullest.
+    std::vector<size_t> full;
+    for (size_t r = 0; r < runs.size(); ++r) {
+        const size_t m = runs[r].second - runs[r].first;
+        if (m >= 2 && 4 * m >= largest) full.push_back(r);
+    }
     std::vector<double> all, shared;
     std::vector<long> alone;
-    for (auto [i, k] : runs) {
-        all.push_back(xs[i].first);
-        // A height is an x_ref that at least two positions share, and
-        // either a quarter as many as the fullest height or a twentieth of
-        // the jig: two references moved to the same wrong x (a typed value,
-        // a spacer left in for two holes) are not a fixture height of two
-        // positions with an offset of its own and no neighbours, while a
-        // height the recording stopped part-way through still is one.
-        const size_t m = k - i;
-        if (m >= 2 && (4 * m >= largest || 20 * m >= xs.size())) shared.push_back(xs[i].first);
+    for (size_t r = 0; r < runs.size(); ++r) {
+        const auto [i, k] = runs[r];
+        all.push_back(xs[i].x);
+        bool height = std::find(full.begin(), full.end(), r) != full.end();
+        if (!height && k - i >= 2 && !full.empty()) {
+            // A smaller group is a height when it measures holes the nearest
+            // full height also has (a height with fewer holes, or one the
+            // recording stopped part-way through); references moved off a
+            // height to the same wrong x (a typed value, a spacer left in for
+            // two holes) are that height's missing holes. As a height of
+            // their own they had an offset that absorbed their error and no
+            // neighbours.
+            size_t near = full.front();
+            for (size_t f : full)
+                if (std::fabs(xs[runs[f].first].x - xs[i].x) < std::fabs(xs[runs[near].first].x - xs[i].x)) near = f;
+            std::set<std::pair<long long, long long>> holes;
+            for (size_t j = runs[near].first; j < runs[near].second; ++j) holes.insert(hole(xs[j].pos));
+            for (size_t j = i; j < k && !height; ++j) height = holes.count(hole(xs[j].pos)) > 0;
+        }
+        if (height) shared.push_back(xs[i].x);
         else
-            for (size_t j = i; j < k; ++j) alone.push_back(xs[j].second);
+            for (size_t j = i; j < k; ++j) alone.push_back(xs[j].point);
     }
     d_.off_height_points.clear();
     if (!shared.empty() && !alone.empty() && alone.size() * 10 <= xs.size()) {

@@ -60,8 +60,9 @@ struct Dataset {
     std::vector<std::string> ignored_columns;
     std::vector<JigHole> pos;                 // in order of first appearance
     // The fixture heights, sorted: the x_ref values positions share, each by
-    // at least two positions and by a quarter as many as the fullest height
-    // or a twentieth of the jig (a height recorded part-way). A
+    // at least two positions and either by a quarter as many as the fullest
+    // height or on holes the nearest such height also has (a height with
+    // fewer holes, or recorded part-way). A
     // position whose x_ref no other position has, or only a few do (a
     // reference typed or measured off its height, a probe seated 1 mm high),
     // is not a height of its own when such positions are a tenth of the jig

@@ -106,14 +106,16 @@ T cable_reading(const DeviceGeometry &g, int i, const Sample<T> &s, const CableL
 #undef CDM_STEP
     // d = P + h0 + dh - A0 - dA, in that order; a displacement no hook moved
     // is zero and left out, and the drawing's constants are added to the
-    // value alone (their derivatives are zero): the same bits, without the
-    // derivative vectors' arithmetic on zeros.
+    // value alone (their derivatives are zero): the same values (at most a
+    // zero's sign differs), without the derivative vectors' arithmetic on
+    // zeros.
+    const T *dh = geo.holder_shift(), *dA = geo.anchor_shift();
     T d[3];
     for (int k = 0; k < 3; ++k) {
         d[k] = T(s.P[k] + h0[k]);
-        if (geo.moved_h) d[k] += geo.dh[k];
+        if (dh) d[k] += dh[k];
         d[k] = T(d[k] - A0[k]);
-        if (geo.moved_A) d[k] -= geo.dA[k];
+        if (dA) d[k] -= dA[k];
     }
     T len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     const PathIn<T> in{g.exit_axis[i].data(), d};

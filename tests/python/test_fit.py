@@ -172,8 +172,8 @@ def test_a_height_recorded_part_way_is_still_a_height(tmp_path):
     """A recording that stopped 15 positions into its last height (of 81):
     those 15 share their x_ref and are a fixture height of their own (their
     own offset, neighbours among themselves), not references off the height
-    20 mm below. 15 is under a quarter of a full height but over a twentieth
-    of the jig (177 positions)."""
+    20 mm below. 15 is under a quarter of a full height, but they measure
+    holes the height below has."""
     full = simulate_jig(tmp_path / "full.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--holes", "9",
                         "--heights", "30,50,70", "--samples", "5")
     part = tmp_path / "part.csv"
@@ -185,6 +185,25 @@ def test_a_height_recorded_part_way_is_still_a_height(tmp_path):
     d = cdm.diagnose(part, DEVICE_JSON, effects=["exit_pulley"], candidates=False, validation=False)
     assert d["data"]["heights"] == [30.0, 50.0, 70.0] and d["data"]["off_height_points"] == [], d["data"]
     assert d["data"]["positions"] == 177, d["data"]
+
+
+def test_small_heights_on_the_same_holes_are_heights(tmp_path):
+    """A jig that measures 9 x 9 holes at 50 mm but only the middle 3 x 3 at
+    30 and 70 mm (a workspace that narrows): the small heights measure holes
+    the full one has, so they are heights with their own fixture offsets,
+    not references moved off 50 mm (9 positions are under a quarter of 81)."""
+    full = simulate_jig(tmp_path / "full.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--holes", "9",
+                        "--heights", "30,50,70", "--samples", "5")
+    part = tmp_path / "part.csv"
+    with open(full) as f, open(part, "w") as g:
+        g.write(f.readline())
+        for line in f:
+            v = line.split(",")
+            if abs(float(v[1]) - 50.0) < 1e-9 or (abs(float(v[2])) <= 5.0001 and abs(float(v[3])) <= 5.0001):
+                g.write(line)
+    d = cdm.diagnose(part, DEVICE_JSON, effects=["exit_pulley"], candidates=False, validation=False)
+    assert d["data"]["positions"] == 81 + 2 * 9, d["data"]
+    assert d["data"]["heights"] == [30.0, 50.0, 70.0] and d["data"]["off_height_points"] == [], d["data"]
 
 
 def test_fit_says_when_its_effects_do_not_explain_the_data(jig, tmp_path):

@@ -38,20 +38,28 @@ template <class T> struct Sample {
 // Geometry stage: displacement of cable i's anchor (exit point) and holder
 // attachment point from the drawing, mm. Zero on entry; hooks add to it with
 // move_anchor / move_holder. A displacement no hook moved is left out of the
-// sums (adding an exact zero changes no bit), so the hot path neither zeroes
-// nor adds derivative vectors that stay zero.
-template <class T> struct CableGeom {
-    T dA[3]; // valid when moved_A
-    T dh[3]; // valid when moved_h
-    bool moved_A = false, moved_h = false;
-    void move_anchor(const T *v) { add(dA, moved_A, v); }
-    void move_holder(const T *v) { add(dh, moved_h, v); }
+// sums (adding an exact zero changes no value), so the hot path neither
+// zeroes nor adds derivative vectors that stay zero. The displacements are
+// private: a hook cannot read one that was never written.
+template <class T> class CableGeom {
+  public:
+    void move_anchor(const T *v) { add(dA_, moved_A_, v); }
+    void move_holder(const T *v) { add(dh_, moved_h_, v); }
+    // The displacement, or nullptr when no hook moved it (the kernel's).
+    const T *anchor_shift() const { return moved_A_ ? dA_ : nullptr; }
+    const T *holder_shift() const { return moved_h_ ? dh_ : nullptr; }
 
   private:
     static void add(T *to, bool &moved, const T *v) {
-        for (int k = 0; k < 3; ++k) to[k] = moved ? T(to[k] + v[k]) : v[k];
+        if (moved)
+            for (int k = 0; k < 3; ++k) to[k] += v[k];
+        else
+            for (int k = 0; k < 3; ++k) to[k] = v[k];
         moved = true;
     }
+    T dA_[3];
+    T dh_[3];
+    bool moved_A_ = false, moved_h_ = false;
 };
 
 // Path stage: the vector from the (displaced) anchor to the (displaced)

@@ -200,13 +200,23 @@ static void check_consistent(const nlohmann::json &r) {
         static const std::regex kMore("; and ([0-9]+) more");
         for (std::sregex_iterator it(head.begin(), head.end(), kMore), end; it != end; ++it)
             more += std::stoul((*it)[1].str());
-        // The two tests' p-values as printed beside "explains the data"
-        // read as not below the level (significant: p < 1e-3).
-        if (rec["explained"].get<bool>()) {
-            static const std::regex kP("\\(p = ([0-9.e+-]+)\\)");
+        // The two tests' p-values as printed on the recommended model
+        // ("chi2/dof 1.02 (p = 0.210), spatial structure z = 3.4 (p =
+        // 0.0012)") read as the JSON's within their rounding (5 %): p =
+        // 0.0012 printed as "p = 0.001" beside "explains the data" read as a
+        // p at the level (1e-3).
+        {
+            static const std::regex kP("\\(p ([=<]) ([0-9.e+-]+)\\)");
+            const double want[2] = {rec["chi2_p_value"].get<double>(), rec["structure"]["p_value"].get<double>()};
             int k = 0;
-            for (std::sregex_iterator it(head.begin(), head.end(), kP), end; it != end && k < 2; ++it, ++k)
-                if (std::stod((*it)[1].str()) < 1e-3) fail_msg("explained beside a printed p below 1e-3: %s", head.c_str());
+            for (std::sregex_iterator it(head.begin(), head.end(), kP), end; it != end && k < 2; ++it, ++k) {
+                if ((*it)[1].str() == "<") continue;
+                const double shown = std::stod((*it)[2].str());
+                if (!(std::fabs(shown - want[k]) <= 0.051 * want[k]))
+                    fail_msg("the recommended model's p %g is printed as %s: %s", want[k], (*it)[2].str().c_str(),
+                             head.c_str());
+            }
+            if (k < 2) fail_msg("the verdict's head does not print the two tests' p: %s", head.c_str());
         }
         if (named + more < significant)
             fail_msg("the verdict names %zu of the %zu candidates significant on the recommended model (and %zu more); "

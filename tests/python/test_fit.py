@@ -116,6 +116,37 @@ def test_fit_sets_misplaced_positions_aside(tmp_path):
         assert j2 > 1.1 * j0, (a, j0, j2)
 
 
+def heights_jig(tmp_path, edit):
+    """The 9 x 9 plate at 30, 50 and 70 mm (exit_pulley hidden, 5 samples)
+    rewritten row by row: edit(v) gets a row's fields (point, x_ref, y_ref,
+    z_ref, l1..l4, as text) and returns them, changed or not, or None to
+    drop the row."""
+    clean = simulate_jig(tmp_path / "clean.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--holes", "9",
+                         "--heights", "30,50,70", "--samples", "5")
+    out = tmp_path / "edited.csv"
+    with open(clean) as f, open(out, "w") as g:
+        g.write(f.readline())
+        for line in f:
+            v = edit(line.rstrip("\n").split(","))
+            if v is not None:
+                g.write(",".join(v) + "\n")
+    return out
+
+
+def raised(points):
+    """An edit that raises the given points' x_ref by the mm given."""
+    def edit(v):
+        dx = points.get(int(v[0]), 0.0)
+        if dx:
+            v[1] = f"{float(v[1]) + dx:.4f}"
+        return v
+    return edit
+
+
+def diagnosed_heights(path):
+    return cdm.diagnose(path, DEVICE_JSON, effects=["exit_pulley"], candidates=False, validation=False)
+
+
 def test_a_reference_off_its_height_is_judged_not_made_a_height(tmp_path):
     """One reference 1 mm above its fixture height (a probe seated high) and
     one 4 micrometres off (a value typed from a gauge): neither is a height of
@@ -123,20 +154,10 @@ def test_a_reference_off_its_height_is_judged_not_made_a_height(tmp_path):
     and no neighbours). The 1 mm one is set aside, as one moved in y or z is;
     the other is listed and kept. Until 2026-11-24 the diagnosis of this file
     said "does not explain the data" and set nothing aside."""
-    clean = simulate_jig(tmp_path / "clean.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--holes", "9",
-                         "--heights", "30,50,70", "--samples", "5")
-    bad = tmp_path / "bad.csv"
-    with open(clean) as f, open(bad, "w") as g:
-        g.write(f.readline())
-        for line in f:
-            v = line.rstrip("\n").split(",")
-            dx = {100: 1.0, 20: 0.004}.get(int(v[0]), 0.0)
-            if dx:
-                v[1] = f"{float(v[1]) + dx:.4f}"
-            g.write(",".join(v) + "\n")
+    bad = heights_jig(tmp_path, raised({100: 1.0, 20: 0.004}))
     r = cdm.fit(bad, DEVICE_JSON, ["exit_pulley"])
     assert [x["point"] for x in r["outliers"]["set_aside"]] == [100], r["outliers"]
-    d = cdm.diagnose(bad, DEVICE_JSON, effects=["exit_pulley"], candidates=False, validation=False)
+    d = diagnosed_heights(bad)
     assert d["data"]["heights"] == [30.0, 50.0, 70.0] and d["data"]["off_height_points"] == [20], d["data"]
     assert [x["point"] for x in d["data"]["outliers"]["set_aside"]] == [100]
     assert d["explained"], d["verdict"]
@@ -147,20 +168,10 @@ def test_two_references_at_the_same_wrong_height_are_not_a_height(tmp_path):
     spacer left in for two holes): a group of two positions is not a
     fixture height (that would give it an offset of its own, absorbing the
     error, and no neighbours on the plate; the diagnosis said "does not
-    explain the data" and named a 0.5 mm spacer). Both are off their height,
-    grouped with the nearest one, and set aside like one such reference."""
-    clean = simulate_jig(tmp_path / "clean.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--holes", "9",
-                         "--heights", "30,50,70", "--samples", "5")
-    bad = tmp_path / "bad.csv"
-    with open(clean) as f, open(bad, "w") as g:
-        g.write(f.readline())
-        for line in f:
-            v = line.rstrip("\n").split(",")
-            if int(v[0]) in (100, 112):  # both at the 50 mm height of the 9 x 9 plate
-                assert abs(float(v[1]) - 50.0) < 1e-9, v
-                v[1] = f"{float(v[1]) + 1.0:.4f}"
-            g.write(",".join(v) + "\n")
-    d = cdm.diagnose(bad, DEVICE_JSON, effects=["exit_pulley"], candidates=False, validation=False)
+    explain the data" and named a 0.5 mm spacer). Their holes are the ones
+    missing at 50 mm: both are off their height, grouped with it, and set
+    aside like one such reference."""
+    d = diagnosed_heights(heights_jig(tmp_path, raised({100: 1.0, 112: 1.0})))  # both at 50 mm
     # (off_height_points lists those of the data the statistics are on: the
     # two are set aside, so none is left.)
     assert d["data"]["heights"] == [30.0, 50.0, 70.0] and d["data"]["off_height_points"] == [], d["data"]
@@ -174,15 +185,7 @@ def test_a_height_recorded_part_way_is_still_a_height(tmp_path):
     own offset, neighbours among themselves), not references off the height
     20 mm below. 15 is under a quarter of a full height, but they measure
     holes the height below has."""
-    full = simulate_jig(tmp_path / "full.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--holes", "9",
-                        "--heights", "30,50,70", "--samples", "5")
-    part = tmp_path / "part.csv"
-    with open(full) as f, open(part, "w") as g:
-        g.write(f.readline())
-        for line in f:
-            if int(line.split(",", 1)[0]) < 2 * 81 + 15:
-                g.write(line)
-    d = cdm.diagnose(part, DEVICE_JSON, effects=["exit_pulley"], candidates=False, validation=False)
+    d = diagnosed_heights(heights_jig(tmp_path, lambda v: v if int(v[0]) < 2 * 81 + 15 else None))
     assert d["data"]["heights"] == [30.0, 50.0, 70.0] and d["data"]["off_height_points"] == [], d["data"]
     assert d["data"]["positions"] == 177, d["data"]
 
@@ -192,16 +195,10 @@ def test_small_heights_on_the_same_holes_are_heights(tmp_path):
     30 and 70 mm (a workspace that narrows): the small heights measure holes
     the full one has, so they are heights with their own fixture offsets,
     not references moved off 50 mm (9 positions are under a quarter of 81)."""
-    full = simulate_jig(tmp_path / "full.csv", "--effects", "exit_pulley", "--effect-seed", "1", "--holes", "9",
-                        "--heights", "30,50,70", "--samples", "5")
-    part = tmp_path / "part.csv"
-    with open(full) as f, open(part, "w") as g:
-        g.write(f.readline())
-        for line in f:
-            v = line.split(",")
-            if abs(float(v[1]) - 50.0) < 1e-9 or (abs(float(v[2])) <= 5.0001 and abs(float(v[3])) <= 5.0001):
-                g.write(line)
-    d = cdm.diagnose(part, DEVICE_JSON, effects=["exit_pulley"], candidates=False, validation=False)
+    def middle(v):
+        keep = abs(float(v[1]) - 50.0) < 1e-9 or (abs(float(v[2])) <= 5.0001 and abs(float(v[3])) <= 5.0001)
+        return v if keep else None
+    d = diagnosed_heights(heights_jig(tmp_path, middle))
     assert d["data"]["positions"] == 81 + 2 * 9, d["data"]
     assert d["data"]["heights"] == [30.0, 50.0, 70.0] and d["data"]["off_height_points"] == [], d["data"]
 

@@ -62,14 +62,13 @@ struct Dataset {
     // The fixture heights, sorted: the x_ref values positions share, each by
     // at least two positions and either by a quarter as many as the fullest
     // height or on holes the nearest such height also has (a height with
-    // fewer holes, or recorded part-way). A
-    // position whose x_ref no other position has, or only a few do (a
-    // reference typed or measured off its height, a probe seated 1 mm high),
-    // is not a height of its own when such positions are a tenth of the jig
-    // or fewer: it is
-    // listed in off_height_points, grouped with the nearest height for the
-    // fixture and the neighbours (diag::make_grid), and judged by the model
-    // on the reference as written. Otherwise (references scattered in x)
+    // fewer holes, or recorded part-way). A position whose x_ref no other
+    // position has, or a few share on holes missing from the nearest height
+    // (a reference typed or measured off its height, a probe seated 1 mm
+    // high), is not a height of its own when such positions are a tenth of
+    // the jig or fewer: it is listed in off_height_points, grouped with the
+    // nearest height for the fixture and the neighbours (diag::make_grid),
+    // and judged by the model on the reference as written. Otherwise (references scattered in x)
     // every distinct x_ref.
     std::vector<double> heights;
     std::vector<long> off_height_points;

@@ -42,6 +42,8 @@ void find_heights(Dataset &d) {
         const size_t m = runs[r].second - runs[r].first;
         if (m >= 2 && 4 * m >= largest) full.push_back(r);
     }
+    // Each full height's holes, built when a smaller group first asks.
+    std::vector<std::set<std::pair<long long, long long>>> holes_of(runs.size());
     std::vector<double> all, shared;
     std::vector<long> alone;
     for (size_t r = 0; r < runs.size(); ++r) {
@@ -59,8 +61,9 @@ void find_heights(Dataset &d) {
             size_t near = full.front();
             for (size_t f : full)
                 if (std::fabs(xs[runs[f].first].x - xs[i].x) < std::fabs(xs[runs[near].first].x - xs[i].x)) near = f;
-            std::set<std::pair<long long, long long>> holes;
-            for (size_t j = runs[near].first; j < runs[near].second; ++j) holes.insert(hole(xs[j].pos));
+            auto &holes = holes_of[near];
+            if (holes.empty())
+                for (size_t j = runs[near].first; j < runs[near].second; ++j) holes.insert(hole(xs[j].pos));
             for (size_t j = i; j < k && !height; ++j) height = holes.count(hole(xs[j].pos)) > 0;
         }
         if (height) shared.push_back(xs[i].x);

@@ -189,7 +189,20 @@ void MasterWatcher::rescan(bool report) {
     for (const MasterNode &n : nodes) {
         if (known_.count(n.path)) continue;
         cdm_device_info info;
-        hid_master_info(n, info);
+        // A node just added may not answer yet: udev applies its rule's
+        // permissions after the node appears, and a device can take a moment
+        // after enumeration (the emulated one, on a loaded machine, once
+        // told "1.0" for "1.0.0"). An arrival is told with the full info
+        // when the device gives it within kSettleMs (tries kSettleStepMs
+        // apart, on this thread, leaving off at once when the watcher is
+        // stopped), else with what enumeration knows, as before.
+        constexpr int kSettleMs = 250, kSettleStepMs = 25;
+        bool full = hid_master_info(n, info);
+        for (int waited = 0; report && !full && waited < kSettleMs; waited += kSettleStepMs) {
+            pollfd p{stop_fd_, POLLIN, 0};
+            if (::poll(&p, 1, kSettleStepMs) != 0) break; // stopping (or poll failed): no more tries
+            full = hid_master_info(n, info);
+        }
         known_[n.path] = info;
         if (report) cb_(CDM_WATCH_ARRIVED, info);
     }

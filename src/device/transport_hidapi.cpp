@@ -314,7 +314,7 @@ int open_hid(const Uri &u, TransportPtr &out, std::string &err) {
 
 void hid_list_master_nodes(std::vector<MasterNode> &out, std::string &err) { out = master_nodes(err); }
 
-void hid_master_info(const MasterNode &node, cdm_device_info &out) {
+bool hid_master_info(const MasterNode &node, cdm_device_info &out) {
     const std::string uri = "hid:" + node.path;
     cdm_device_info info{};
     bool full = false;
@@ -342,6 +342,7 @@ void hid_master_info(const MasterNode &node, cdm_device_info &out) {
     info.vendor_id = proto::kVendorId;
     info.product_id = proto::kProductId;
     out = info;
+    return full;
 }
 
 void hid_list_masters(std::vector<cdm_device_info> &out, std::string &err) {

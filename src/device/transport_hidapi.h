@@ -22,7 +22,8 @@ struct MasterNode {
 };
 // Every connected master's node, each once (cheap: no open). err as above.
 void hid_list_master_nodes(std::vector<MasterNode> &out, std::string &err);
-// Its full info when it answers the device-info feature report, else what
-// enumeration knows (uri, serial, firmware major.minor, USB ids).
-void hid_master_info(const MasterNode &node, cdm_device_info &out);
+// Its full info when it answers the device-info feature report (returns
+// true), else what enumeration knows (uri, serial, firmware major.minor,
+// USB ids; returns false).
+bool hid_master_info(const MasterNode &node, cdm_device_info &out);
 } // namespace cdm

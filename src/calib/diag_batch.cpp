@@ -58,6 +58,7 @@ std::string fit_key(const DiagContext &ctx, const Model &m) {
         model_key(k, *w);
     }
     bytes(&ctx.fo.max_evals, sizeof ctx.fo.max_evals);
+    k += ctx.fo.profile_fixture_start ? '\5' : '\6';
     k.append(ctx.fo.use.begin(), ctx.fo.use.end());
     return k;
 }

@@ -326,6 +326,7 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         return false;
     };
     if (!pb.failure.empty()) return fail(); // while weighting
+    if (opt.profile_fixture_start && !pb.profile_fixture()) return fail();
     if (nfree == 0) {
         Eigen::VectorXd res;
         if (!pb.residuals(res, nullptr)) return fail();

@@ -175,6 +175,17 @@ static void check_consistent(const nlohmann::json &r) {
     };
     const auto &f = r["unexplained_structure"]["findings"];
     const auto &rec = r["recommended"];
+    // A candidate contains the model it extends (its effect at the neutral
+    // start): its fit cannot honestly end above it. One unit of chi-square
+    // is the base fit's own convergence (diag_candidates.cpp): below it no
+    // test moves. (From zero fixture offsets on the nominal model, the
+    // fixture-height test's exit_pulley row read delta chi2 -629485.)
+    for (const nlohmann::json *t : {&r["candidates"], rec.is_null() ? nullptr : &rec["candidates"]})
+        if (t)
+            for (auto &c : *t)
+                if (c["delta_chi2"].get<double>() < -1)
+                    fail_msg("candidate %s ended above the model it extends: delta chi2 %g",
+                             c["effect"].dump().c_str(), c["delta_chi2"].get<double>());
     if (!rec.is_null())
         check(rec["explained"], rec["candidates"], rec["chi2_p_value"].get<double>(),
               rec["structure"]["p_value"].get<double>(), &f, "the recommended model");

@@ -72,22 +72,8 @@ std::vector<ParamValues> effect_starts(const Model &base, const std::string &eff
         if (p.name != "period" || (p.unit != "mm" && !p.unit.empty())) continue;
         const PeriodPeak pk = length_period(length_view(base, pos));
         if (!pk.valid) return {{}};
-        // The periodogram's peak, and two starts a tenth either side of it
-        // for a peak that the base model pulled off the period (it took up
-        // part of the ripple). Those two cost two held-period fits of the
-        // whole model at every step, and are spent only where there is a
-        // ripple to find: a peak at false-alarm probability kExtraStarts or
-        // below. A ripple the candidate test could just find (delta chi2
-        // about 33 for its 9 parameters, the test's 1e-3 over 9 candidates)
-        // has a pooled Lomb power of about 16 on residuals at the noise,
-        // false alarm about 2e-3 over the frequencies searched: 25 times
-        // inside. With no ripple the peak is noise's (false alarm uniform),
-        // and one start, at it, is what such a candidate deserves.
-        constexpr double kExtraStarts = 0.05;
-        const bool extra = pk.fap <= kExtraStarts;
         std::vector<ParamValues> v;
         for (double f : {1.0, 0.9, 1.1}) {
-            if (f != 1.0 && !extra) continue;
             const double per = std::min(std::max(pk.period_mm * f, p.lower), p.upper);
             v.push_back({{"period", per}});
         }

@@ -50,6 +50,8 @@ namespace cdm {
 
 namespace {
 
+using fit_detail::BoundedStep;
+using fit_detail::bounded_gauss_newton;
 using fit_detail::Problem;
 
 struct Whitened {
@@ -198,22 +200,10 @@ Eigen::MatrixXd free_hessian(const Problem &pb, const Eigen::MatrixXd &J) {
     return pb.Q.transpose() * JtJ.selfadjointView<Eigen::Lower>() * pb.Q;
 }
 
-// The Gauss-Newton step within the bounds: the u that minimises the local
-// quadratic model 0.5 u'Hu + g'u of the objective subject to
-// lo <= x0 + Q u <= hi (every parameter the gauge leaves free), by the
-// primal active-set method for a convex quadratic programme (Nocedal and
-// Wright, Numerical Optimization, 2nd ed., algorithm 16.3), started at u = 0
-// with the bounds x0 already lies on (within SLSQP's constraint tolerance,
-// 1e-9). H is positive definite (the prior, and the eigenvalue floor of
-// the whitening), so each equality-constrained step is unique. `kkt` says u
-// satisfies the programme's optimality conditions; false when the method
-// did not settle within its iteration budget (the caller leaves the pass to
-// SLSQP). `pred` is the decrease the quadratic model promises.
-struct BoundedStep {
-    bool kkt = false;
-    Eigen::VectorXd u;
-    double pred = 0;
-};
+
+} // namespace
+
+namespace fit_detail {
 
 BoundedStep bounded_gauss_newton(const Eigen::MatrixXd &H, const Eigen::VectorXd &g, const Eigen::VectorXd &x0,
                                  const Eigen::MatrixXd &Q, const Eigen::VectorXd &lo, const Eigen::VectorXd &hi) {
@@ -308,7 +298,7 @@ BoundedStep bounded_gauss_newton(const Eigen::MatrixXd &H, const Eigen::VectorXd
     return st;
 }
 
-} // namespace
+} // namespace fit_detail
 
 bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt, FitReport &rep) {
     auto t0 = std::chrono::steady_clock::now();

@@ -58,9 +58,9 @@ struct FitOptions {
     // Start the fixture offsets where they fit the starting model best (as
     // model_chi2 profiles them) instead of at zero. A candidate's start is
     // then exactly the model it extends, and the fit cannot end above it.
-    // Not the default: from offsets clamped at kFixtureMaxMm (a model
-    // millimetres off) fits converge worse (seen: chi2/dof 2.5 against 0.94
-    // from zero), so the diagnosis uses it only for a retry (diag_candidates.cpp).
+    // The diagnosis uses it for a candidate that ended above its base
+    // (diag_candidates.cpp); every other fit starts them at zero, as the
+    // results measured in docs/ were.
     bool profile_fixture_start = false;
     int max_evals = 400;
     std::function<bool(double)> progress;        // fraction done; false cancels

@@ -225,6 +225,42 @@ static std::vector<PreparedPos> noise_free_jig(const Model &truth) {
     return pos;
 }
 
+// The fixture heights' offsets (FitOptions::fixture) sum to zero: their
+// common part is the jig's placement, which the fit's gauge leaves out, and
+// each is bounded by kFixtureMaxMm. model_chi2 profiles them for the model
+// as it stands; that must be the chi-square a fit of the offsets alone (the
+// model has no parameter) reaches, not below it. On the nominal model with
+// a 6 mm exit pulley in the data every height's best offset is past the
+// bound, and clamping the free solution added a common offset no fit can
+// have: model_chi2 came out about a tenth below the fit (candidates then
+// read delta chi2 -629485). Agreement to 1e-6 relative: both minimise the
+// same convex problem in 4 unknowns, the fit to SLSQP's 1e-12 tolerance
+// and the profile by three bounded Gauss-Newton steps on readings that
+// are near-linear in an x offset of a tenth of a millimetre.
+static void fixture_profile_on_its_gauge(void **) {
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    assert_true(truth.add_effect("exit_pulley", ParamValues{{"radius_mm", 6.0}}, err));
+    const std::vector<PreparedPos> pos = noise_free_jig(truth);
+    FitOptions fo;
+    fo.fixture_count = 5;
+    for (auto &pp : pos) fo.fixture.push_back(int(std::lround((pp.ref(0) - 30) / 10)));
+    Model m{DeviceGeometry{}};
+    const double profiled = model_chi2(m, pos, fo);
+    FitReport rep;
+    assert_true(fit_model(m, pos, fo, rep));
+    assert_int_equal(rep.n_fixture, 4);
+    double sum = 0, worst = 0;
+    for (double v : rep.fixture_mm) {
+        sum += v;
+        worst = std::max(worst, std::fabs(v));
+    }
+    if (!(worst > kFixtureMaxMm - 1e-6)) fail_msg("premise: no offset at the bound (largest %g mm)", worst);
+    if (std::fabs(sum) > 1e-9) fail_msg("the fit's offsets sum to %g mm", sum);
+    if (std::fabs(profiled - rep.chi2) > 1e-6 * rep.chi2)
+        fail_msg("model_chi2 %.9g, the offsets' fit %.9g", profiled, rep.chi2);
+}
+
 // FitOptions::hold keeps a parameter where it is and fits the rest: the
 // diagnosis profiles a ripple's period this way. Noise-free readings of a
 // ripple (period 94.2 mm) at 5 x 13 x 13 positions: held at 90 mm the
@@ -563,6 +599,7 @@ int main(void) {
         cmocka_unit_test(pulley_limits),
         cmocka_unit_test(json_round_trip_and_errors),
         cmocka_unit_test(apply_failure_is_reported),
+        cmocka_unit_test(fixture_profile_on_its_gauge),
         cmocka_unit_test(held_parameter_stays),
         cmocka_unit_test(held_parameter_in_a_gauge),
         cmocka_unit_test(weights_from_the_named_model),

@@ -200,9 +200,9 @@ Eigen::MatrixXd free_hessian(const Problem &pb, const Eigen::MatrixXd &J) {
     return pb.Q.transpose() * JtJ.selfadjointView<Eigen::Lower>() * pb.Q;
 }
 
-
 } // namespace
 
+// (fit_problem.h says what it solves: Problem::profile_fixture uses it too.)
 namespace fit_detail {
 
 BoundedStep bounded_gauss_newton(const Eigen::MatrixXd &H, const Eigen::VectorXd &g, const Eigen::VectorXd &x0,

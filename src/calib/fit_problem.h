@@ -21,8 +21,7 @@
 
 namespace cdm::fit_detail {
 
-// (Defined in fit.cpp.)
-// The Gauss-Newton step within the bounds: the u that minimises the local
+// The Gauss-Newton step within the bounds (defined in fit.cpp): the u that minimises the local
 // quadratic model 0.5 u'Hu + g'u of the objective subject to
 // lo <= x0 + Q u <= hi (every parameter the gauge leaves free), by the
 // primal active-set method for a convex quadratic programme (Nocedal and

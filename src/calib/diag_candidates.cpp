@@ -141,19 +141,25 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
     {
         std::vector<FitJob> again;
         std::vector<size_t> of;
+        std::vector<std::string> list_of;
         for (size_t i = 0; i < list.size(); ++i)
             for (size_t q = span[i].first; q < span[i].second; ++q)
                 if (jobs[q].ok && jobs[q].rep.chi2 > base_chi2 + 1) {
                     again.push_back(start_job(base, reading_effects(base), list[i]->name,
                                               effect_starts(base, list[i]->name, ctx.pos), jobs[q].stage + " again"));
                     of.push_back(q);
+                    list_of.push_back(list[i]->name);
                 }
         if (!again.empty()) {
             DiagContext pc = ctx;
             pc.fo.profile_fixture_start = true;
             if (!fit_all(pc, again, err)) return false;
             for (size_t a = 0; a < again.size(); ++a)
-                if (again[a].ok && again[a].rep.chi2 < jobs[of[a]].rep.chi2) jobs[of[a]] = std::move(again[a]);
+                // (A period the first fit showed is not traded for one the
+                // data do not show: that candidate would drop from the table.)
+                if (again[a].ok && again[a].rep.chi2 < jobs[of[a]].rep.chi2 &&
+                    (period_shown(again[a].m, list_of[a], ctx.pos) || !period_shown(jobs[of[a]].m, list_of[a], ctx.pos)))
+                    jobs[of[a]] = std::move(again[a]);
         }
     }
     // Each candidate's best start, then (in parallel: independent, each

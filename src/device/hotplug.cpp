@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cstring>
 #include <set>
 
@@ -196,9 +197,12 @@ void MasterWatcher::rescan(bool report) {
         // when the device gives it within kSettleMs (tries kSettleStepMs
         // apart, on this thread, leaving off at once when the watcher is
         // stopped), else with what enumeration knows, as before.
+        // (The deadline is on the clock: a try that itself blocks, a
+        // control request timing out, counts too.)
         constexpr int kSettleMs = 250, kSettleStepMs = 25;
+        const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(kSettleMs);
         bool full = hid_master_info(n, info);
-        for (int waited = 0; report && !full && waited < kSettleMs; waited += kSettleStepMs) {
+        while (report && !full && std::chrono::steady_clock::now() < deadline) {
             pollfd p{stop_fd_, POLLIN, 0};
             if (::poll(&p, 1, kSettleStepMs) != 0) break; // stopping (or poll failed): no more tries
             full = hid_master_info(n, info);

@@ -112,7 +112,7 @@ struct MasterTestbed::Impl {
     uint64_t sent = 0;
     std::map<unsigned, uint64_t> ioctl_count;
     std::atomic<bool> plugged{false};
-    uint64_t generation = 1; // bumped by unplug: clients of an older one get ENODEV
+    std::atomic<uint64_t> generation{1}; // bumped by unplug: clients of an older one get ENODEV (read by connected_cb, on any thread)
 
     explicit Impl(const TestbedOptions &opt)
         : o(opt), fw(master_info(opt)),
@@ -299,14 +299,46 @@ uint64_t client_generation(UMockdevIoctlClient *c) {
     return GPOINTER_TO_SIZE(g_object_get_data(G_OBJECT(c), "cdm-generation"));
 }
 
+// umockdev emits a client's signals on the context that was the thread
+// default when the ioctl handler was attached (the handler thread's) but,
+// now and then, on a thread of GLib's own: an ASan run of umockdev_watch
+// caught on_read popping the report queue there while unplug() cleared it
+// on the handler thread (a double free, 1 run in about 100). A signal that
+// arrives elsewhere is therefore handed to the handler thread (the client
+// is completed from there, as a pending read always was), so that the
+// state below is touched on that thread alone, as Impl says.
+template <gboolean (MasterTestbed::Impl::*On)(UMockdevIoctlClient *)>
+gboolean on_handler_thread(UMockdevIoctlClient *c, gpointer self) {
+    auto *impl = static_cast<MasterTestbed::Impl *>(self);
+    if (g_main_context_is_owner(impl->ctx)) return (impl->*On)(c);
+    struct Hop {
+        MasterTestbed::Impl *impl;
+        UMockdevIoctlClient *c;
+    };
+    auto *h = new Hop{impl, G_TYPE_CHECK_INSTANCE_CAST(g_object_ref(c), UMOCKDEV_TYPE_IOCTL_CLIENT, UMockdevIoctlClient)};
+    g_main_context_invoke_full(
+        impl->ctx, G_PRIORITY_DEFAULT,
+        [](gpointer p) -> gboolean {
+            auto *k = static_cast<Hop *>(p);
+            (k->impl->*On)(k->c);
+            return G_SOURCE_REMOVE;
+        },
+        h,
+        [](gpointer p) {
+            auto *k = static_cast<Hop *>(p);
+            g_object_unref(k->c);
+            delete k;
+        });
+    return TRUE;
+}
 gboolean ioctl_cb(UMockdevIoctlBase *, UMockdevIoctlClient *c, gpointer self) {
-    return static_cast<MasterTestbed::Impl *>(self)->on_ioctl(c);
+    return on_handler_thread<&MasterTestbed::Impl::on_ioctl>(c, self);
 }
 gboolean read_cb(UMockdevIoctlBase *, UMockdevIoctlClient *c, gpointer self) {
-    return static_cast<MasterTestbed::Impl *>(self)->on_read(c);
+    return on_handler_thread<&MasterTestbed::Impl::on_read>(c, self);
 }
 gboolean write_cb(UMockdevIoctlBase *, UMockdevIoctlClient *c, gpointer self) {
-    return static_cast<MasterTestbed::Impl *>(self)->on_write(c);
+    return on_handler_thread<&MasterTestbed::Impl::on_write>(c, self);
 }
 void connected_cb(UMockdevIoctlBase *, UMockdevIoctlClient *c, gpointer self) {
     // A client belongs to the plug it opened: after an unplug its fd is

@@ -299,11 +299,11 @@ uint64_t client_generation(UMockdevIoctlClient *c) {
     return GPOINTER_TO_SIZE(g_object_get_data(G_OBJECT(c), "cdm-generation"));
 }
 
-// umockdev emits a client's signals on the context that was the thread
-// default when the ioctl handler was attached (the handler thread's) but,
-// now and then, on a thread of GLib's own: an ASan run of umockdev_watch
-// caught on_read popping the report queue there while unplug() cleared it
-// on the handler thread (a double free, 1 run in about 100). A signal that
+// umockdev emits a client's signals partly on the handler thread (whose
+// context was the thread default when the handler was attached) and partly
+// on a thread of GLib's own: about 35 of a umockdev_watch run's, counted.
+// An ASan run caught on_read popping the report queue there while unplug()
+// cleared it on the handler thread (a double free, once in 65 runs). A signal that
 // arrives elsewhere is therefore handed to the handler thread (the client
 // is completed from there, as a pending read always was), so that the
 // state below is touched on that thread alone, as Impl says.

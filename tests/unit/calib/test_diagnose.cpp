@@ -176,10 +176,13 @@ static void check_consistent(const nlohmann::json &r) {
     const auto &f = r["unexplained_structure"]["findings"];
     const auto &rec = r["recommended"];
     // A candidate contains the model it extends (its effect at the neutral
-    // start): its fit cannot honestly end above it. One unit of chi-square
-    // is the base fit's own convergence (diag_candidates.cpp): below it no
-    // test moves. (From zero fixture offsets on the nominal model, the
-    // fixture-height test's exit_pulley row read delta chi2 -629485.)
+    // start): its fit should not end above it. One unit of chi-square is
+    // the base fit's own convergence (diag_candidates.cpp): below it no test
+    // moves. (While the fixture offsets' profile clamped them off their
+    // sum-zero gauge, the fixture-height test's exit_pulley row read delta
+    // chi2 -629485 on the nominal model.) Not a theorem: the fit also
+    // minimises the offsets' prior, which could give back a few units; no
+    // case run so far comes near -1.
     for (const nlohmann::json *t : {&r["candidates"], rec.is_null() ? nullptr : &rec["candidates"]})
         if (t)
             for (auto &c : *t)

@@ -109,18 +109,24 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
     const int K = int(heights.size());
     if (!G.layered || K < 2) return A; // no fixture heights: nothing repeats
 
-    // --- the fixture: per-height means, relative to their common part
-    // (the jig's placement), tested against their standard errors.
+    // --- the fixture: per-height means, tested against their standard
+    // errors. In x (the axis the spacers set, where the fit has an offset
+    // per height) the means themselves: their common part is the spacers'
+    // mean error, the jig's placement along x, which the fit gives the
+    // fixture too (fit_problem.h, build_gauge), K degrees of freedom. In y
+    // and z, relative to their common part (the jig's placement there,
+    // which no spacer sets), K - 1.
     const auto hm = height_means(E, G, jig);
     json fx = {{"heights_mm", json::array()}, {"offsets_mm", json::object()}, {"max_mm", json::object()},
                {"p_value", json::object()}, {"taken_as_jig", true},
                {"test", !lr
-                            ? "chi-square of the per-height weighted mean residuals about their common mean, K - 1 "
-                              "degrees of freedom, per axis; Bonferroni over the three axes"
+                            ? "x (the axis the spacers set): chi-square of the per-height weighted mean residuals "
+                              "about zero, K degrees of freedom; y, z: about their common mean, K - 1; Bonferroni "
+                              "over the three axes"
                             : "x (the axis the spacers set, fitted as per-height offsets): likelihood ratio, the "
                               "model refitted without the offsets, delta chi-square over max(1, chi2/dof of the "
-                              "model) against chi-square(K - 1) (conservative: the offsets' prior and what the "
-                              "device's parameters can take leave fewer than K - 1 free); y, z: "
+                              "model) against chi-square(K) (conservative: the offsets' prior and what the "
+                              "device's parameters can take leave fewer than K free); y, z: "
                               "chi-square of the per-height weighted mean residuals about their common mean, K - 1 "
                               "degrees of freedom; Bonferroni over the three axes"}};
     if (lr && lr->tested) {
@@ -149,7 +155,7 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
             sw += 1 / (m.se() * m.se());
             swm += m.mean() / (m.se() * m.se());
         }
-        const double common = swm / sw;
+        const double common = a == 0 ? 0.0 : swm / sw; // x: the spacers' mean error is theirs
         double chi2 = 0, mx = 0;
         json offs = json::array();
         for (int h : heights) {
@@ -173,7 +179,7 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
             continue;
         }
         const double stat = by_lr ? lr->chi2 / lr->scale : chi2;
-        const double p = std::min(1.0, 3 * chi2_sf(stat, K - 1));
+        const double p = std::min(1.0, 3 * chi2_sf(stat, a == 0 ? K : K - 1));
         fx["p_value"][kAxis[a]] = p;
         if (p < kFindingLevel && mx >= small && mx > fx_worst) {
             fx_worst = mx;

@@ -49,8 +49,10 @@ struct FitOptions {
     std::vector<char> use;                       // positions that take part (empty: all)
     // The jig as it is: each fixture height's own x error (jig frame, the
     // axis the spacer sets), fitted as nuisance offsets beside the model's
-    // parameters, summing to zero (their common part is the jig's placement
-    // or the model's). fixture[j]: position j's height index; empty, or
+    // parameters, one free offset per height (their common part is the
+    // spacers' mean error, i.e. the jig's placement along x; a model with a
+    // translation of its own shares that direction with them, and the
+    // priors give it to the model). fixture[j]: position j's height index; empty, or
     // fewer than two heights: none. Bounded by kFixtureMaxMm: a larger
     // per-height error is not a machined spacer's and is left to the model.
     std::vector<int> fixture;
@@ -96,7 +98,7 @@ struct FitReport {
     // per effect (model order), per parameter
     std::vector<std::vector<double>> std;
     std::string message;
-    std::vector<double> fixture_mm; // fitted per-height x offsets (FitOptions::fixture), sum zero
+    std::vector<double> fixture_mm; // fitted per-height x offsets (FitOptions::fixture)
     int n_fixture = 0;              // their free parameters (not in n_free: the same in every model)
     bool abandoned = false;         // stopped by FitOptions::abandon_above (not converged)
 };

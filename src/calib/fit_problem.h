@@ -197,14 +197,21 @@ struct Problem {
             Q.block(o, col, B.rows(), B.cols()) = B;
             col += int(B.cols());
         }
-        // The fixture offsets sum to zero: contrasts e_k - 1/F.
-        for (int k = 0; k + 1 < F; ++k, ++col) {
-            Q.block(ev.size(), col, F, 1).setConstant(-1.0 / F);
-            Q(ev.size() + k, col) += 1.0;
-        }
+        // Every fixture offset is free, their common part included: it is
+        // the spacers' mean error, which is the jig's placement along x, and
+        // the judge takes it out with each height's mean (diag_jig.cpp).
+        // Under the sum-zero gauge this used to have, a common x offset of
+        // the jig was left to the device: on clean data with spacers off by
+        // 0.03 mm (their mean -0.0085 mm) every candidate that can shift x
+        // gained delta chi2 ~1730 and the search recommended cable_stretch
+        // for it. Where the model has a translation of its own
+        // (jig_misalignment, anchor_position) the two are one direction of
+        // the data, told apart by the priors alone: the device's weak prior
+        // against the spacers' tolerance, so the device takes it.
+        for (int k = 0; k < F; ++k, ++col) Q(ev.size() + k, col) = 1.0;
         Q.conservativeResize(n, col);
     }
-    int n_fixture_free() const { return F > 0 ? F - 1 : 0; }
+    int n_fixture_free() const { return F; }
 
     // Restricts the basis B (full = base + B * free) to the directions that
     // leave parameter r where it is: the column with the largest entry in
@@ -348,7 +355,7 @@ struct Problem {
     // with the jig as it is.
     bool profile_fixture() {
         if (F == 0) return true;
-        Eigen::MatrixXd Qf = Q.bottomRows(F).rightCols(F - 1);
+        Eigen::MatrixXd Qf = Q.bottomRows(F).rightCols(F);
         for (int it = 0; it < 3; ++it) {
             Eigen::VectorXd res;
             Eigen::MatrixXd J;
@@ -357,11 +364,12 @@ struct Problem {
             // With the fixture offsets' prior (prior_sd), as in the fit:
             // minimises |res - A step|^2 + sum_k ((fx + Qf step)_k / sd)^2.
             const double p = 1.0 / (kFixturePriorSdMm * kFixturePriorSdMm);
-            // Within the bounds and on the gauge (the offsets sum to zero):
-            // the bounded step, not the free one clamped, whose clamp added
-            // a common offset no fit can have (the gauge fixes it), so
-            // model_chi2 came out below what any fit of the same model could
-            // reach and candidates read delta chi2 -629485.
+            // Within the bounds: the bounded step, not the free one clamped
+            // (when the offsets summed to zero, the clamp added a common
+            // offset no fit could have, so model_chi2 came out below what
+            // any fit of the same model could reach and candidates read
+            // delta chi2 -629485; clamped coordinate by coordinate it is
+            // still not the box's optimum).
             const Eigen::MatrixXd H = A.transpose() * A + p * Qf.transpose() * Qf;
             const Eigen::VectorXd g = -(A.transpose() * res - p * Qf.transpose() * fx);
             const Eigen::VectorXd lo = Eigen::VectorXd::Constant(F, -kFixtureMaxMm);

@@ -937,6 +937,52 @@ static void many_misplaced_positions_are_set_aside(void **) {
     assert_true(r["recommended"]["explained"].get<bool>());
 }
 
+// The structure test's z on white residuals is a standard normal: on the
+// half jig (13 x 13 holes, 5 heights, 1560 neighbour pairs) 4000 draws of
+// independent unit normals (per-height means removed, as the judge does)
+// must give z a standard deviation within 0.06 of 1 (its estimate's own
+// spread is 1/sqrt(2 x 4000) = 0.011; 0.06 leaves room for the normal
+// approximation's small bias from the removed means) and cross the
+// verdict's one-sided 1e-3 point (3.09) at most 3 times the stated rate
+// (4 expected; 12 is 4 standard deviations of a Poisson count above).
+// With Cliff and Ord's S1 and S2 halved and quartered, as they were until
+// 2026-11-25, the standard deviation was 1.41 and the 1e-3 point was
+// crossed 8 times as often: clean data read "not explained" one run in
+// twenty or so.
+static void structure_test_is_calibrated(void **) {
+    std::vector<PreparedPos> pos;
+    std::vector<double> heights{30, 40, 50, 60, 70};
+    for (double x : heights)
+        for (int y = -6; y <= 6; ++y)
+            for (int z = -6; z <= 6; ++z) {
+                PreparedPos p;
+                p.ref = Eigen::Vector3d(x, 10.0 * y, 10.0 * z);
+                p.mean.setZero();
+                p.var_mean.setZero();
+                p.cov.setZero();
+                pos.push_back(p);
+            }
+    const diag::Grid G = diag::make_grid(pos, heights);
+    const std::vector<char> ok(pos.size(), 1);
+    std::mt19937_64 rng(20261125);
+    std::normal_distribution<double> g(0.0, 1.0);
+    const int draws = 4000;
+    double s = 0, s2 = 0;
+    int past = 0;
+    std::vector<double> v(pos.size());
+    for (int t = 0; t < draws; ++t) {
+        for (double &e : v) e = g(rng);
+        const double z = diag::moran_z(v, ok, G);
+        s += z;
+        s2 += z * z;
+        past += z > 3.09;
+    }
+    const double mean = s / draws, sd = std::sqrt(s2 / draws - mean * mean);
+    if (std::fabs(sd - 1) > 0.06) fail_msg("Moran z on white residuals: sd %g (mean %g)", sd, mean);
+    if (std::fabs(mean) > 0.1) fail_msg("Moran z on white residuals: mean %g", mean);
+    if (past > 12) fail_msg("Moran z past 3.09 in %d of %d white draws (1e-3 expects 4)", past, draws);
+}
+
 // The two tests that let more than the few be set aside, on their own.
 static void references_off_are_told_from_structure(void **) {
     // Join count: a 3 x 3 block of a 13 x 13 plate marked is clustered;
@@ -1029,6 +1075,7 @@ int main(void) {
         cmocka_unit_test(grid_ignores_a_misplaced_reference),
         cmocka_unit_test(many_misplaced_positions_are_set_aside),
         cmocka_unit_test(references_off_are_told_from_structure),
+        cmocka_unit_test(structure_test_is_calibrated),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -983,6 +983,36 @@ static void structure_test_is_calibrated(void **) {
     if (past > 12) fail_msg("Moran z past 3.09 in %d of %d white draws (1e-3 expects 4)", past, draws);
 }
 
+// A ripple's period is picked where the residual looks most like one, so
+// on data with none drum_eccentricity's delta chi2 is the largest of about
+// M = span / 8 mm - 1 chi-square(8)'s, not a chi-square(9) (it averaged 19
+// on 20 clean half jigs). Its p must say so: on 10 clean half jigs (no jig
+// errors) at most 3 may read p < 0.05 (binomial(10, 0.05) passes 3 once in
+// a thousand). Against chi-square(9), as until 2026-11-25, most did.
+static void ripple_p_counts_the_periods_searched(void **) {
+    int small = 0;
+    std::string ps;
+    for (uint64_t seed = 700; seed < 710; ++seed) {
+        Dataset d;
+        std::string err;
+        assert_true(simulate_jig(Model{DeviceGeometry{}}, test::half_jig(seed), d, err));
+        DiagnoseOptions o;
+        o.search = false;
+        o.validation = false;
+        o.per_position = false;
+        nlohmann::json r;
+        Model fitted{DeviceGeometry{}};
+        if (!diagnose(d, DeviceGeometry{}, o, r, fitted, err)) fail_msg("diagnose failed: %s", err.c_str());
+        for (auto &c : r["candidates"])
+            if (c["effect"] == "drum_eccentricity") {
+                const double p = c["lr_p_value"].get<double>();
+                small += p < 0.05;
+                ps += " " + std::to_string(p);
+            }
+    }
+    if (small > 3) fail_msg("drum_eccentricity on clean data: %d of 10 p < 0.05 (p:%s)", small, ps.c_str());
+}
+
 // The two tests that let more than the few be set aside, on their own.
 static void references_off_are_told_from_structure(void **) {
     // Join count: a 3 x 3 block of a 13 x 13 plate marked is clustered;
@@ -1076,6 +1106,7 @@ int main(void) {
         cmocka_unit_test(many_misplaced_positions_are_set_aside),
         cmocka_unit_test(references_off_are_told_from_structure),
         cmocka_unit_test(structure_test_is_calibrated),
+        cmocka_unit_test(ripple_p_counts_the_periods_searched),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -28,7 +28,8 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
         }
         eff.push_back({{"name", d.name}, {"params", pj}});
     }
-    const int dof = std::max(1, cf.report.n_obs - cf.report.n_free);
+    // the reading-space fit's: its own parameters and the fixture heights' offsets
+    const int dof = std::max(1, cf.report.n_obs - cf.report.n_free - cf.report.n_fixture);
     // Whether the fitted effects explain the data, by the diagnosis's own
     // two tests (judge: the position chi-square against the noise and the
     // jig, and the spatial structure), so that a fit of the wrong effects is

@@ -60,6 +60,22 @@ Eval without_fixture(const Eval &E, const Grid &G, const FixtureOffsets &f) {
     return out;
 }
 
+double x_rms_without_fixture(const Eval &E, const Grid &G, const V3 &jig, const std::vector<PreparedPos> &pos) {
+    const FixtureOffsets f = fixture_offsets(E, G, jig);
+    if (f.empty() || !(E.err[0].n > 0)) return NAN;
+    // sum over a position's n samples of (r - o)^2 = sum r^2 - 2 o n r + n o^2,
+    // r its mean residual (evaluate() accumulates the samples' moments so)
+    double ss = E.err[0].ss;
+    for (size_t j = 0; j < E.res.size() && j < pos.size(); ++j) {
+        if (!E.ok[j]) continue;
+        auto it = f.find({G.height_index[j], 0});
+        if (it == f.end()) continue;
+        const double o = it->second, n = double(pos[j].n);
+        ss += n * (o * o - 2 * o * E.res[j](0));
+    }
+    return std::sqrt(std::max(0.0, ss) / E.err[0].n);
+}
+
 bool fixture_lr(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &fo, FixtureLR &out,
                 std::string &err) {
     out = FixtureLR{};
@@ -148,6 +164,7 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
     double fx_worst = 0;
     double past = 0; // the largest per-height mean past kFixtureMaxMm (mm)
     int fx_axis = -1;
+    double x_common = 0, x_spread = 0;
     for (int a = 0; a < 3; ++a) {
         double sw = 0, swm = 0;
         for (int h : heights) {
@@ -156,6 +173,10 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
             swm += m.mean() / (m.se() * m.se());
         }
         const double common = a == 0 ? 0.0 : swm / sw; // x: the spacers' mean error is theirs
+        if (a == 0) { // x's common part and the heights' spread about it, for the words
+            x_common = swm / sw;
+            for (int h : heights) x_spread = std::max(x_spread, std::fabs(hm.at({h, a}).mean() - x_common));
+        }
         double chi2 = 0, mx = 0;
         json offs = json::array();
         for (int h : heights) {
@@ -186,14 +207,29 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
             fx_axis = a;
         }
     }
+    fx["x_common_mm"] = x_common;
+    fx["x_spread_mm"] = x_spread;
     out["fixture"] = fx;
     if (fx_axis >= 0) {
         std::string per;
         for (auto &v : fx["offsets_mm"][kAxis[fx_axis]]) per += (per.empty() ? "" : ", ") + fmt_num(v.get<double>(), 3, true);
-        out["text"].push_back("each fixture height has its own offset, up to " + fmt_num(fx_worst, 3) + " mm in " +
-                              kAxis[fx_axis] + " (per height: " + per + " mm; " +
-                              fmt_p(fx["p_value"][kAxis[fx_axis]].get<double>()) +
-                              "): the height fixture's spacers, the jig's error, taken out of the fit and the "
+        // In x the offsets are the spacers' and the jig's mounting together
+        // (one direction of the data): the same at every height, they are
+        // not told as each height's own.
+        const std::string what =
+            fx_axis != 0 ? "each fixture height has its own offset, up to " + fmt_num(fx_worst, 3) + " mm in " +
+                               kAxis[fx_axis] + " (per height: " + per + " mm; " +
+                               fmt_p(fx["p_value"][kAxis[fx_axis]].get<double>()) + "): the height fixture's spacers"
+            : x_spread < small
+                ? "the jig sits " + fmt_num(x_common, 3, true) + " mm off in x at every fixture height (per height: " +
+                      per + " mm, the same to within a tenth of the noise floor; " +
+                      fmt_p(fx["p_value"]["x"].get<double>()) +
+                      "): the jig's mounting along x, or its spacers' common error"
+                : "each fixture height has its own offset, up to " + fmt_num(fx_worst, 3) +
+                      " mm in x (per height: " + per + " mm, their common part " + fmt_num(x_common, 3, true) +
+                      " mm; " + fmt_p(fx["p_value"]["x"].get<double>()) +
+                      "): the height fixture's spacers (the common part: their mean error, or the jig's mounting along x)";
+        out["text"].push_back(what + ", the jig's error, taken out of the fit and the "
                               "tests (up to " + fmt_num(kFixtureMaxMm, 2) + " mm per height" +
                               (fx["taken_as_jig"].get<bool>()
                                    ? std::string(")")

@@ -43,6 +43,11 @@ FixtureOffsets fixture_offsets(const Eval &E, const Grid &G, const V3 &jig);
 // E with the fixture's offsets subtracted from its residuals.
 Eval without_fixture(const Eval &E, const Grid &G, const FixtureOffsets &f);
 
+// The per-sample x RMS of E with the fixture's per-height offsets
+// (fixture_offsets) out: what the judge's tests see in x. NaN without
+// fixture heights.
+double x_rms_without_fixture(const Eval &E, const Grid &G, const V3 &jig, const std::vector<PreparedPos> &pos);
+
 // The jig's own errors in E's residual. report: {"fixture": {...},
 // "holes": {...}, "seat_std_mm": [x,y,z], "text": [...], "finding": ...}
 // (docs/calibration.md, "The jig as it is"); a sentence in "text" only for

@@ -9,6 +9,7 @@
 // ("explains the data to within what matters") while `explained` stays false.
 #pragma once
 
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -30,9 +31,11 @@ struct Judgement {
 // v: the model's chi-square and structure tests; E: its evaluation;
 // cands: the candidates on top of it (nullptr: not tried); findings: its
 // residual findings (nullptr: not analysed); noise: the noise floor per
-// axis (mm).
+// axis (mm); x_rms_jig_out: E's x RMS with the fixture's per-height offsets
+// out (x_rms_without_fixture; NaN: no fixture heights), printed beside the
+// raw one when they differ, since the tests judge that one.
 Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candidate> *cands,
-                      const nlohmann::json *findings, const V3 &noise);
+                      const nlohmann::json *findings, const V3 &noise, double x_rms_jig_out = NAN);
 
 // The samples the dataset's glitch screen set aside (calib/dataset_glitches.h)
 // as a sentence for the verdict ("" when none); their JSON is

@@ -276,12 +276,14 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     // findings when they are about it.
     const bool findings_on_model = !search ? !use_top : sr.effects == reading_effects(model);
     const Judgement jm = judge_model(vcur, cur, opt.candidates ? &cands : nullptr,
-                                     findings_on_model ? &findings : nullptr, noise);
+                                     findings_on_model ? &findings : nullptr, noise,
+                                     x_rms_without_fixture(cur, cf.grid, jig, pos));
     std::string verdict, unexplained_summary;
     json recommended = nullptr;
     if (search) {
         const Verdict vr = judge(sr.E, cf.grid, sctx.jig, sr.rep.n_free, sctx.fo.hole_sigma);
-        const Judgement jr = judge_model(vr, sr.E, &sr.cands, &findings, noise_floor(sr.E, sctx.jig));
+        const Judgement jr = judge_model(vr, sr.E, &sr.cands, &findings, noise_floor(sr.E, sctx.jig),
+                                         x_rms_without_fixture(sr.E, cf.grid, sctx.jig, pos));
         json path = json::array(), alternatives = json::array();
         for (auto &st : sr.path) {
             json s = {{"step", st.step}, {"bic_change", st.bic_change}, {"x_rms_mm", st.x_rms_mm}};

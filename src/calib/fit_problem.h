@@ -205,7 +205,7 @@ struct Problem {
         // 0.03 mm (their mean -0.0085 mm) every candidate that can shift x
         // gained delta chi2 ~1730 and the search recommended cable_stretch
         // for it. Where the model has a translation of its own
-        // (jig_misalignment, anchor_position) the two are one direction of
+        // (jig_misalignment, anchor_position, holder_geometry) the two are one direction of
         // the data, told apart by the priors alone: the device's weak prior
         // against the spacers' tolerance, so the device takes it.
         for (int k = 0; k < F; ++k, ++col) Q(ev.size() + k, col) = 1.0;

@@ -180,15 +180,32 @@ static void check_consistent(const nlohmann::json &r) {
     // the base fit's own convergence (diag_candidates.cpp): below it no test
     // moves. (While the fixture offsets' profile clamped them off their
     // sum-zero gauge, the fixture-height test's exit_pulley row read delta
-    // chi2 -629485 on the nominal model.) Not a theorem: the fit also
-    // minimises the offsets' prior, which could give back a few units; no
-    // case run so far comes near -1.
+    // chi2 -629485 on the nominal model.) Not a theorem: the fit minimises
+    // chi2 plus the fixture offsets' prior, and a candidate that moves the
+    // jig's x (exit_pulley) may give back chi-square for a smaller offset:
+    // with the jig 0.15 mm off in x (a_jig_off_in_x_is_the_jigs) its row
+    // read -1.7, the prior's cost falling by more. Allowed: the base's
+    // offsets' whole prior cost, sum (o / 0.05 mm)^2 (each height's offset
+    // as the fit or the judge has it, the larger).
+    double give_back = 0;
+    {
+        const auto &fx = r["jig"]["fixture_fitted_x_mm"];
+        const auto &hm = r["jig"]["fixture"].is_object() ? r["jig"]["fixture"]["offsets_mm"]["x"] : nlohmann::json();
+        for (size_t k = 0; k < std::max(fx.size(), hm.size()); ++k) {
+            double o = 0;
+            if (k < fx.size()) o = std::fabs(fx[k].get<double>());
+            if (k < hm.size() && hm[k].is_number()) o = std::max(o, std::fabs(hm[k].get<double>()));
+            o = std::min(o, kFixtureMaxMm) / kFixturePriorSdMm;
+            give_back += o * o;
+        }
+    }
     for (const nlohmann::json *t : {&r["candidates"], rec.is_null() ? nullptr : &rec["candidates"]})
         if (t)
             for (auto &c : *t)
-                if (c["delta_chi2"].get<double>() < -1)
-                    fail_msg("candidate %s ended above the model it extends: delta chi2 %g",
-                             c["effect"].dump().c_str(), c["delta_chi2"].get<double>());
+                if (c["delta_chi2"].get<double>() < -1 - give_back)
+                    fail_msg("candidate %s ended above the model it extends: delta chi2 %g (the offsets' prior "
+                             "could give back %g)",
+                             c["effect"].dump().c_str(), c["delta_chi2"].get<double>(), give_back);
     if (!rec.is_null())
         check(rec["explained"], rec["candidates"], rec["chi2_p_value"].get<double>(),
               rec["structure"]["p_value"].get<double>(), &f, "the recommended model");
@@ -597,6 +614,34 @@ static void spacers_mean_adds_nothing(void **) {
     }
 }
 
+// A jig mounted 0.15 mm off along x, nothing else: within the spacers'
+// bound the fixture's offsets take it, so nothing is recommended, and the
+// words must not call it each height's own offset (an independent
+// reviewer's case): "the jig sits ... off in x at every fixture height".
+// The raw x RMS then includes it (0.185 mm against a floor of 0.111): the
+// verdict must print the RMS its tests saw beside it, within 5 % of the
+// floor (a sampled RMS over 845 x 40 samples is good to ~1 %; the jig's
+// seat scatter adds the rest).
+static void a_jig_off_in_x_is_the_jigs(void **) {
+    Model truth{DeviceGeometry{}};
+    std::string err;
+    assert_true(truth.add_effect("jig_misalignment", ParamValues{{"tx", 0.15}}, err));
+    auto r = run(truth, 5, {}, true);
+    check_consistent(r);
+    const auto &rec = r["recommended"];
+    if (!rec["effects"].empty() || !rec["explained"].get<bool>())
+        fail_msg("a jig 0.15 mm off in x: %s", r["verdict"].dump().c_str());
+    const std::string v = r["verdict"].get<std::string>();
+    if (v.find("jig sits +0.1") == std::string::npos || v.find("ach fixture height has its own") != std::string::npos)
+        fail_msg("the words for a jig off in x: %s", v.c_str());
+    std::smatch m;
+    if (!std::regex_search(v, m, std::regex("\\(([0-9.]+) mm with the fixture's per-height offsets out\\) at the noise "
+                                            "floor ([0-9.]+) mm")))
+        fail_msg("no x RMS with the offsets out: %s", v.c_str());
+    const double out = std::stod(m[1].str()), floor = std::stod(m[2].str());
+    if (out > 1.05 * floor) fail_msg("x RMS with the offsets out %g, noise floor %g", out, floor);
+}
+
 // A plate whose hole errors (0.04 mm in y and z, the same at every height)
 // dominate what is left per position (0.01 mm): the fit weighs each hole's
 // readings as one block (FitOptions::hole_sigma) and the verdict's tests
@@ -940,9 +985,9 @@ static void many_misplaced_positions_are_set_aside(void **) {
 // The structure test's z on white residuals is a standard normal: on the
 // half jig (13 x 13 holes, 5 heights, 1560 neighbour pairs) 4000 draws of
 // independent unit normals (per-height means removed, as the judge does)
-// must give z a standard deviation within 0.06 of 1 (its estimate's own
-// spread is 1/sqrt(2 x 4000) = 0.011; 0.06 leaves room for the normal
-// approximation's small bias from the removed means) and cross the
+// must give z a standard deviation within 0.035 of 1 (the moments are
+// exact, so only the estimate's own spread, 1/sqrt(2 x 4000) = 0.011,
+// is left: 3 of those; a 7 % error in the variance fails it) and cross the
 // verdict's one-sided 1e-3 point (3.09) at most 3 times the stated rate
 // (4 expected; 12 is 4 standard deviations of a Poisson count above).
 // With Cliff and Ord's S1 and S2 halved and quartered, as they were until
@@ -978,7 +1023,7 @@ static void structure_test_is_calibrated(void **) {
         past += z > 3.09;
     }
     const double mean = s / draws, sd = std::sqrt(s2 / draws - mean * mean);
-    if (std::fabs(sd - 1) > 0.06) fail_msg("Moran z on white residuals: sd %g (mean %g)", sd, mean);
+    if (std::fabs(sd - 1) > 0.035) fail_msg("Moran z on white residuals: sd %g (mean %g)", sd, mean);
     if (std::fabs(mean) > 0.1) fail_msg("Moran z on white residuals: mean %g", mean);
     if (past > 12) fail_msg("Moran z past 3.09 in %d of %d white draws (1e-3 expects 4)", past, draws);
 }
@@ -1099,6 +1144,7 @@ int main(void) {
         cmocka_unit_test(strong_plate_holes_add_nothing),
         cmocka_unit_test(a_three_sigma_fixture_height_is_the_jigs),
         cmocka_unit_test(spacers_mean_adds_nothing),
+        cmocka_unit_test(a_jig_off_in_x_is_the_jigs),
         cmocka_unit_test(smooth_repeat_is_not_the_plate),
         cmocka_unit_test(spikes_change_nothing_but_their_count),
         cmocka_unit_test(misplaced_positions_are_set_aside),

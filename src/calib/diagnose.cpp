@@ -409,7 +409,8 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     out["model"] = mlist;
     out["params"] = params;
     out["fit"] = {{"algorithm", rep.algorithm}, {"evaluations", rep.evals}, {"seconds", rep.seconds},
-                  {"converged", rep.converged}, {"free_parameters", rep.n_free}, {"message", rep.message}};
+                  {"converged", rep.converged}, {"free_parameters", rep.n_free}, {"message", rep.message},
+                  {"fixture_x_mm", rep.fixture_mm}};
     out["error_mm"] = stats3(cur.err);
     out["nominal_error_mm"] = stats3(nom.err);
     out["ellipsoid_error_mm"] = stats3(ellE.err);

@@ -106,15 +106,14 @@ bool period_shown(const Model &m, const std::string &effect, const std::vector<P
     return true;
 }
 
+// The independent periods searched for a candidate whose period starts from
+// the periodogram (effect_starts), as length_period counts them; 1 otherwise.
 static double searched_periods(const std::string &effect, const std::vector<PreparedPos> &pos) {
     auto d = find_effect(effect);
     if (!d) return 1;
     for (auto &p : d->params)
-        if (p.name == "period" && (p.unit == "mm" || p.unit.empty())) {
-            // as length_period (diag_findings.cpp): periods from 8 mm to the span
-            const double span = length_span(pos);
-            return span > 8 ? span * (1.0 / 8.0 - 1.0 / span) : 1;
-        }
+        if (p.name == "period" && (p.unit == "mm" || p.unit.empty()))
+            return std::max(1.0, periods_searched(length_span(pos)));
     return 1;
 }
 
@@ -235,12 +234,8 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         // Its p is then the false-alarm probability over the M independent
         // periods the periodogram searches (span / 8 mm - 1), never below
         // the chi-square(k) one.
-        if (const double M = searched_periods(c.name, ctx.pos); M > 1) {
-            const double sf = chi2_sf(std::max(0.0, c.dchi2), std::max(1, c.k - 1));
-            const double fap = sf < 1e-12 ? std::min(1.0, M * sf) // the union bound, exact in the tail
-                                          : -std::expm1(M * std::log1p(-std::min(sf, 1 - 1e-16)));
-            c.p = std::max(c.p, fap);
-        }
+        if (const double M = searched_periods(c.name, ctx.pos); M > 1)
+            c.p = std::max(c.p, false_alarm(chi2_sf(std::max(0.0, c.dchi2), std::max(1, c.k - 1)), M));
         {
             const V3 oj = ctx.own_jig(c.E);
             c.v = judge(c.E, ctx.G, oj, c.rep.n_free, ctx.own_hole(c.E, oj));

@@ -63,6 +63,10 @@ LengthView shifted(const LengthView &v, const std::vector<V3> &off) {
     return out;
 }
 
+double periods_searched(double span_mm) {
+    return span_mm > kShortestPeriodMm ? span_mm * (1.0 / kShortestPeriodMm - 1.0 / span_mm) : 0.0;
+}
+
 PeriodPeak length_period(const LengthView &v) {
     PeriodPeak pk;
     const size_t P = v.lmean.size();
@@ -76,7 +80,7 @@ PeriodPeak length_period(const LengthView &v) {
     const double span = hi - lo;
     // Periods from 8 mm to the span: one full turn seen at least (a longer
     // one is a smooth trend to this test, as to the fit).
-    const double fmin = 1.0 / span, fmax = 1.0 / 8.0;
+    const double fmin = 1.0 / span, fmax = 1.0 / kShortestPeriodMm;
     if (!(span > 0) || !(fmax > fmin)) return pk;
     // Oversampled 5x against the natural resolution 1/span, so that the
     // grid's own step is no part of the period's error.
@@ -103,9 +107,7 @@ PeriodPeak length_period(const LengthView &v) {
     const double z = pooled[bf];
     // Each normalised power is ~Exp(1) under noise; the sum of four ~Gamma(4,1).
     const double sf = std::exp(-z) * (1 + z + z * z / 2 + z * z * z / 6);
-    const double M = span * (fmax - fmin); // independent frequencies searched
-    pk.fap = -std::expm1(M * std::log1p(-std::min(sf, 1 - 1e-16)));
-    if (sf < 1e-12) pk.fap = std::min(1.0, M * sf); // the union bound, exact in the tail
+    pk.fap = false_alarm(sf, periods_searched(span));
     pk.period_mm = 1.0 / freqs[bf];
     for (int c = 0; c < 4; ++c) {
         Eigen::MatrixXd A(P, 5);

@@ -46,6 +46,14 @@ struct PeriodPeak {
 };
 PeriodPeak length_period(const LengthView &v);
 
+// The shortest period the periodogram searches (mm), and the number of
+// independent periods it searches over lengths spanning `span_mm` (from
+// kShortestPeriodMm to the span; 0 when the span is shorter): a searched
+// period's false-alarm count, for the periodogram and for a candidate
+// whose period starts from it (diag_candidates.cpp).
+constexpr double kShortestPeriodMm = 8.0;
+double periods_searched(double span_mm);
+
 // lv: the length view of the evaluation bE's model, the jig's estimated
 // errors taken out; jig: tolerance; across: the same view before the
 // jig's errors (the fixture's per-height offsets, the holes') were taken

@@ -3,6 +3,8 @@
 // cases (no degrees of freedom, a non-positive statistic) into p = 1.
 #include "calib/diag_stats.h"
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 
 #include <boost/math/distributions/chi_squared.hpp>
@@ -15,6 +17,11 @@ namespace diag {
 double normal_sf(double z) {
     if (!std::isfinite(z)) return z > 0 ? 0.0 : 1.0;
     return boost::math::cdf(boost::math::complement(boost::math::normal_distribution<double>(), z));
+}
+
+double false_alarm(double sf, double M) {
+    if (sf < 1e-12) return std::min(1.0, M * sf);
+    return -std::expm1(M * std::log1p(-std::min(sf, 1 - 1e-16)));
 }
 
 double chi2_sf(double x, double dof) {

@@ -16,6 +16,10 @@ double normal_sf(double z);             // P(Z > z), Z standard normal
 double chi2_sf(double x, double dof);   // P(X > x), X ~ chi-square(dof)
 double chi2_isf(double p, double dof);  // x with P(X > x) = p
 double f_sf(double F, double d1, double d2); // P(X > F), X ~ F(d1, d2)
+// The probability that the largest of M independent tests each passing
+// with probability sf passes: 1 - (1 - sf)^M, the union bound M sf (exact
+// in the tail) once sf is below 1e-12.
+double false_alarm(double sf, double M);
 
 // Numbers in the diagnosis' words: fixed decimals (sign: a leading + for
 // positive values), and a p-value ("p = 0.042", "p = 3.2e-05", "p < 1e-300").

@@ -41,6 +41,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include <nlopt.h>
 
@@ -361,18 +362,33 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
         Eigen::MatrixXd J;
         if (!take(full, res, J)) return fail();
         Hfree = free_hessian(pb, J);
-        Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Hfree);
+        // Eigendecomposed with its diagonal scaled to one (D H D, D =
+        // diag(H)^(-1/2)): the free parameters are in mm, rad, 1/mm and the
+        // fixture's mm, so H's eigenvalues span 14 to 17 decades, and the
+        // solver's eigenvalues are accurate to eps times the largest only.
+        // Unscaled, the directions the data barely fix (an anchor
+        // translation against the fixture offsets and the pot offsets) had
+        // eigenvalues below that floor, raised to it: the Gauss-Newton
+        // steps were a fraction of the true one there (each gained 1.7-1.9
+        // times what it promised) and the whitening made SLSQP creep along
+        // them (20-40 evaluations per fit of a search step with
+        // anchor_position). Scaled, the spread is what the data's own
+        // correlations make it, a few decades.
+        const Eigen::VectorXd D = Hfree.diagonal().cwiseMax(std::numeric_limits<double>::min()).cwiseSqrt().cwiseInverse();
+        Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(D.asDiagonal() * Hfree * D.asDiagonal());
         Eigen::VectorXd lam = es.eigenvalues().cwiseMax(1e-12 * es.eigenvalues().maxCoeff());
-        Whitened W{&pb, full, pb.Q * es.eigenvectors() * lam.cwiseSqrt().cwiseInverse().asDiagonal(), INFINITY, full};
+        const Eigen::MatrixXd QD = pb.Q * D.asDiagonal(); // free = D * scaled
+        Whitened W{&pb, full, QD * es.eigenvectors() * lam.cwiseSqrt().cwiseInverse().asDiagonal(), INFINITY, full};
         for (auto &[at, v] : opt.abandon_above)
             if (at.first < m.effect_count() && pb.ev.offset(at.first) >= 0 && at.second < m.effect_params(at.first).size())
                 W.abandon.emplace_back(pb.ev.offset(at.first) + int(at.second), v);
         if (gauss_newton && steps < kGaussNewtonSteps) {
             Eigen::VectorXd pg;
             const double f0 = 0.5 * (res.squaredNorm() + pb.prior(full, &pg));
-            const Eigen::VectorXd gu = pb.Q.transpose() * (-J.transpose() * res + 0.5 * pg);
+            // In the scaled free coordinates (QD).
+            const Eigen::VectorXd gu = QD.transpose() * (-J.transpose() * res + 0.5 * pg);
             const Eigen::MatrixXd H = es.eigenvectors() * lam.asDiagonal() * es.eigenvectors().transpose();
-            const BoundedStep st = bounded_gauss_newton(H, gu, full, pb.Q, pb.lo, pb.hi);
+            const BoundedStep st = bounded_gauss_newton(H, gu, full, QD, pb.lo, pb.hi);
             if (st.kkt && std::isfinite(f0)) {
                 if (st.pred <= std::max(1e-12 * std::fabs(f0), kConvergedF)) {
                     // At the minimum of the linearised problem within the

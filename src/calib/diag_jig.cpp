@@ -172,7 +172,8 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
     double fx_worst = 0;
     double past = 0; // the largest per-height mean past kFixtureMaxMm (mm)
     int fx_axis = -1;
-    double x_common = 0, x_spread = 0, x_spread_chi2 = 0;
+    double x_common = 0, x_spread = 0, x_spread_chi2 = 0, x_common_chi2 = 0;
+    bool x_one_sign = true; // every height's offset on the common part's side
     for (int a = 0; a < 3; ++a) {
         double sw = 0, swm = 0;
         for (int h : heights) {
@@ -183,8 +184,10 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
         const double common = a == 0 ? 0.0 : swm / sw; // x: the spacers' mean error is theirs
         if (a == 0) { // x's common part and the heights' spread about it, for the words
             x_common = swm / sw;
+            x_common_chi2 = x_common * x_common * sw;
             for (int h : heights) {
                 const auto &m = hm.at({h, a});
+                if (m.mean() * x_common <= 0) x_one_sign = false;
                 const double d = m.mean() - x_common;
                 x_spread = std::max(x_spread, std::fabs(d));
                 x_spread_chi2 += d * d / (m.se() * m.se());
@@ -220,17 +223,28 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
             fx_axis = a;
         }
     }
-    // The heights are told apart only when their spread about the common
-    // part is significant (chi-square of the per-height means about it
-    // against their standard errors, K - 1 degrees of freedom, Bonferroni
-    // over the axes, as in y and z); otherwise the jig sits off as a whole.
-    // (A tenth of the noise floor as the rule, as first written, let the
-    // noise decide: a pure 0.15 mm shift on a 7 x 7 jig of 10 samples read
-    // "each fixture height has its own offset" at a spread of 2.3 standard
-    // errors: an independent reviewer's case.)
-    const double x_spread_p = std::min(1.0, 3 * chi2_sf(x_spread_chi2, K - 1));
-    const bool x_as_whole = x_spread_p >= kFindingLevel;
+    // Which words x gets, once the offsets together are significant: the
+    // heights are told apart when their spread about the common part is
+    // significant (chi-square of the per-height means about it against
+    // their standard errors, K - 1 degrees of freedom); the jig sits off as
+    // a whole when the common part is significant on its own (its square
+    // over its variance, 1 degree of freedom), the spread is not, and every
+    // height lies on its side; otherwise neither is shown alone and the
+    // offsets are named together. Both at the findings' level, x alone (no
+    // Bonferroni over the axes: these choose the words, the joint test
+    // above decided that there is something to word). (A tenth of the
+    // noise floor as the rule, as first written, let the noise decide: a
+    // pure 0.15 mm shift on a 7 x 7 jig of 10 samples read "each fixture
+    // height has its own offset" at a spread of 2.3 standard errors; the
+    // spread's test alone then read "the jig sits +0.012 mm off at every
+    // height" for per-height offsets of +0.034 and -0.010 mm, a common part
+    // 2.7 standard errors from zero: an independent reviewer's cases.)
+    const double x_spread_p = chi2_sf(x_spread_chi2, K - 1);
+    const double x_common_p = chi2_sf(x_common_chi2, 1);
+    const bool x_apart = x_spread_p < kFindingLevel;
+    const bool x_as_whole = !x_apart && x_common_p < kFindingLevel && x_one_sign;
     fx["x_common_mm"] = x_common;
+    fx["x_common_p_value"] = x_common_p;
     fx["x_spread_mm"] = x_spread;
     fx["x_spread_p_value"] = x_spread_p;
     out["fixture"] = fx;
@@ -246,13 +260,21 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
                                fmt_p(fx["p_value"][kAxis[fx_axis]].get<double>()) + "): the height fixture's spacers"
             : x_as_whole
                 ? "the jig sits " + fmt_num(x_common, 3, true) + " mm off in x at every fixture height (per height: " +
-                      per + " mm; " + fmt_p(fx["p_value"]["x"].get<double>()) + "; their spread of " +
-                      fmt_num(x_spread, 3) + " mm is within the noise, " + fmt_p(x_spread_p) +
+                      per + " mm; " + fmt_p(fx["p_value"]["x"].get<double>()) + "; the common part alone " +
+                      fmt_p(x_common_p) + "; their spread of " + fmt_num(x_spread, 3) +
+                      " mm about it is not significant at " + fmt_num(kFindingLevel, 3) + ", " + fmt_p(x_spread_p) +
                       "): the jig's mounting along x, or its spacers' common error"
-                : "each fixture height has its own offset, up to " + fmt_num(fx_worst, 3) +
+            : x_apart
+                ? "each fixture height has its own offset, up to " + fmt_num(fx_worst, 3) +
                       " mm in x (per height: " + per + " mm, their common part " + fmt_num(x_common, 3, true) +
-                      " mm; " + fmt_p(fx["p_value"]["x"].get<double>()) +
-                      "): the height fixture's spacers (the common part: their mean error, or the jig's mounting along x)";
+                      " mm; " + fmt_p(fx["p_value"]["x"].get<double>()) + "; their spread about it " +
+                      fmt_p(x_spread_p) +
+                      "): the height fixture's spacers (the common part: their mean error, or the jig's mounting along x)"
+                : "the fixture heights are off in x, up to " + fmt_num(fx_worst, 3) + " mm (per height: " + per +
+                      " mm; together " + fmt_p(fx["p_value"]["x"].get<double>()) +
+                      "; neither their common part (" + fmt_num(x_common, 3, true) + " mm, " + fmt_p(x_common_p) +
+                      ") nor their spread about it (" + fmt_p(x_spread_p) + ") is significant alone at " +
+                      fmt_num(kFindingLevel, 3) + "): the height fixture's spacers or the jig's mounting along x";
         out["text"].push_back(what + ", the jig's error, taken out of the fit and the "
                               "tests (up to " + fmt_num(kFixtureMaxMm, 2) + " mm per height" +
                               (fx["taken_as_jig"].get<bool>()

@@ -1,5 +1,7 @@
 // The least-squares problem a fit solves: the model's readings against
-// the per-position means, weighted (sqrt(w) * (mean - y)), with their
+// the per-position means, whitened per position (L^-1 (mean - y), L L' the
+// four readings' covariance: the pots' noise and the position's own jig
+// error through the model's sensitivity to the position), with their
 // Jacobian over the fitted parameters and the fixture heights' x offsets,
 // each plate hole's block decorrelated (generalised least squares); the
 // gauge (full = base + Q * free), the bounds and the weak prior.
@@ -51,7 +53,20 @@ struct Problem {
     Eigen::VectorXd scale, lo, hi, init;
     Eigen::MatrixXd Q;                // full = base + Q * free
     std::vector<int> rows;            // positions used
-    Eigen::VectorXd w;                // weights per observation (4 per used position)
+    // Per used position, the inverse of the lower Cholesky factor L of its
+    // four mean readings' covariance C = V + dP S dP' (V the pots' noise of
+    // the mean, cross-cable terms included; dP the readings' derivative in
+    // the position; S = diag(jig_sigma^2), the position's own jig error):
+    // generalised least squares, so that a chi-square difference is
+    // chi-square distributed. A jig error moves the four readings together
+    // (three directions of four); weighing each reading by 1/C_cc alone, as
+    // until 2026-11-26, ignored that, and on clean half jigs candidates'
+    // delta chi2 had 2-2.5 times chi-square(k)'s variance, p < 0.001 in
+    // 1-2.5 % of them (an independent reviewer's Monte Carlo, 400 seeds;
+    // calibrated with the jig's tolerance at zero). The fourth direction,
+    // which no position error moves (the cables' redundancy), is then
+    // weighed by the pots' noise alone.
+    std::vector<Eigen::Matrix4d> wh;
     int evals = 0;
     bool cancelled = false;
     std::string failure;              // a user effect's apply failed: its message
@@ -101,8 +116,8 @@ struct Problem {
             wo.weigh_with = nullptr;
             wo.hold.clear();
             Problem wp(wm, pos, wo); // the same positions (opt.use)
-            w = wp.w;
-            holes = wp.holes;
+            wh = std::move(wp.wh);
+            holes = std::move(wp.holes);
             failure = wp.failure;
         } else {
             compute_weights();
@@ -111,8 +126,8 @@ struct Problem {
 
     // The plate's holes (FitOptions::hole): a hole's error e (3-vector, sd
     // hole_sigma per axis) moves each of its positions' readings by dP e, so
-    // the weighted residuals of a hole's m positions have the covariance
-    // I + U U' (U: 4m x 3, the sqrt(w) dP hole_sigma rows) instead of I.
+    // the whitened residuals of a hole's m positions have the covariance
+    // I + U U' (U: 4m x 3, the wh dP hole_sigma rows) instead of I.
     // Generalised least squares multiplies them by (I + U U')^(-1/2)
     // = I - Q diag(c) Q', Q the orthonormal directions of U and
     // c = 1 - 1/sqrt(1 + s^2) for its singular values s: the chi-square is
@@ -142,10 +157,8 @@ struct Problem {
             const int m = b.m;
             Eigen::MatrixXd U(4 * m, 3);
             for (int i = 0; i < m; ++i)
-                for (int c = 0; c < 4; ++c)
-                    for (int a = 0; a < 3; ++a)
-                        U(4 * i + c, a) = std::sqrt(w(4 * (b.start + i) + c)) * dPs[size_t(b.start + i)](c, a) *
-                                          opt.hole_sigma(a);
+                U.block<4, 3>(4 * i, 0) =
+                    wh[size_t(b.start + i)] * dPs[size_t(b.start + i)] * opt.hole_sigma.asDiagonal();
             // U = Q S V': the eigenvectors V of U'U (3 x 3), Q = U V / s.
             Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(U.transpose() * U);
             std::vector<int> keep;
@@ -288,7 +301,8 @@ struct Problem {
     }
 
     void compute_weights() {
-        w.resize(4 * int(rows.size()));
+        wh.resize(rows.size());
+        const Eigen::Matrix3d S = opt.jig_sigma.cwiseAbs2().asDiagonal();
         const bool batched = ev.has_batch();
         const bool batch_ok = batched && eval_rows(false, true);
         std::vector<Eigen::Matrix<double, 4, 3>> dPs;
@@ -301,17 +315,23 @@ struct Problem {
                 dP = batch_ok ? batch.dydP[r] : Eigen::Matrix<double, 4, 3>::Zero();
             else if (!eval_position(size_t(rows[r]), y, nullptr, &dP))
                 dP.setZero();
-            for (int c = 0; c < 4; ++c) {
-                double jig = 0;
-                for (int a = 0; a < 3; ++a) jig += dP(c, a) * dP(c, a) * opt.jig_sigma(a) * opt.jig_sigma(a);
-                w(4 * r + c) = 1.0 / (pp.var_mean(c) + jig);
+            Eigen::Matrix4d C = pp.cov_mean;
+            C.diagonal() = pp.var_mean;
+            C += dP * S * dP.transpose();
+            const Eigen::LLT<Eigen::Matrix4d> llt(C);
+            if (C.allFinite() && llt.info() == Eigen::Success &&
+                llt.matrixL().toDenseMatrix().diagonal().minCoeff() > 0) {
+                wh[r] = llt.matrixL().solve(Eigen::Matrix4d::Identity());
+            } else { // (not positive definite: NaN readings' derivatives) each reading alone
+                wh[r].setZero();
+                for (int c = 0; c < 4; ++c) wh[r](c, c) = C(c, c) > 0 ? 1.0 / std::sqrt(C(c, c)) : 0.0;
             }
             if (!dPs.empty()) dPs[r] = dP;
         }
         if (!dPs.empty()) build_holes(dPs);
     }
 
-    // Weighted residuals (sqrt(w) * (mean - y)) and Jacobian of y. False
+    // Whitened residuals (wh (mean - y)) and Jacobian of y. False
     // when a user effect's apply fails (message in `failure`).
     bool residuals(Eigen::VectorXd &res, Eigen::MatrixXd *J) {
         const int n = n_params();
@@ -333,18 +353,16 @@ struct Problem {
             } else if (!eval_position(j, y, J ? &Jp : nullptr, J && F > 0 ? &dP : nullptr, 1)) {
                 return false;
             }
-            Eigen::Array4d sw;
-            for (int c = 0; c < 4; ++c) {
-                sw(c) = std::sqrt(w(4 * r + c));
-                res(4 * r + c) = sw(c) * (pp.mean(c) - y(c));
-            }
+            const Eigen::Matrix4d &L = wh[r]; // lower triangular
+            res.segment<4>(4 * long(r)) = L.triangularView<Eigen::Lower>() * (pp.mean - y);
             if (!J) continue;
             // The position's four rows at once: each column's four entries
             // are adjacent in the column-major J.
-            J->block(4 * long(r), 0, 4, ev.size()) = Jp.array().colwise() * sw;
+            J->block(4 * long(r), 0, 4, ev.size()) = L.triangularView<Eigen::Lower>() * Jp;
             // d y / d (jig-frame x): the device-frame x derivative; the
             // jig's rotation (a few mrad) is left out of this column.
-            if (F > 0) J->block<4, 1>(4 * long(r), ev.size() + opt.fixture[j]) = sw * dP.col(0).array();
+            if (F > 0)
+                J->block<4, 1>(4 * long(r), ev.size() + opt.fixture[j]) = L.triangularView<Eigen::Lower>() * dP.col(0);
         }
         decorrelate(res, J);
         return true;

@@ -278,36 +278,43 @@ static void fit_jacobian_full_model(void **) {
     assert_int_equal(bad, 0);
 }
 
-// The fit's plate-hole blocks (FitOptions::hole_sigma, fit_problem.h) are
-// generalised least squares: the chi-square equals r' S^-1 r computed
-// densely, r the residuals weighted as without holes (the same jig_sigma),
-// S = I + U U' per hole, U = sqrt(w) dP diag(hole_sigma), dP the readings'
-// derivative in the jig frame by central differences; and the gradient J'r
-// is the dense J' S^-1 r. Holes of one to four positions in a shuffled
-// order, and a position in no hole (-1: a block of its own). dP's step,
-// 1e-3 mm, leaves a truncation error near 1e-7 of dP: agreement to 1e-5.
-static void hole_blocks_are_dense_gls(void **) {
+// The fit's weighting (fit_problem.h) is generalised least squares: the
+// chi-square equals r' S^-1 r computed densely in raw reading space, r the
+// readings' residuals (mean - y) and S, per hole, the block of
+// diag(var_mean) + dP diag(jig_sigma^2) dP' per position (its own jig
+// error moves its four readings together) plus U U' for the hole's shared
+// error, U = dP diag(hole_sigma) stacked over the hole's positions, dP the
+// readings' derivative in the jig frame by central differences; and the
+// gradient J'r is the dense J' S^-1 r. Holes of one to four positions in a
+// shuffled order, and a position in no hole (-1: a block of its own). The
+// raw residuals and Jacobian come from the fit with no jig term at all,
+// whose whitening is then 1/sqrt(var_mean) = 100 on every reading. dP's
+// step, 1e-3 mm, leaves a truncation error near 1e-7 of dP: agreement to
+// 1e-5. Each reading weighed alone (as until 2026-11-26) must differ.
+static void fit_weighting_is_dense_gls(void **) {
     Model m{DeviceGeometry{}};
     std::string err;
     assert_true(m.add_effect_random("exit_pulley", 3, err));
     assert_true(m.add_effect_random("cable_gain", 4, err));
     auto pos = fit_positions(m, 12);
-    for (auto &p : pos) p.var_mean.setConstant(1e-4); // 0.01 mm: the holes' share is large
+    for (auto &p : pos) p.var_mean.setConstant(1e-4); // 0.01 mm: the jig's share is large
     const std::vector<int> hole = {2, 0, 1, 0, 2, -1, 1, 0, 3, 2, 0, 1};
     FitOptions a;
     a.jig_sigma = Eigen::Vector3d(0.01, 0.02, 0.015);
     a.hole = hole;
     a.hole_sigma = Eigen::Vector3d(0.0, 0.03, 0.04);
-    FitOptions b = a;
+    FitOptions b = a; // the raw residuals: no jig term, each reading weighed 1/0.01
     b.hole_sigma.setZero();
+    b.jig_sigma.setZero();
     Eigen::VectorXd ra, rb;
     Eigen::MatrixXd Ja, Jb;
     assert_true(fit_residual_jacobian(m, pos, a, ra, Ja, err));
     assert_true(fit_residual_jacobian(m, pos, b, rb, Jb, err)); // position order: no hole model, no grouping
+    rb /= 100;
+    Jb /= 100;
     const size_t P = pos.size();
     std::vector<Eigen::Matrix<double, 4, 3>> dP(P);
-    std::vector<Eigen::Vector4d> sw(P);
-    for (size_t j = 0; j < P; ++j) {
+    for (size_t j = 0; j < P; ++j)
         for (int ax = 0; ax < 3; ++ax) {
             double rp[3] = {pos[j].ref(0), pos[j].ref(1), pos[j].ref(2)}, rm[3] = {rp[0], rp[1], rp[2]}, Pp[3], Pm[3],
                    yp[4], ym[4];
@@ -319,12 +326,6 @@ static void hole_blocks_are_dense_gls(void **) {
             assert_int_equal(m.readings(Pm, ym), 0);
             for (int c = 0; c < 4; ++c) dP[j](c, ax) = (yp[c] - ym[c]) / 2e-3;
         }
-        for (int c = 0; c < 4; ++c) {
-            double v = pos[j].var_mean(c);
-            for (int ax = 0; ax < 3; ++ax) v += dP[j](c, ax) * dP[j](c, ax) * a.jig_sigma(ax) * a.jig_sigma(ax);
-            sw[j](c) = 1 / std::sqrt(v);
-        }
-    }
     // The blocks: each hole's positions, and the -1 position alone.
     std::vector<std::vector<size_t>> blocks;
     for (int h = 0; h <= 3; ++h) {
@@ -334,31 +335,34 @@ static void hole_blocks_are_dense_gls(void **) {
     }
     for (size_t j = 0; j < P; ++j)
         if (hole[j] < 0) blocks.push_back({j});
-    double chi2 = 0;
+    const Eigen::Matrix3d Sj = a.jig_sigma.cwiseAbs2().asDiagonal();
+    double chi2 = 0, indep = 0;
     Eigen::VectorXd grad = Eigen::VectorXd::Zero(Jb.cols());
     for (auto &bl : blocks) {
         const long m4 = 4 * long(bl.size());
         Eigen::MatrixXd U(m4, 3), Jh(m4, Jb.cols());
+        Eigen::MatrixXd S = Eigen::MatrixXd::Zero(m4, m4);
         Eigen::VectorXd r(m4);
         for (size_t i = 0; i < bl.size(); ++i) {
-            for (int c = 0; c < 4; ++c) {
-                for (int ax = 0; ax < 3; ++ax) U(4 * long(i) + c, ax) = sw[bl[i]](c) * dP[bl[i]](c, ax) * a.hole_sigma(ax);
-                r(4 * long(i) + c) = rb(4 * long(bl[i]) + c);
-                Jh.row(4 * long(i) + c) = Jb.row(4 * long(bl[i]) + c);
-            }
+            const long o = 4 * long(i);
+            U.block<4, 3>(o, 0) = dP[bl[i]] * a.hole_sigma.asDiagonal();
+            S.block<4, 4>(o, o) = Eigen::Matrix4d(pos[bl[i]].var_mean.asDiagonal()) + dP[bl[i]] * Sj * dP[bl[i]].transpose();
+            r.segment<4>(o) = rb.segment<4>(4 * long(bl[i]));
+            Jh.middleRows(o, 4) = Jb.middleRows(4 * long(bl[i]), 4);
+            for (int c = 0; c < 4; ++c) indep += r(o + c) * r(o + c) / S(o + c, o + c);
         }
-        const Eigen::MatrixXd S = Eigen::MatrixXd::Identity(m4, m4) + U * U.transpose();
+        S += U * U.transpose();
         const Eigen::VectorXd Sr = S.ldlt().solve(r);
         chi2 += r.dot(Sr);
         grad += Jh.transpose() * Sr;
     }
-    const double got = ra.squaredNorm(), indep = rb.squaredNorm();
+    const double got = ra.squaredNorm();
     if (std::fabs(got - chi2) > 1e-5 * chi2)
-        fail_msg("hole blocks: chi-square %.9g, dense GLS %.9g (independent: %.9g)", got, chi2, indep);
-    if (std::fabs(indep - chi2) < 1e-2 * chi2) fail_msg("the holes changed nothing: %.9g vs %.9g", indep, chi2);
+        fail_msg("fit weighting: chi-square %.9g, dense GLS %.9g (each reading alone: %.9g)", got, chi2, indep);
+    if (std::fabs(indep - chi2) < 1e-2 * chi2) fail_msg("the correlations changed nothing: %.9g vs %.9g", indep, chi2);
     const Eigen::VectorXd ga = Ja.transpose() * ra;
     if ((ga - grad).norm() > 1e-5 * grad.norm())
-        fail_msg("hole blocks: gradient off by %.3g of its norm", (ga - grad).norm() / grad.norm());
+        fail_msg("fit weighting: gradient off by %.3g of its norm", (ga - grad).norm() / grad.norm());
     if (std::fabs(model_chi2(m, pos, a) - got) > 1e-9 * got) fail_msg("model_chi2 is not the residuals' chi-square");
 }
 
@@ -368,7 +372,7 @@ int main() {
         cmocka_unit_test(reading_position_gradients),
         cmocka_unit_test(forward_kinematics_jacobian),
         cmocka_unit_test(fit_jacobian_full_model),
-        cmocka_unit_test(hole_blocks_are_dense_gls),
+        cmocka_unit_test(fit_weighting_is_dense_gls),
     };
     return cmocka_run_group_tests(tests, nullptr, nullptr);
 }

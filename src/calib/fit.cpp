@@ -97,8 +97,14 @@ constexpr int kStallEvals = 3;
 // objective, chi-square / 2) is the minimum: ten times finer than the stall
 // stop's resolution.
 constexpr double kConvergedF = 0.1 * kStallF;
-// Gauss-Newton steps per fit before SLSQP takes over.
+// Gauss-Newton steps per fit before SLSQP takes over (refused ones count).
 constexpr int kGaussNewtonSteps = 8;
+// A refused step's damping (Levenberg-Marquardt, in the Hessian's scaled
+// coordinates, where its diagonal is one): from kMinDamping, tenfold per
+// refusal, up to kMaxDamping (a step then a thousandth of the gradient's
+// descent), after which SLSQP takes over.
+constexpr double kMinDamping = 1e-3;
+constexpr double kMaxDamping = 1e3;
 
 double objective(unsigned n, const double *z, double *grad, void *data) {
     auto *W = static_cast<Whitened *>(data);
@@ -355,6 +361,7 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
     // passes take it from there.
     bool gauss_newton = true;
     double last_pred = INFINITY;
+    double mu = 0; // the Gauss-Newton steps' damping (0: none)
     for (int pass = 0, steps = 0; pass < 4 && pb.evals < opt.max_evals;) {
         Eigen::VectorXd full = pb.get_full();
         pb.set_full(full);
@@ -388,17 +395,34 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
             // In the scaled free coordinates (QD).
             const Eigen::VectorXd gu = QD.transpose() * (-J.transpose() * res + 0.5 * pg);
             const Eigen::MatrixXd H = es.eigenvectors() * lam.asDiagonal() * es.eigenvectors().transpose();
-            const BoundedStep st = bounded_gauss_newton(H, gu, full, QD, pb.lo, pb.hi);
-            if (st.kkt && std::isfinite(f0)) {
-                if (st.pred <= std::max(1e-12 * std::fabs(f0), kConvergedF)) {
-                    // At the minimum of the linearised problem within the
-                    // bounds: nothing left that a pass could gain.
-                    rep.converged = true;
-                    have_at = full;
-                    have_res = std::move(res);
-                    have_J = std::move(J);
-                    break;
-                }
+            const BoundedStep st0 = bounded_gauss_newton(H, gu, full, QD, pb.lo, pb.hi);
+            bool taken = false, stop = false;
+            if (st0.kkt && std::isfinite(f0) && st0.pred <= std::max(1e-12 * std::fabs(f0), kConvergedF)) {
+                // At the minimum of the linearised problem within the
+                // bounds: nothing left that a pass could gain.
+                rep.converged = true;
+                have_at = full;
+                have_res = std::move(res);
+                have_J = std::move(J);
+                break;
+            }
+            // A step that falls short of its promise is retried shorter,
+            // Levenberg-Marquardt's way (H + mu I in the scaled coordinates,
+            // whose diagonal is one; mu from 1e-3, ten times larger at each
+            // refusal, a tenth at each success), from the same pass start and
+            // its Jacobian, within the Gauss-Newton budget. A period that
+            // the linearised problem sends far past where its sines still
+            // look alike (a ripple's joint fit on a model far from the data)
+            // made the first step raise the objective 10-80 fold; handed to
+            // SLSQP from there, such a fit took 190-230 evaluations.
+            while (!stop && st0.kkt && std::isfinite(f0) && steps < kGaussNewtonSteps) {
+                const BoundedStep st =
+                    mu > 0 ? bounded_gauss_newton(H + mu * Eigen::MatrixXd::Identity(H.rows(), H.cols()), gu, full,
+                                                  QD, pb.lo, pb.hi)
+                           : st0;
+                if (!st.kkt) break;
+                // What the (undamped) quadratic model promises for this step.
+                const double pred = -(gu.dot(st.u) + 0.5 * st.u.dot(H * st.u));
                 Whitened G = W; // the trial's own bookkeeping; W stays for SLSQP
                 G.best = f0;
                 const Eigen::VectorXd zeta = lam.cwiseSqrt().asDiagonal() * (es.eigenvectors().transpose() * st.u);
@@ -406,7 +430,7 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
                 const double f1 = objective(unsigned(nfree), zeta.data(), grad.data(), &G);
                 ++steps;
                 if (!pb.failure.empty()) return fail();
-                const bool take_step = f1 < f0 && f0 - f1 >= 0.25 * st.pred && G.best_has_J && !pb.cancelled;
+                const bool take_step = f1 < f0 && f0 - f1 >= 0.25 * pred && G.best_has_J && !pb.cancelled;
                 // objective() left the problem at the trial point: back to
                 // the pass start unless the step is taken, the point the
                 // rest of the pass holds the residuals of, so that neither a
@@ -416,24 +440,36 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
                 if (pb.cancelled) {
                     rep.message = "fit cancelled";
                     ok = false;
+                    stop = true;
                     break;
                 }
-                if (take_step) {
-                    pb.set_full(G.best_full);
-                    have_at = G.best_full;
-                    have_res = std::move(G.best_res);
-                    have_J = std::move(G.best_J);
-                    if (G.abandoned) {
-                        rep.abandoned = true;
-                        rep.message = "abandoned: a parameter went past the value its result was wanted for";
-                        break;
-                    }
-                    if (st.pred > 0.1 * last_pred) gauss_newton = false;
-                    last_pred = st.pred;
-                    prev = f1;
+                if (!take_step) {
+                    if (mu >= kMaxDamping) break;
+                    mu = mu > 0 ? 10 * mu : kMinDamping;
                     continue;
                 }
+                pb.set_full(G.best_full);
+                have_at = G.best_full;
+                have_res = std::move(G.best_res);
+                have_J = std::move(G.best_J);
+                if (G.abandoned) {
+                    rep.abandoned = true;
+                    rep.message = "abandoned: a parameter went past the value its result was wanted for";
+                    stop = true;
+                    break;
+                }
+                // Slow convergence (a full step that leaves more than a tenth
+                // of its promise for the next) goes to SLSQP, whose updated
+                // Hessian handles it better.
+                if (mu == 0 && st.pred > 0.1 * last_pred) gauss_newton = false;
+                if (mu == 0) last_pred = st.pred;
+                mu = mu > 3 * kMinDamping ? mu / 3 : 0.0;
+                prev = f1;
+                taken = true;
+                break;
             }
+            if (stop) break;
+            if (taken) continue;
             gauss_newton = false; // the pass goes to SLSQP from this point
         }
         {

@@ -201,15 +201,22 @@ private:
         if (!f.weigh_with) f.weigh_with = &s.starts[q];
         // A period whose best fit so far lies past twice the measured span
         // has left the ripple for a smooth trend (less than half a cycle
-        // over the data): the fit is given up there and ends on that point,
-        // whose period is not shown, as where it was heading. (On a model
-        // far from the data, such as the
-        // nominal one, every start's joint fit went that way, to the
-        // period's upper bound, in 70-130 evaluations each: a fifth of a
-        // single-effect diagnosis's fitting.)
+        // over the data): the final free fit is given up there and ends on
+        // that point, whose period is not shown, as where it was heading.
+        // (The profile search before it stops at the span itself.)
         const double span = length_span(ctx_.pos);
-        for (auto at : period_params(s.joint[q], j.seeded)) f.abandon_above.push_back({at, 2 * span});
-        s.joint_ok[q] = fit_model(s.joint[q], ctx_.pos, f, s.joint_rep[q]);
+        const auto at = period_params(s.joint[q], j.seeded);
+        for (auto a : at) f.abandon_above.push_back({a, 2 * span});
+        // The other starts' held fits are points of the same profile when
+        // they were weighed alike: by the context's model, or each by its
+        // own start when those differ in the period alone and the ripple
+        // starts at zero amplitude (a built-in), so that the readings'
+        // sensitivity to the position, and the weights, are the same.
+        std::vector<std::pair<const Model *, double>> known;
+        const bool alike = ctx_.fo.weigh_with || (!at.empty() && s.starts[q].effect_desc(at[0].first).stage != Stage::User);
+        for (size_t r = 0; alike && r < s.starts.size(); ++r)
+            if (r != q && s.held_ok[r]) known.push_back({&s.held[r], s.held_rep[r].chi2});
+        s.joint_ok[q] = fit_seeded_period(s.joint[q], ctx_.pos, f, at, s.held_rep[q].chi2, known, s.joint_rep[q]);
         s.shown_joint[q] = !s.joint_rep[q].abandoned && period_shown(s.joint[q], j.seeded, ctx_.pos);
     }
 

@@ -159,6 +159,21 @@ bool period_shown(const Model &m, const std::string &effect, const std::vector<P
 // The span of the measured cable lengths (mm): the longest period shown.
 double length_span(const std::vector<PreparedPos> &pos);
 
+// The joint fit of a seeded period from m, fitted with the period held at
+// its start (chi-square start_chi2): a search over the period of the
+// profile chi-square (each point a fit with the period held), then one fit
+// with everything free from its minimum (diag_period.cpp). `period`: the
+// {effect, parameter} of the period in m (with more than one, the plain
+// joint fit). f's weights must be fixed (weigh_with) so that the points
+// compare. A search that leaves the span of the measured lengths stops
+// there: m is that point's held fit and rep.abandoned is set (its period
+// is not shown). `known`: other held fits of the same model at other
+// periods and their chi-squares (the job's other starts), used as points
+// where they fall. rep counts every fit's evaluations and seconds.
+bool fit_seeded_period(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &f,
+                       const std::vector<std::pair<size_t, size_t>> &period, double start_chi2,
+                       const std::vector<std::pair<const Model *, double>> &known, FitReport &rep);
+
 std::vector<ParamValues> effect_starts(const Model &base, const std::string &effect,
                                        const std::vector<PreparedPos> &pos);
 

@@ -553,13 +553,19 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
     rep.fixture_mm.assign(pb.fx.data(), pb.fx.data() + pb.fx.size());
     Eigen::VectorXd res;
     Eigen::MatrixXd J;
-    if (!take(pb.get_full(), res, J)) return fail();
+    if (!opt.statistics && (have_at.size() == 0 || have_at != pb.get_full())) {
+        if (!pb.residuals(res, nullptr)) return fail(); // the chi-square alone: no Jacobian
+    } else if (!take(pb.get_full(), res, J)) {
+        return fail();
+    }
     rep.chi2 = res.squaredNorm();
     rep.evals = pb.evals;
     if (!rep.converged && rep.message.empty()) rep.message = "evaluation budget spent before convergence";
-    // Parameter std from the Gauss-Newton covariance, inflated by chi2/dof
-    // when the residual is larger than the weights claim.
-    {
+    if (!opt.statistics) {
+        for (size_t e = 0; e < m.effect_count(); ++e) rep.std.emplace_back(m.effect_params(e).size(), 0.0);
+    } else {
+        // Parameter std from the Gauss-Newton covariance, inflated by chi2/dof
+        // when the residual is larger than the weights claim.
         const Eigen::MatrixXd H = free_hessian(pb, J);
         Eigen::MatrixXd C = pb.Q * H.ldlt().solve(Eigen::MatrixXd::Identity(nfree, nfree)) * pb.Q.transpose();
         const double dof = std::max(1, rep.n_obs - nfree);

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <functional>
+#include <memory>
 #include <utility>
 #include <string>
 #include <vector>
@@ -33,6 +34,10 @@ struct PreparedPos {
 };
 
 std::vector<PreparedPos> prepare(const Dataset &d);
+
+// A fit's whitening of the readings (fit_problem.h), fixed by the model it
+// is weighed with and the options' noise model: fit_weights.
+struct FitWeights;
 
 struct FitOptions {
     Eigen::Vector3d jig_sigma{0.03, 0.03, 0.03}; // mm, per axis, std of each position's own error
@@ -77,6 +82,15 @@ struct FitOptions {
     // fitted ripple would give a chi-square on another scale than the same
     // model fitted from zero amplitudes.
     const Model *weigh_with = nullptr;
+    // weigh_with's whitening under these same options (fit_weights),
+    // computed once for fits that share it (a period's profile search, each
+    // point a fit): null, each fit computes its own. Whoever sets it keeps
+    // it in step with weigh_with and the noise model.
+    std::shared_ptr<const FitWeights> weights;
+    // The parameters' standard errors in FitReport::std (the covariance at
+    // the end of the fit: one more Hessian and its inverse). A fit compared
+    // by its chi-square alone (a profile's point) goes without (zeros).
+    bool statistics = true;
     // A fit whose result is not wanted once a parameter passes a value:
     // {{effect index, parameter index}, value}. The fit stops as soon as its
     // best point so far lies beyond (a line-search trial beyond that does
@@ -123,6 +137,12 @@ constexpr double kFixturePriorSdMm = 0.05;
 // False with rep.message when cancelled or when a user effect's apply
 // returns non-zero (the message names the effect).
 bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt, FitReport &rep);
+
+// The whitening a fit of `weigh` under opt computes (weigh_with and weights
+// in opt are ignored): for FitOptions::weights. failure names a user
+// effect that failed while weighing (its fits then fail with it).
+std::shared_ptr<const FitWeights> fit_weights(const Model &weigh, const std::vector<PreparedPos> &pos,
+                                              const FitOptions &opt);
 
 // How much of effect `name`'s action on the readings (its Jacobian columns,
 // each normalised, weighted like the fit) lies in the span of each other

@@ -42,6 +42,26 @@ struct BoundedStep {
 BoundedStep bounded_gauss_newton(const Eigen::MatrixXd &H, const Eigen::VectorXd &g, const Eigen::VectorXd &x0,
                                  const Eigen::MatrixXd &Q, const Eigen::VectorXd &lo, const Eigen::VectorXd &hi);
 
+struct HoleBlock {
+    int start = 0, m = 0; // rows[start, start + m): the hole's positions (contiguous: see rows)
+    Eigen::MatrixXd Q;    // 4m x k
+    Eigen::VectorXd c;    // k
+};
+
+} // namespace cdm::fit_detail
+
+namespace cdm {
+// FitOptions::weights (fit.h): a problem's whitening, as Problem computes it.
+struct FitWeights {
+    std::vector<Eigen::Matrix4d> wh;
+    std::vector<fit_detail::HoleBlock> holes;
+    std::vector<int> rows; // the positions they are for, in their order
+    std::string failure;
+};
+} // namespace cdm
+
+namespace cdm::fit_detail {
+
 struct Problem {
     Model &m;
     const std::vector<PreparedPos> &pos;
@@ -110,10 +130,15 @@ struct Problem {
             std::stable_sort(rows.begin(), rows.end(), [&](int a, int b) {
                 return unsigned(opt.hole[size_t(a)]) < unsigned(opt.hole[size_t(b)]); // -1 (none) last
             });
-        if (opt.weigh_with) {
+        if (opt.weights && opt.weights->rows == rows) {
+            wh = opt.weights->wh;
+            holes = opt.weights->holes;
+            failure = opt.weights->failure;
+        } else if (opt.weigh_with) {
             Model wm = *opt.weigh_with;
             FitOptions wo = opt;
             wo.weigh_with = nullptr;
+            wo.weights = nullptr;
             wo.hold.clear();
             Problem wp(wm, pos, wo); // the same positions (opt.use)
             wh = std::move(wp.wh);
@@ -134,11 +159,6 @@ struct Problem {
     // then the Gaussian likelihood's, the number of residuals unchanged.
     // Fixed for a problem, like the weights (and taken with them from
     // weigh_with), so the Jacobian is transformed the same way.
-    struct HoleBlock {
-        int start = 0, m = 0; // rows[start, start + m): the hole's positions (contiguous: see rows)
-        Eigen::MatrixXd Q;    // 4m x k
-        Eigen::VectorXd c;    // k
-    };
     std::vector<HoleBlock> holes;
 
     bool hole_model() const {
@@ -331,6 +351,14 @@ struct Problem {
         if (!dPs.empty()) build_holes(dPs);
     }
 
+    // L v for a lower-triangular 4 x 4 L, written out: Eigen's triangular
+    // products go through its general matrix-product kernels, whose packing
+    // cost more than the ten multiplications (a fifth of a diagnosis).
+    static Eigen::Vector4d lower4(const Eigen::Matrix4d &L, const Eigen::Vector4d &v) {
+        return {L(0, 0) * v(0), L(1, 0) * v(0) + L(1, 1) * v(1), L(2, 0) * v(0) + L(2, 1) * v(1) + L(2, 2) * v(2),
+                L(3, 0) * v(0) + L(3, 1) * v(1) + L(3, 2) * v(2) + L(3, 3) * v(3)};
+    }
+
     // Whitened residuals (wh (mean - y)) and Jacobian of y. False
     // when a user effect's apply fails (message in `failure`).
     bool residuals(Eigen::VectorXd &res, Eigen::MatrixXd *J) {
@@ -354,15 +382,14 @@ struct Problem {
                 return false;
             }
             const Eigen::Matrix4d &L = wh[r]; // lower triangular
-            res.segment<4>(4 * long(r)) = L.triangularView<Eigen::Lower>() * (pp.mean - y);
+            res.segment<4>(4 * long(r)) = lower4(L, pp.mean - y);
             if (!J) continue;
             // The position's four rows at once: each column's four entries
             // are adjacent in the column-major J.
-            J->block(4 * long(r), 0, 4, ev.size()) = L.triangularView<Eigen::Lower>() * Jp;
+            for (int k = 0; k < ev.size(); ++k) J->block<4, 1>(4 * long(r), k) = lower4(L, Jp.col(k));
             // d y / d (jig-frame x): the device-frame x derivative; the
             // jig's rotation (a few mrad) is left out of this column.
-            if (F > 0)
-                J->block<4, 1>(4 * long(r), ev.size() + opt.fixture[j]) = L.triangularView<Eigen::Lower>() * dP.col(0);
+            if (F > 0) J->block<4, 1>(4 * long(r), ev.size() + opt.fixture[j]) = lower4(L, dP.col(0));
         }
         decorrelate(res, J);
         return true;

@@ -1,7 +1,7 @@
 // The diagnosis's questions about a model on the data, answered with the
 // fit's own problem (fit_problem.h) and without fitting: an effect's
 // overlap with the others, the chi-square, the weighted residual and its
-// Jacobian.
+// Jacobian; the whitening a fit weighed with it computes.
 #include <Eigen/QR>
 
 #include "calib/fit.h"
@@ -78,6 +78,22 @@ bool fit_residual_jacobian(const Model &m, const std::vector<PreparedPos> &pos, 
     }
     J = -J; // residual = sqrt(w) * (mean - y)
     return true;
+}
+
+std::shared_ptr<const FitWeights> fit_weights(const Model &weigh, const std::vector<PreparedPos> &pos,
+                                              const FitOptions &opt) {
+    Model wm = weigh;
+    FitOptions wo = opt;
+    wo.weigh_with = nullptr;
+    wo.weights = nullptr;
+    wo.hold.clear();
+    Problem wp(wm, pos, wo);
+    auto w = std::make_shared<FitWeights>();
+    w->wh = std::move(wp.wh);
+    w->holes = std::move(wp.holes);
+    w->rows = wp.rows;
+    w->failure = wp.failure;
+    return w;
 }
 
 } // namespace cdm

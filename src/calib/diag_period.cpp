@@ -56,6 +56,7 @@ bool fit_seeded_period(Model &m, const std::vector<PreparedPos> &pos, const FitO
     fh.hold = period;
     fh.abandon_above.clear();
     fh.statistics = false; // a point is its chi-square
+    fh.single_step = true;  // from its neighbour's result, nearly linear in the rest
     FitReport last;
     // The held fit at period p from `from`'s values (p within the effect's bounds).
     auto held = [&](const Model &from, double p, Point &out) {

@@ -343,7 +343,7 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
     Eigen::VectorXd have_at, have_res;
     Eigen::MatrixXd have_J;
     auto take = [&](const Eigen::VectorXd &at, Eigen::VectorXd &res, Eigen::MatrixXd &J) {
-        if (have_at.size() != at.size() || have_at.size() == 0 ||
+        if (have_at.size() != at.size() || have_at.size() == 0 || have_J.size() == 0 ||
             std::memcmp(have_at.data(), at.data(), sizeof(double) * size_t(at.size())) != 0)
             return pb.residuals(res, &J);
         res = std::move(have_res);
@@ -404,6 +404,26 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
                 have_at = full;
                 have_res = std::move(res);
                 have_J = std::move(J);
+                break;
+            }
+            if (opt.single_step) {
+                // One step, its chi-square without a Jacobian (FitOptions::
+                // single_step): kept when it lowers the objective.
+                if (st0.kkt && std::isfinite(f0)) {
+                    const Eigen::VectorXd full1 = full + QD * st0.u;
+                    pb.set_full(full1);
+                    Eigen::VectorXd r1;
+                    if (!pb.residuals(r1, nullptr)) return fail();
+                    ++pb.evals;
+                    if (0.5 * (r1.squaredNorm() + pb.prior(full1, nullptr)) < f0) {
+                        have_at = full1;
+                        have_res = std::move(r1);
+                        have_J.resize(0, 0);
+                    } else {
+                        pb.set_full(full);
+                    }
+                }
+                rep.converged = true;
                 break;
             }
             // A step that falls short of its promise is retried shorter,
@@ -553,9 +573,14 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
     rep.fixture_mm.assign(pb.fx.data(), pb.fx.data() + pb.fx.size());
     Eigen::VectorXd res;
     Eigen::MatrixXd J;
-    if (!opt.statistics && (have_at.size() == 0 || have_at != pb.get_full())) {
-        if (!pb.residuals(res, nullptr)) return fail(); // the chi-square alone: no Jacobian
-    } else if (!take(pb.get_full(), res, J)) {
+    const Eigen::VectorXd at_end = pb.get_full();
+    const bool have_end = have_at.size() == at_end.size() && have_at.size() > 0 &&
+                          std::memcmp(have_at.data(), at_end.data(), sizeof(double) * size_t(at_end.size())) == 0;
+    if (!opt.statistics && have_end) {
+        res = std::move(have_res); // the chi-square alone
+    } else if (!opt.statistics) {
+        if (!pb.residuals(res, nullptr)) return fail();
+    } else if (!take(at_end, res, J)) {
         return fail();
     }
     rep.chi2 = res.squaredNorm();

@@ -91,6 +91,11 @@ struct FitOptions {
     // the end of the fit: one more Hessian and its inverse). A fit compared
     // by its chi-square alone (a profile's point) goes without (zeros).
     bool statistics = true;
+    // A single Gauss-Newton step (within the bounds) from the start, kept
+    // when it lowers the objective, and its chi-square without a second
+    // Jacobian: for a fit warm-started next to its minimum and nearly
+    // linear in what it fits (a period profile's points, the period held).
+    bool single_step = false;
     // A fit whose result is not wanted once a parameter passes a value:
     // {{effect index, parameter index}, value}. The fit stops as soon as its
     // best point so far lies beyond (a line-search trial beyond that does

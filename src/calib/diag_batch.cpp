@@ -386,15 +386,20 @@ bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err
     std::vector<size_t> serial, shared;
     for (size_t k = 0; k < jobs.size(); ++k)
         if (!cached[k]) (weigh_user || has_user_effect(jobs[k].m) ? serial : shared).push_back(k);
+    // Every fit of the batch weighed by one model: its whitening once, not
+    // per fit (each would evaluate that model at every position).
+    DiagContext bc = ctx;
+    if (bc.fo.weigh_with && !bc.fo.weights && serial.size() + shared.size() > 1)
+        bc.fo.weights = fit_weights(*bc.fo.weigh_with, bc.pos, bc.fo);
     std::atomic<bool> cancelled{false};
     size_t failed = SIZE_MAX;
     {
-        Batch b(ctx, jobs, cancelled);
+        Batch b(bc, jobs, cancelled);
         b.run(serial, 1);
         failed = b.first_failed_;
     }
     if (!cancelled) {
-        Batch b(ctx, jobs, cancelled);
+        Batch b(bc, jobs, cancelled);
         b.run(shared, size_t(std::max(1, ctx.threads)));
         failed = b.first_failed_;
     }

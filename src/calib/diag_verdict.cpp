@@ -18,7 +18,7 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
     Judgement J;
     const double floor3 = noise.norm();
     const double small = 0.1 * floor3; // a tenth of the noise floor (3-D)
-    std::vector<std::string> material, negligible;
+    std::vector<std::string> material, negligible, unpaid;
     if (cands)
         for (auto &c : *cands) {
             if (!c.significant()) continue;
@@ -35,6 +35,7 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
                                      {"position_change_rms_mm", c.shift_rms_mm},
                                      {"negligible", c.shift_rms_mm < small}});
             (c.shift_rms_mm < small ? negligible : material).push_back(what);
+            if (c.shift_rms_mm >= small && c.bic > 0) unpaid.push_back(c.name);
         }
     if (findings)
         for (auto &f : *findings) {
@@ -78,6 +79,19 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
             // The strongest three in words; the JSON lists every one.
             for (size_t k = 0; k < material.size() && k < 3; ++k) J.words += (k ? "; " : "") + material[k];
             if (material.size() > 3) J.words += "; and " + std::to_string(material.size() - 3) + " more (significant_left)";
+            // A likelihood ratio the test calls significant with a BIC change
+            // above zero: the criterion asks more of its parameters than the
+            // test does (its penalty grows with the log of the readings), so
+            // the search leaves it out, and the reader must know why.
+            if (!unpaid.empty()) {
+                std::string names;
+                for (size_t k = 0; k < unpaid.size(); ++k) names += (k ? ", " : "") + unpaid[k];
+                J.words += ". The search leaves " + names + " out: " + (unpaid.size() == 1 ? "its" : "their") +
+                           " likelihood ratio is significant, but the BIC, whose penalty per parameter grows with the "
+                           "number of readings, does not pay for " + (unpaid.size() == 1 ? "its" : "their") +
+                           " parameters; add " + (unpaid.size() == 1 ? "it" : "them") +
+                           " (--effects) if the physics makes it plausible, and compare";
+            }
         } else if (!v.explained) {
             J.words += ": the residual is larger or more structured than the noise and the jig's tolerance allow";
         }

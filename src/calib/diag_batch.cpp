@@ -217,7 +217,7 @@ private:
         for (size_t r = 0; alike && r < s.starts.size(); ++r)
             if (r != q && s.held_ok[r]) known.push_back({&s.held[r], s.held_rep[r].chi2});
         s.joint_ok[q] = fit_seeded_period(s.joint[q], ctx_.pos, f, at, s.held_rep[q].chi2, known, s.joint_rep[q]);
-        s.shown_joint[q] = !s.joint_rep[q].abandoned && period_shown(s.joint[q], j.seeded, ctx_.pos);
+        s.shown_joint[q] = fit_shown(s.joint[q], s.joint_rep[q], j.seeded, ctx_.pos);
     }
 
     // Under the lock: task t has ended; what follows from it.

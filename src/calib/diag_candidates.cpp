@@ -169,7 +169,8 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
                 // (A period the first fit showed is not traded for one the
                 // data do not show: that candidate would drop from the table.)
                 if (again[a].ok && again[a].rep.chi2 < jobs[of[a]].rep.chi2 &&
-                    (period_shown(again[a].m, list_of[a], ctx.pos) || !period_shown(jobs[of[a]].m, list_of[a], ctx.pos)))
+                    (fit_shown(again[a].m, again[a].rep, list_of[a], ctx.pos) ||
+                     !fit_shown(jobs[of[a]].m, jobs[of[a]].rep, list_of[a], ctx.pos)))
                     jobs[of[a]] = std::move(again[a]);
         }
     }
@@ -188,7 +189,7 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         for (size_t q = span[i].first; q < span[i].second; ++q) {
             const Model &m = jobs[q].m;
             const FitReport &r = jobs[q].rep;
-            if (!period_shown(m, d->name, ctx.pos)) continue;
+            if (!fit_shown(m, r, d->name, ctx.pos)) continue;
             if (!have || r.chi2 < c.rep.chi2) {
                 c.m = m;
                 c.rep = r;

@@ -158,6 +158,13 @@ std::vector<std::string> reading_effects(const Model &m);
 bool period_shown(const Model &m, const std::string &effect, const std::vector<PreparedPos> &pos);
 // The span of the measured cable lengths (mm): the longest period shown.
 double length_span(const std::vector<PreparedPos> &pos);
+// A fit's period shown: period_shown, and the fit not abandoned (a period
+// profile that falls to the span ends on the span itself, which
+// period_shown alone would take; a joint fit given up past twice the span).
+inline bool fit_shown(const Model &m, const FitReport &r, const std::string &effect,
+                      const std::vector<PreparedPos> &pos) {
+    return !r.abandoned && period_shown(m, effect, pos);
+}
 
 // The joint fit of a seeded period from m, fitted with the period held at
 // its start (chi-square start_chi2): a search over the period of the

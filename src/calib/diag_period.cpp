@@ -35,6 +35,7 @@ struct Point {
     double p = 0; // the period
     double chi2 = INFINITY;
     Model m{DeviceGeometry{}};
+    FitReport rep; // its held fit's
 };
 
 } // namespace
@@ -43,13 +44,19 @@ bool fit_seeded_period(Model &m, const std::vector<PreparedPos> &pos, const FitO
                        const std::vector<std::pair<size_t, size_t>> &period, double start_chi2,
                        const std::vector<std::pair<const Model *, double>> &known, FitReport &rep) {
     if (period.size() != 1) return fit_model(m, pos, f0, rep); // (a user effect with several: the plain joint fit)
-    // Every point is weighed as f0 says (weigh_with): the whitening once.
-    FitOptions f = f0;
-    if (f.weigh_with && !f.weights) f.weights = fit_weights(*f.weigh_with, pos, f);
     const auto [e, q] = period[0];
     const ParamDesc &pd = m.effect_desc(e).params[q];
     const double span = length_span(pos);
-    const double lo = std::max(pd.lower, kShortestPeriodMm), hi = std::min(pd.upper, span);
+    // The walk's upper end: a quarter past the span, so that a minimum at the
+    // span itself (a period of one turn over the data) is bracketed and
+    // fitted; whether it is shown is then the free fit's period's to say.
+    const double hi = std::min(pd.upper, 1.25 * span);
+    // A start outside what the search walks: the plain joint fit, as before
+    // there was a search.
+    if (!(m.effect_params(e)[q] >= pd.lower && m.effect_params(e)[q] <= hi)) return fit_model(m, pos, f0, rep);
+    // Every point is weighed as f0 says (weigh_with): the whitening once.
+    FitOptions f = f0;
+    if (f.weigh_with && !f.weights) f.weights = fit_weights(*f.weigh_with, pos, f);
     int evals = 0;
     double seconds = 0;
     FitOptions fh = f;
@@ -57,80 +64,103 @@ bool fit_seeded_period(Model &m, const std::vector<PreparedPos> &pos, const FitO
     fh.abandon_above.clear();
     fh.statistics = false; // a point is its chi-square
     fh.single_step = true;  // from its neighbour's result, nearly linear in the rest
-    FitReport last;
-    // The held fit at period p from `from`'s values (p within the effect's bounds).
+    // The held fit at period p from `from`'s values (p within the effect's
+    // bounds); on failure rep is its report (a user effect's message).
     auto held = [&](const Model &from, double p, Point &out) {
         out.p = p;
         out.m = from;
         auto v = out.m.effect_params(e);
         v[q] = p;
         std::string err;
-        if (!out.m.set_effect_params(e, v, err)) return false;
-        const bool ok = fit_model(out.m, pos, fh, last);
-        evals += last.evals;
-        seconds += last.seconds;
-        out.chi2 = std::isnan(last.chi2) ? INFINITY : last.chi2;
+        if (!out.m.set_effect_params(e, v, err)) {
+            rep = FitReport{};
+            rep.message = "fit failed: " + err;
+            return false;
+        }
+        const bool ok = fit_model(out.m, pos, fh, out.rep);
+        evals += out.rep.evals;
+        seconds += out.rep.seconds;
+        out.chi2 = std::isnan(out.rep.chi2) ? INFINITY : out.rep.chi2;
+        if (!ok) rep = out.rep;
         return ok;
-    };
-    auto finish_held = [&](const Point &pt, bool abandoned) {
-        m = pt.m;
-        rep = last;
-        rep.chi2 = pt.chi2;
-        rep.evals = evals;
-        rep.seconds = seconds;
-        rep.abandoned = abandoned;
-        if (abandoned) rep.message = "abandoned: the period left the span of the measured lengths";
-        return true;
     };
     Point b;
     b.p = m.effect_params(e)[q];
-    b.chi2 = start_chi2;
+    b.chi2 = std::isnan(start_chi2) ? INFINITY : start_chi2;
     b.m = m;
-    if (!(b.p >= lo && b.p <= hi)) return finish_held(b, true);
-    // A quarter of a phase turn over the span: the profile's peaks are
-    // about four such steps wide.
-    const double h = std::min(b.p * b.p / (4 * span), 0.25 * b.p);
+    // A quarter of a phase turn over the span at period p: the profile's
+    // peaks are about four such steps wide.
+    auto step = [&](double p) { return std::min(p * p / (4 * span), 0.25 * p); };
     // --- walk downhill to a bracket (a, b, c), b lowest; the other starts'
-    // held fits within two steps serve as the first neighbours
+    // held fits within two steps serve as the first neighbours. The walk
+    // ends at the effect's bounds (the free fit takes it from there) or a
+    // quarter past the span: a profile still falling there is a trend, not a
+    // period the data repeat, and the search stops on it (abandoned, not
+    // shown).
     Point a, c;
     a.p = -INFINITY;
     c.p = INFINITY;
     for (auto &[km, kc] : known) {
         const double kp = km->effect_params(e)[q];
-        if (kp < b.p && kp >= b.p - 2 * h && kp > a.p) {
+        if (kp < b.p && kp >= b.p - 2 * step(b.p) && kp > a.p) {
             a.p = kp;
             a.chi2 = std::isnan(kc) ? INFINITY : kc;
             a.m = *km;
-        } else if (kp > b.p && kp <= b.p + 2 * h && kp < c.p) {
+        } else if (kp > b.p && kp <= std::min(hi, b.p + 2 * step(b.p)) && kp < c.p) {
             c.p = kp;
             c.chi2 = std::isnan(kc) ? INFINITY : kc;
             c.m = *km;
         }
     }
-    if ((!std::isfinite(a.p) && !held(b.m, std::max(pd.lower, b.p - h), a)) ||
-        (!std::isfinite(c.p) && !held(b.m, std::min(pd.upper, b.p + h), c)))
-        return false;
-    for (int walk = 0; walk < 64 && (a.chi2 < b.chi2 || c.chi2 < b.chi2); ++walk) {
-        if (a.chi2 < c.chi2) { // downhill to shorter periods
-            c = std::move(b);
-            b = std::move(a);
-            if (b.p <= lo) return finish_held(b, true);
-            if (!held(b.m, std::max(pd.lower, b.p - h), a)) return false;
+    bool bracketed = false;
+    if (!std::isfinite(a.p)) {
+        if (b.p > pd.lower) {
+            if (!held(b.m, std::max(pd.lower, b.p - step(b.p)), a)) return false;
         } else {
-            a = std::move(b);
-            b = std::move(c);
-            if (b.p >= hi) return finish_held(b, true); // a trend, not a period the data repeat
-            if (!held(b.m, std::min(pd.upper, b.p + h), c)) return false;
+            a.chi2 = INFINITY; // at the bound: nothing to its left
         }
     }
-    if (a.chi2 < b.chi2 || c.chi2 < b.chi2) return finish_held(a.chi2 < c.chi2 ? a : c, true); // (no bracket)
+    if (!std::isfinite(c.p)) {
+        if (b.p < hi) {
+            if (!held(b.m, std::min(hi, b.p + step(b.p)), c)) return false;
+        } else {
+            c.chi2 = INFINITY;
+        }
+    }
+    for (int walk = 0; walk < 64; ++walk) {
+        if (a.chi2 < b.chi2 && a.chi2 <= c.chi2) { // downhill to shorter periods
+            c = std::move(b);
+            b = std::move(a);
+            if (b.p <= pd.lower) break; // the bound: the free fit from there
+            if (!held(b.m, std::max(pd.lower, b.p - step(b.p)), a)) return false;
+        } else if (c.chi2 < b.chi2) {
+            a = std::move(b);
+            b = std::move(c);
+            if (b.p >= hi) {
+                if (hi < 1.25 * span) break; // the effect's upper bound: the free fit
+                m = std::move(b.m);          // a trend (fit_shown is false for it)
+                rep = b.rep;
+                rep.n_free += int(period.size()); // counted as the free fit would
+                rep.evals = evals;
+                rep.seconds = seconds;
+                rep.abandoned = true;
+                rep.message = "abandoned: the period's profile falls past the span of the measured lengths";
+                return true;
+            }
+            if (!held(b.m, std::min(hi, b.p + step(b.p)), c)) return false;
+        } else {
+            bracketed = std::isfinite(a.chi2) && std::isfinite(c.chi2);
+            break;
+        }
+    }
+    const double h = step(b.p);
     // --- successive parabolic interpolation within (a, c), golden section
     // when the parabola's vertex is not usefully inside
     // Down to a bracket of an eighth of the step (a thirty-second of a phase
     // turn over the span): the free fit from there is within the reach of
     // its linearisation, and finishes the job in a few evaluations.
     const double tol = h / 16;
-    for (int it = 0; it < 12 && c.p - a.p > 2 * tol; ++it) {
+    for (int it = 0; bracketed && it < 12 && c.p - a.p > 2 * tol; ++it) {
         const double d1 = b.p - a.p, d2 = b.p - c.p, f1 = b.chi2 - c.chi2, f2 = b.chi2 - a.chi2;
         const double den = d1 * f1 - d2 * f2;
         double v = den != 0 ? b.p - 0.5 * (d1 * d1 * f1 - d2 * d2 * f2) / den : NAN;

@@ -61,7 +61,7 @@ bool review_model(const DiagContext &ctx, const Model &model, int n_free, double
         for (const Swap &sw : swaps[i]) {
             const FitJob &j = jobs[sw.job];
             const double d = ctx.bic(j.rep.chi2, j.rep.n_free) - bic_cur;
-            if (period_shown(j.m, sw.name, ctx.pos) && d < best) {
+            if (fit_shown(j.m, j.rep, sw.name, ctx.pos) && d < best) {
                 best = d;
                 best_name = sw.name;
             }

@@ -429,7 +429,7 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
             // A step that falls short of its promise is retried shorter,
             // Levenberg-Marquardt's way (H + mu I in the scaled coordinates,
             // whose diagonal is one; mu from 1e-3, ten times larger at each
-            // refusal, a tenth at each success), from the same pass start and
+            // refusal, a third at each success), from the same pass start and
             // its Jacobian, within the Gauss-Newton budget. A period that
             // the linearised problem sends far past where its sines still
             // look alike (a ripple's joint fit on a model far from the data)

@@ -337,7 +337,10 @@ struct Problem {
                 dP.setZero();
             Eigen::Matrix4d C = pp.cov_mean;
             C.diagonal() = pp.var_mean;
-            C += dP * S * dP.transpose();
+            // (A derivative that is not a number, a degenerate geometry:
+            // the pots' noise alone, rather than a weight of zero that would
+            // drop the position from a chi-square that still counts it.)
+            if (dP.allFinite()) C += dP * S * dP.transpose();
             const Eigen::LLT<Eigen::Matrix4d> llt(C);
             if (C.allFinite() && llt.info() == Eigen::Success &&
                 llt.matrixL().toDenseMatrix().diagonal().minCoeff() > 0) {
@@ -346,7 +349,7 @@ struct Problem {
                 wh[r].setZero();
                 for (int c = 0; c < 4; ++c) wh[r](c, c) = C(c, c) > 0 ? 1.0 / std::sqrt(C(c, c)) : 0.0;
             }
-            if (!dPs.empty()) dPs[r] = dP;
+            if (!dPs.empty()) dPs[r] = dP.allFinite() ? dP : Eigen::Matrix<double, 4, 3>::Zero();
         }
         if (!dPs.empty()) build_holes(dPs);
     }

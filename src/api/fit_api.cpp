@@ -64,6 +64,8 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
             {"jig_tolerance_mm", {cf.jig(0), cf.jig(1), cf.jig(2)}},
             // The part of it each plate hole shares at every height (since 1.1).
             {"plate_holes_mm", {cf.fit_options.hole_sigma(0), cf.fit_options.hole_sigma(1), cf.fit_options.hole_sigma(2)}},
+            // Each reading's own white error beyond the pots' noise (since 1.1).
+            {"reading_noise_mm", cdm::diag::reading_noise_json(cf.reading)},
             {"nominal_error_mm", cdm::diag::stats3(cf.nominal.err)},
             {"error_mm", cdm::diag::stats3(cf.fitted.err)},
             // The samples the dataset's screen set aside (the diagnosis' data.glitches).

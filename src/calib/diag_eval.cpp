@@ -7,6 +7,8 @@
 
 #include <limits>
 
+#include <Eigen/SVD>
+
 namespace cdm {
 namespace diag {
 
@@ -18,6 +20,9 @@ Eval init_eval(size_t P) {
     E.var_mean.assign(P, V3::Constant(1e-6));
     E.ok.assign(P, 0);
     E.est.assign(P, V3::Zero());
+    E.mis.assign(P, 0.0);
+    E.mis_var.assign(P, 0.0);
+    E.mis_dir.assign(P, Eigen::Vector4d::Zero());
     return E;
 }
 } // namespace
@@ -81,6 +86,14 @@ Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos) {
         Cl.diagonal() = pos[j].var_mean;
         const Eigen::Matrix3d C = E.Jp[j] * Cl * E.Jp[j].transpose();
         for (int a = 0; a < 3; ++a) E.var_mean[j](a) = std::max(C(a, a), 1e-10);
+        if (J.allFinite()) {
+            const Eigen::JacobiSVD<Eigen::Matrix<double, 4, 3>> svd(Eigen::Matrix<double, 4, 3>(J), Eigen::ComputeFullU);
+            const Eigen::Vector4d dir = svd.matrixU().col(3);
+            const Eigen::Vector4d r = pos[j].mean - Eigen::Map<const Eigen::Vector4d>(&y[4 * slot[j]]);
+            E.mis[j] = dir.dot(r);
+            E.mis_var[j] = dir.dot(Cl * dir);
+            E.mis_dir[j] = dir;
+        }
         E.ok[j] = 1;
         const double n = pos[j].n;
         const Eigen::Matrix3d S = E.Jp[j] * (pos[j].cov * (n - 1)) * E.Jp[j].transpose();

@@ -26,6 +26,14 @@ struct Eval {
     Acc err[3];                                    // per-sample error statistics
     Acc within[3];                                 // per-sample deviation from the position mean
     size_t bad_samples = 0;
+    // The four cables measure three coordinates: the mean readings' part
+    // that no position explains, (mean - readings(est)) along the unit
+    // direction dir no position change moves (J' dir = 0, J the readings'
+    // derivative at est; its sign is the solver's, so readers align it),
+    // mm, with its noise variance from the readings' covariance. Neither
+    // the reference nor the jig's error enters it.
+    std::vector<double> mis, mis_var;
+    std::vector<Eigen::Vector4d> mis_dir;
 };
 
 // The model on per-position statistics: residuals by FK of the mean

@@ -221,6 +221,74 @@ V3 estimate_hole_std(const Eval &E, const Grid &G) {
     return out;
 }
 
+// Each mean reading's own white error beyond the pots' noise of the mean,
+// from the cables' misclosure (Eval::mis): the part of the readings no
+// position explains, so that neither the jig's reference nor its error
+// enters, and a smooth device error nearly cancels in second differences
+// along the plate's rows and columns, as in estimate_nugget. A white error
+// of variance t^2 in each reading adds t^2 to every misclosure (its
+// direction is a unit vector), so E[dd^2] = noise + 1.5 t^2 for
+// dd = m_j - (m_l + m_r) / 2, the neighbours' directions aligned with the
+// centre's. Second differences along one plate line share positions, so
+// the standard error is taken over the lines (each row's y triples and each
+// column's z triples at a height), as in estimate_hole_std; the estimate is
+// kept only where it is more than 3 of those standard errors above zero.
+ReadingNoise estimate_reading_noise(const Eval &E, const Grid &G) {
+    ReadingNoise out;
+    if (!G.layered || G.cell.size() != E.res.size() || E.mis.size() != E.res.size()) return out;
+    std::map<std::array<long, 3>, std::pair<double, double>> lines; // (kind, height, line) -> sum, count
+    auto add = [&](const std::vector<int> &cen, const std::vector<std::array<int, 2>> &pr, long kind, int across) {
+        for (size_t k = 0; k < cen.size(); ++k) {
+            const size_t j = size_t(cen[k]), l = size_t(pr[k][0]), r = size_t(pr[k][1]);
+            if (!E.ok[j] || !E.ok[l] || !E.ok[r] || E.mis_var[j] <= 0 || E.mis_var[l] <= 0 || E.mis_var[r] <= 0)
+                continue;
+            const double sl = E.mis_dir[l].dot(E.mis_dir[j]) < 0 ? -1 : 1;
+            const double sr = E.mis_dir[r].dot(E.mis_dir[j]) < 0 ? -1 : 1;
+            const double dd = E.mis[j] - 0.5 * (sl * E.mis[l] + sr * E.mis[r]);
+            const double noise = E.mis_var[j] + 0.25 * (E.mis_var[l] + E.mis_var[r]);
+            auto &ln = lines[{kind, long(G.height_index[j]), G.cell[j][size_t(across)]}];
+            ln.first += (dd * dd - noise) / 1.5;
+            ln.second += 1;
+        }
+    };
+    add(G.ycentre, G.ypair, 0, 1);
+    add(G.zcentre, G.zpair, 1, 0);
+    const double N = double(lines.size());
+    if (N < 8) return out;
+    double mean = 0, var = 0;
+    for (auto &kv : lines) mean += kv.second.first / kv.second.second;
+    mean /= N;
+    for (auto &kv : lines) {
+        const double d = kv.second.first / kv.second.second - mean;
+        var += d * d;
+    }
+    var /= N - 1;
+    out.tested = true;
+    out.variance = mean;
+    out.se = std::sqrt(var / N);
+    if (mean > 3 * out.se) out.sigma = std::sqrt(mean);
+    return out;
+}
+
+nlohmann::json reading_noise_json(const ReadingNoise &r) {
+    return {{"value", r.sigma},
+            {"tested", r.tested},
+            {"source", r.source},
+            {"variance_mm2", r.variance},
+            {"se_mm2", r.se},
+            {"test", "each mean reading's own white error beyond the pots' noise of the mean (a pot's hysteresis, a "
+                     "wiper's offset per approach, a seat that tilts), from the cables' misclosure (the mean readings' "
+                     "part no position explains, which neither the reference nor the jig's error enters): its second "
+                     "differences along the plate's rows and columns, noise subtracted, over 1.5; the standard error "
+                     "over the plate's lines; kept (value > 0) when more than 3 standard errors above zero, and then "
+                     "added to every reading's variance in the fits"},
+            {"note", !r.tested ? "not tested: the positions are not on a plate's rows and columns"
+                     : r.sigma > 0 ? "the readings scatter beyond the pots' noise by this much, position to position: "
+                                     "every fit weighs the readings with it (the positions' own statistics see it "
+                                     "as part of the jig's white scatter)"
+                                   : "none significant"}};
+}
+
 void set_jig_noise(FitOptions &fo, const V3 &jig, const V3 &hole) {
     for (int a = 0; a < 3; ++a) {
         fo.hole_sigma(a) = std::clamp(hole(a), 0.0, jig(a));
@@ -511,21 +579,39 @@ std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, 
         o.j = j, o.chi2 = c, o.chi2_nb = cn, o.res = E.res[j], o.nb = mean, o.var = s2 + var;
         out.push_back(o);
     }
-    // A few: set aside. More (up to kOutlierScatteredFraction of the
-    // positions read): only when they look like references off, not like a
-    // reading effect or a local structure.
+    // A few: set aside, unless they deviate as one cable's reading error
+    // would (more than a quarter of two or more): a reading effect local in
+    // cable length (a worn track), which the positions where that cable
+    // passes the spot show and their neighbours do not, is no mis-seated
+    // probe (a worn spot 0.25 mm deep lost 5 to 14 of its positions so,
+    // once the fits weighed the readings' own scatter). More (up to
+    // kOutlierScatteredFraction of the positions read): only when they look
+    // like references off, not like a reading effect or a local structure.
     const double base = double(read > 0 ? read : used);
     const double total = double(already + out.size());
-    if (total <= std::max(1.0, kOutlierMaxFraction * base)) return out;
+    auto one_cable = [&] {
+        int one = 0;
+        for (auto &o : out)
+            if (one_cable_chi2(E.Jp[o.j], o.res - o.nb, o.var) <= chi2_isf(0.01, 2)) ++one;
+        return one;
+    };
+    if (total <= std::max(1.0, kOutlierMaxFraction * base)) {
+        const int one = out.size() >= 2 ? one_cable() : 0;
+        if (4 * one > int(out.size())) {
+            if (declined)
+                *declined = Declined{out.size(), std::to_string(one) + " of " + std::to_string(out.size()) +
+                                                     " deviate as one cable's reading error would: a reading effect"};
+            out.clear();
+        }
+        return out;
+    }
     char why[200] = "";
     if (!(kOutlierMaxFraction * base >= 1))
         std::snprintf(why, sizeof why, "a jig of %.0f positions has none to spare", base);
     else if (total > kOutlierScatteredFraction * base)
         std::snprintf(why, sizeof why, "%.0f of %.0f positions: more than 10 %% are not a few bad positions", total, base);
     if (!*why) {
-        int one = 0;
-        for (auto &o : out)
-            if (one_cable_chi2(E.Jp[o.j], o.res - o.nb, o.var) <= chi2_isf(0.01, 2)) ++one;
+        const int one = one_cable();
         if (4 * one > int(out.size()))
             std::snprintf(why, sizeof why, "%d of %zu deviate as one cable's reading error would: a reading effect", one,
                           out.size());

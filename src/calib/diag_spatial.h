@@ -36,6 +36,25 @@ V3 estimate_nugget(const Eval &E, const Grid &G);
 // y and z (the plate's plane; x is left at zero). Zero for a scattered
 // layout or where it is not significant.
 V3 estimate_hole_std(const Eval &E, const Grid &G);
+// Each mean reading's own white error beyond the pots' noise of the mean
+// (pot hysteresis, a wiper's per-approach offset, a seat that tilts: per
+// position and cable), estimated from the cables' misclosure (Eval::mis) by
+// second differences along the plate: variance (mm^2) and its standard
+// error over the plate's lines; sigma (mm) when the variance is more than
+// three standard errors above zero, else 0. Not tested (tested false) on a
+// scattered layout or fewer than 8 lines.
+struct ReadingNoise {
+    bool tested = false;
+    double variance = 0, se = 0, sigma = 0;
+    // How sigma came about: "estimated" (from the model fitted first),
+    // "re-estimated" (from the recommended model's misclosure, the
+    // diagnosis run again with it).
+    std::string source = "estimated";
+};
+ReadingNoise estimate_reading_noise(const Eval &E, const Grid &G);
+// The estimate as JSON (reading_noise_mm in the diagnosis and in cdm_fit's
+// result).
+nlohmann::json reading_noise_json(const ReadingNoise &r);
 // The fit's noise model from a jig's white scatter per position (`jig`,
 // holes included) and the part of it each hole shares (`hole`, at most
 // jig): fo.hole_sigma = hole, fo.jig_sigma = what is left per position.

@@ -30,6 +30,10 @@ struct DiagnoseOptions {
     // Threads for the search's independent fits (0: the machine's cores, at
     // most 8). The result does not depend on it.
     int threads = 0;
+    // Each reading's own white error (mm; < 0: estimated from the user's
+    // model's misclosure). diagnose() sets it for a second run when the
+    // recommended model's misclosure disagrees (docs/calibration.md).
+    double reading_noise_mm = -1;
 };
 
 // The samples the dataset's glitch screen set aside (calib/dataset_glitches.h):

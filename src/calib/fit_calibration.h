@@ -16,6 +16,10 @@ namespace cdm {
 struct FitCalibrationOptions {
     std::vector<std::string> effects; // "ellipsoid" is fitted in position space on top
     double jig_tolerance_mm = -1;     // < 0: estimated from the data
+    // Each reading's own white error (CalibrationFit::reading): < 0,
+    // estimated from the fitted model's misclosure; >= 0, this value (the
+    // diagnosis's second run, with the recommended model's estimate).
+    double reading_noise_mm = -1;
     std::function<bool(const std::string &stage, double fraction)> progress;
     // Fill fitted's per-sample maxima (a pass over the rows). A caller that
     // makes its own pass at the end (diagnose) turns it off.
@@ -35,6 +39,10 @@ struct CalibrationFit {
     // per axis, mm: each position's white scatter, holes included (the part
     // a plate's hole shares at every height: fit_options.hole_sigma)
     diag::V3 jig = diag::V3::Zero();
+    // Each mean reading's own white error beyond the pots' noise
+    // (diag::estimate_reading_noise, on the fitted model's misclosure); its
+    // sigma is fit_options.reading_sigma.
+    diag::ReadingNoise reading;
     std::vector<PreparedPos> pos;
     diag::Grid grid;
     diag::Eval nominal, fitted;     // the nominal triangulation and the fitted model

@@ -5,6 +5,7 @@
 
 #include <cstdio>
 #include <cstdlib>
+#include <random>
 #include <sstream>
 #include <string>
 #include <unistd.h>
@@ -65,6 +66,24 @@ inline void spike(std::vector<std::string> &lines, size_t k, int c, double mm) {
     std::string s;
     for (size_t i = 0; i < f.size(); ++i) s += (i ? "," : "") + f[i];
     lines[k] = s;
+}
+
+// Adds to every reading of each position an offset of its own per cable,
+// N(0, sd^2), the same for all the position's samples (a pot's hysteresis,
+// a wiper's offset per approach): each mean reading's own white error.
+inline void per_position_offsets(std::vector<std::string> &lines, double sd, unsigned seed) {
+    std::mt19937 rng(seed);
+    std::normal_distribution<double> g(0.0, sd);
+    std::string point;
+    double off[4] = {0, 0, 0, 0};
+    for (size_t k = 1; k < lines.size(); ++k) {
+        const std::string p = lines[k].substr(0, lines[k].find(','));
+        if (p != point) {
+            point = p;
+            for (double &o : off) o = g(rng);
+        }
+        for (int c = 0; c < 4; ++c) spike(lines, k, c, off[c]);
+    }
 }
 
 // Moves the reference of every row of `point` by (0, dy, dz) mm: the jig

@@ -53,7 +53,6 @@ std::string fit_key(const DiagContext &ctx, const Model &m) {
     model_key(k, m);
     bytes(ctx.fo.jig_sigma.data(), 3 * sizeof(double));
     bytes(ctx.fo.hole_sigma.data(), 3 * sizeof(double));
-    bytes(&ctx.fo.reading_sigma, sizeof ctx.fo.reading_sigma);
     if (const Model *w = ctx.fo.weigh_with) { // the weights' model, bit for bit
         k += "\4weighed ";
         model_key(k, *w);

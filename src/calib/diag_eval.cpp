@@ -58,6 +58,7 @@ Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos) {
         }
     m.readings_jacobians(conv.size(), pc.data(), tc.data(), y.data(), dr.data(), stj.data());
     std::vector<size_t> slot(P, 0);
+    size_t n_reading = 0;
     for (size_t c = 0; c < conv.size(); ++c) slot[conv[c]] = c;
     for (size_t j = 0; j < P; ++j) {
         if (st[j] != 0) {
@@ -94,6 +95,11 @@ Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos) {
             E.mis_var[j] = dir.dot(Cl * dir);
             E.mis_dir[j] = dir;
         }
+        if (pos[j].reading_var > 0) {
+            const Eigen::Matrix3d R = pos[j].reading_var * E.Jp[j] * E.Jp[j].transpose();
+            for (int a = 0; a < 3; ++a) E.reading_var(a) += R(a, a);
+            ++n_reading;
+        }
         E.ok[j] = 1;
         const double n = pos[j].n;
         const Eigen::Matrix3d S = E.Jp[j] * (pos[j].cov * (n - 1)) * E.Jp[j].transpose();
@@ -104,6 +110,7 @@ Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos) {
         }
     }
     for (int a = 0; a < 3; ++a) E.err[a].mx = E.within[a].mx = std::numeric_limits<double>::quiet_NaN();
+    if (n_reading > 0) E.reading_var /= double(n_reading);
     return E;
 }
 
@@ -200,7 +207,7 @@ V3 noise_floor(const Eval &E, const V3 &jig) {
     V3 n;
     for (int a = 0; a < 3; ++a) {
         const double w = E.within[a].n > 1 ? E.within[a].ss / E.within[a].n : 0;
-        n(a) = std::sqrt(w + jig(a) * jig(a));
+        n(a) = std::sqrt(w + jig(a) * jig(a) + E.reading_var(a));
     }
     return n;
 }

@@ -34,6 +34,10 @@ struct Eval {
     // the reference nor the jig's error enters it.
     std::vector<double> mis, mis_var;
     std::vector<Eigen::Vector4d> mis_dir;
+    // The readings' own white error (PreparedPos::reading_var) in position
+    // space, per axis, averaged over the positions (mm^2): part of the noise
+    // floor.
+    V3 reading_var = V3::Zero();
 };
 
 // The model on per-position statistics: residuals by FK of the mean

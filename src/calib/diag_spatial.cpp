@@ -281,11 +281,10 @@ nlohmann::json reading_noise_json(const ReadingNoise &r) {
                      "part no position explains, which neither the reference nor the jig's error enters): its second "
                      "differences along the plate's rows and columns, noise subtracted, over 1.5; the standard error "
                      "over the plate's lines; kept (value > 0) when more than 3 standard errors above zero, and then "
-                     "added to every reading's variance in the fits"},
+                     "added to every reading's variance"},
             {"note", !r.tested ? "not tested: the positions are not on a plate's rows and columns"
                      : r.sigma > 0 ? "the readings scatter beyond the pots' noise by this much, position to position: "
-                                     "every fit weighs the readings with it (the positions' own statistics see it "
-                                     "as part of the jig's white scatter)"
+                                     "every weight, test and the noise floor carry it"
                                    : "none significant"}};
 }
 

@@ -436,16 +436,19 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     // misclosure: estimated first from the user's model, whose error leaks
     // into it where it is not smooth across the plate (a short ripple, a
     // worn spot: 0.0037 mm from a 0.15 mm ripple on the nominal model).
-    // diagnose() runs the diagnosis again with it when it differs from the
-    // variance used by more than three of its standard errors and a fifth of
-    // that variance (zero when not significant).
+    // The misclosure's noise already holds the variance used, so the
+    // estimate is what is beyond it (or short of it, below zero).
+    // diagnose() runs the diagnosis again with the total when that differs
+    // from the variance used by more than three of its standard errors and a
+    // fifth of that variance.
     if (search) {
         const ReadingNoise again = estimate_reading_noise(sr.E, cf.grid);
-        const double used = cf.reading.sigma * cf.reading.sigma, now = again.sigma * again.sigma;
-        out["reading_noise_mm"]["recommended_model"] = {{"value", again.sigma}, {"variance_mm2", again.variance},
-                                                        {"se_mm2", again.se}};
-        if (again.tested && std::fabs(now - used) > 3 * again.se && std::fabs(now - used) > 0.2 * used)
-            reading_retry = again.sigma;
+        const double used = cf.reading.sigma * cf.reading.sigma;
+        const double total = std::max(0.0, used + again.variance);
+        out["reading_noise_mm"]["recommended_model"] = {
+            {"value", std::sqrt(total)}, {"beyond_used_mm2", again.variance}, {"se_mm2", again.se}};
+        if (again.tested && std::fabs(again.variance) > 3 * again.se && std::fabs(again.variance) > 0.2 * used)
+            reading_retry = std::sqrt(total);
     }
     out["jig_tolerance_mm"]["plate_holes_note"] =
         (cf.fit_options.hole_sigma.array() > 0).any()

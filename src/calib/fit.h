@@ -31,6 +31,10 @@ struct PreparedPos {
     Eigen::Matrix4d cov_mean = Eigen::Matrix4d::Zero();
     int n = 0;
     double t_s = 0; // acquisition time of the position (s), for effects that drift in time
+    // The part of var_mean (and of cov_mean's diagonal) that is each
+    // reading's own white error (fit_calibration's estimate from the cables'
+    // misclosure: a pot's hysteresis), not the pots' averaging: mm^2.
+    double reading_var = 0;
 };
 
 std::vector<PreparedPos> prepare(const Dataset &d);
@@ -41,15 +45,6 @@ struct FitWeights;
 
 struct FitOptions {
     Eigen::Vector3d jig_sigma{0.03, 0.03, 0.03}; // mm, per axis, std of each position's own error
-    // Each mean reading's own white error beyond the pots' noise of the mean
-    // (mm; a pot's hysteresis, a wiper's offset per approach), independent
-    // per cable and position: sigma^2 I added to each position's four
-    // readings' covariance (fit_problem.h). It matters in the direction no
-    // position error moves, which would otherwise be trusted to the pots'
-    // noise alone. In the positions' own statistics (the judge, the jig's
-    // tolerance) it is part of the white scatter the jig's tolerance is
-    // estimated from, as before it was modelled.
-    double reading_sigma = 0;
     // The plate's error per hole (mm, per axis), shared by the hole's
     // positions at every height: a random effect, so that the fit is
     // generalised least squares with each hole's readings as one block

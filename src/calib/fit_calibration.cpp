@@ -82,8 +82,9 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
     // model error that is not smooth across the plate (a short ripple left
     // unmodelled) leaks into it, and the diagnosis estimates it again on the
     // model it recommends (opt.reading_noise_mm then set; diagnose.cpp). It
-    // enters the fits' weights only: in the positions' own statistics it is
-    // part of the white scatter the jig's tolerance is estimated from.
+    // is part of every position's noise from here on (var_mean, cov_mean):
+    // the fits' weights, the positions' own tests, the noise floor, and
+    // what the jig's tolerance is estimated beyond.
     if (opt.reading_noise_mm >= 0) {
         out.reading = diag::estimate_reading_noise(out.fitted, out.grid); // (its numbers, for the JSON)
         out.reading.sigma = opt.reading_noise_mm;
@@ -91,8 +92,17 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
     } else {
         out.reading = diag::estimate_reading_noise(out.fitted, out.grid);
     }
-    out.fit_options.reading_sigma = out.reading.sigma;
-    bool refit = out.reading.sigma > 0 && model.effect_count() > 0;
+    bool refit = false;
+    if (out.reading.sigma > 0) {
+        const double t2 = out.reading.sigma * out.reading.sigma;
+        for (auto &p : out.pos) {
+            p.var_mean.array() += t2;
+            p.cov_mean.diagonal().array() += t2;
+            p.reading_var = t2;
+        }
+        out.fitted = diag::evaluate(model, pos);
+        refit = model.effect_count() > 0;
+    }
     // Jig tolerance from the white part of the residual, and the part of it
     // the plate's holes share at every height; then refit with them.
     if (!user_jig) {

@@ -40,8 +40,10 @@ struct CalibrationFit {
     // a plate's hole shares at every height: fit_options.hole_sigma)
     diag::V3 jig = diag::V3::Zero();
     // Each mean reading's own white error beyond the pots' noise
-    // (diag::estimate_reading_noise, on the fitted model's misclosure); its
-    // sigma is fit_options.reading_sigma.
+    // (diag::estimate_reading_noise, on the fitted model's misclosure); when
+    // its sigma is not zero, sigma^2 is in every position's var_mean and
+    // cov_mean below (PreparedPos::reading_var), so that every weight and
+    // test carries it.
     diag::ReadingNoise reading;
     std::vector<PreparedPos> pos;
     diag::Grid grid;

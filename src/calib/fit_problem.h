@@ -341,7 +341,6 @@ struct Problem {
             // the pots' noise alone, rather than a weight of zero that would
             // drop the position from a chi-square that still counts it.)
             if (dP.allFinite()) C += dP * S * dP.transpose();
-            C.diagonal().array() += opt.reading_sigma * opt.reading_sigma;
             const Eigen::LLT<Eigen::Matrix4d> llt(C);
             if (C.allFinite() && llt.info() == Eigen::Success &&
                 llt.matrixL().toDenseMatrix().diagonal().minCoeff() > 0) {

@@ -74,7 +74,7 @@ void print_summary(const nlohmann::json &r) {
                 r["data"]["positions"].get<int>());
     if (r.contains("reading_noise_mm") && r["reading_noise_mm"].value("value", 0.0) > 0)
         std::printf("  the readings' own scatter beyond the pots' noise: %.4f mm per reading (from the cables' "
-                    "misclosure; in every fit's weights)\n",
+                    "misclosure; in every weight and test)\n",
                     r["reading_noise_mm"]["value"].get<double>());
     std::printf("  explained: %s\n", r["explained"].get<bool>() ? "yes" : "no");
     if (r["data"].contains("outliers") && r["data"]["outliers"]["count"].get<size_t>() > 0)

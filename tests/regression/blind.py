@@ -47,7 +47,7 @@ JIGS = {
 }
 
 
-def draw_cases(n, seed, full_share, small):
+def draw_cases(n, seed, full_share, small, hysteresis=False):
     rng = random.Random(seed)
     cases = []
     for k in range(n):
@@ -57,8 +57,10 @@ def draw_cases(n, seed, full_share, small):
         noise = rng.choice([0.05, 0.05, 0.05, 0.25])
         plate = rng.random() < 0.3
         scale = 1.0 if not small else rng.choice([1.0, 1.0, 0.3, 0.3, 0.1])
+        hyst = rng.choice([0.0, 0.0, 0.01, 0.02, 0.04]) if hysteresis else 0.0
         cases.append({"id": f"c{k:03d}", "hidden": hidden, "jig": jig, "noise": noise, "plate": plate,
-                      "seed": rng.randrange(1, 10**6), "effect_seed": rng.randrange(1, 10**6), "scale": scale})
+                      "seed": rng.randrange(1, 10**6), "effect_seed": rng.randrange(1, 10**6), "scale": scale,
+                      "hysteresis": hyst})
     return cases
 
 
@@ -83,6 +85,29 @@ def simulate(cdm, case, path):
     if case["plate"]:
         argv += ["--jig-hole-mm", "0.03", "--jig-fixture-mm", "0.03"]
     subprocess.run(argv, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    if case.get("hysteresis", 0.0) > 0:
+        add_per_position_offsets(path, case["hysteresis"], case["seed"])
+
+
+def add_per_position_offsets(path, sd, seed):
+    """Each position's readings offset per cable by N(0, sd^2), the same for all its samples (a
+    pot's hysteresis, a wiper's offset per approach), written through a temporary beside the file."""
+    rng = random.Random(seed)
+    tmp = path + ".tmp"
+    with open(path) as f, open(tmp, "w") as g:
+        header = f.readline()
+        g.write(header)
+        cols = header.strip().split(",")
+        idx = [cols.index(c) for c in ("l1", "l2", "l3", "l4")]
+        point, off = None, [0.0] * 4
+        for line in f:
+            v = line.rstrip("\n").split(",")
+            if v[0] != point:
+                point, off = v[0], [rng.gauss(0.0, sd) for _ in range(4)]
+            for k, i in enumerate(idx):
+                v[i] = "%.4f" % (float(v[i]) + off[k])
+            g.write(",".join(v) + "\n")
+    os.replace(tmp, path)
 
 
 def canon(effects):
@@ -161,19 +186,21 @@ def main():
     ap.add_argument("--full-share", type=float, default=0.2, help="share of full 25 x 25 x 5 x 100 jigs")
     ap.add_argument("--small", action="store_true",
                     help="scale some cases' hidden magnitudes down (x0.3, x0.1): effects near detectability")
+    ap.add_argument("--hysteresis", action="store_true",
+                    help="give some cases a per-position error per cable (sd 0.01, 0.02, 0.04 mm): a pot's hysteresis")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", required=True, help="directory for the files (created)")
     ap.add_argument("--keep", action="store_true", help="keep the CSV files")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
-    cases = draw_cases(args.cases, args.seed, args.full_share, args.small)
+    cases = draw_cases(args.cases, args.seed, args.full_share, args.small, args.hysteresis)
     with ThreadPoolExecutor(args.jobs) as ex:
         results = list(ex.map(lambda c: run_case(args, c), cases))
     with open(os.path.join(args.out, "results.json"), "w") as f:
         json.dump(results, f, indent=1)
     for r in results:
         c, a = r["case"], r["a"]
-        line = (f"{c['id']} {c['jig']:6s} noise {c['noise']:.2f}{' plate' if c['plate'] else '      '} x{c['scale']:<3g} "
+        line = (f"{c['id']} {c['jig']:6s} noise {c['noise']:.2f}{' plate' if c['plate'] else '      '} x{c['scale']:<3g} h{c['hysteresis']:<4g} "
                 f"hidden {','.join(c['hidden']) or '-':50s} a: {a['outcome']:10s} {','.join(a.get('recommended', [])) or '-'}"
                 f"{'' if a.get('explained') else ' (not explained)'}")
         if args.vs:

@@ -1,10 +1,11 @@
 // cdm's model search beside the peer a Python user would write
 // (tests/bench/search_peer.py: scipy.optimize.least_squares doing the same
 // greedy forward search by BIC). Both search nominal + {cable_offset,
-// cable_gain, exit_pulley} on the same per-position means and weights of a
-// simulated jig hiding cable_gain and exit_pulley, each candidate fitted
-// from the current model's parameters. cdm's side is its fit engine
-// (fit_model: whitened SLSQP, AD Jacobian) with a step's candidates on 1
+// cable_gain, exit_pulley} on the same per-position means and whitening (each
+// position's four readings as one block) of a simulated jig hiding
+// cable_gain and exit_pulley, each candidate fitted from the current
+// model's parameters. cdm's side is its fit engine (fit_model: damped
+// Gauss-Newton, then whitened SLSQP; AD Jacobian) with a step's candidates on 1
 // and on --threads threads, as diagnose runs them (diag::fit_all).
 //
 //   bench_search [--holes 25] [--samples 100] [--repeat 3] [--threads 2]
@@ -87,14 +88,17 @@ bool cdm_search(const std::vector<PreparedPos> &pos, const FitOptions &fo, int t
     return true;
 }
 
-// Per position: the nominal cable vectors, the mean readings, the weights
-// (what fit_model weighs the nominal model's readings with).
+// Per position: the nominal cable vectors, the mean readings, and the
+// whitening fit_model weighs the nominal model's four readings with: the
+// inverse of the lower Cholesky factor of their covariance (the pots' noise
+// of the mean and the position's jig error through the readings' position
+// derivative), its ten lower entries row by row.
 bool write_means(const std::vector<PreparedPos> &pos, const FitOptions &fo, const std::string &path,
                  std::string &err) {
     const DeviceGeometry g;
     const Model m{g};
     std::ofstream f(path);
-    f << "d1x,d1y,d1z,d2x,d2y,d2z,d3x,d3y,d3z,d4x,d4y,d4z,l1,l2,l3,l4,w1,w2,w3,w4\n";
+    f << "d1x,d1y,d1z,d2x,d2y,d2z,d3x,d3y,d3z,d4x,d4y,d4z,l1,l2,l3,l4,w00,w10,w11,w20,w21,w22,w30,w31,w32,w33\n";
     f.precision(17);
     for (auto &pp : pos) {
         double P[3], y[4], J[12];
@@ -108,11 +112,13 @@ bool write_means(const std::vector<PreparedPos> &pos, const FitOptions &fo, cons
             for (int k = 0; k < 3; ++k) f << P[k] + h[size_t(k)] - A[size_t(k)] << ",";
         }
         for (int c = 0; c < 4; ++c) f << pp.mean(c) << ",";
-        for (int c = 0; c < 4; ++c) {
-            double jig = 0;
-            for (int a = 0; a < 3; ++a) jig += J[3 * c + a] * J[3 * c + a] * fo.jig_sigma(a) * fo.jig_sigma(a);
-            f << 1.0 / (pp.var_mean(c) + jig) << (c < 3 ? "," : "\n");
-        }
+        const Eigen::Matrix<double, 4, 3, Eigen::RowMajor> dP = Eigen::Map<const Eigen::Matrix<double, 4, 3, Eigen::RowMajor>>(J);
+        Eigen::Matrix4d C = pp.cov_mean;
+        C.diagonal() = pp.var_mean;
+        C += dP * fo.jig_sigma.cwiseAbs2().asDiagonal() * dP.transpose();
+        const Eigen::Matrix4d L = Eigen::LLT<Eigen::Matrix4d>(C).matrixL().solve(Eigen::Matrix4d::Identity());
+        for (int r = 0; r < 4; ++r)
+            for (int c = 0; c <= r; ++c) f << L(r, c) << (r == 3 && c == 3 ? "\n" : ",");
     }
     f.close();
     if (!f) err = "cannot write " + path;

@@ -1,6 +1,6 @@
 """The peer of cdm's model search that a Python user would write: the same
 greedy forward search by BIC over nominal + cable_offset + cable_gain +
-exit_pulley, on the same per-position means and weights (written by
+exit_pulley, on the same per-position means and whitening (written by
 bench_search), each candidate fitted by scipy.optimize.least_squares (its
 default trust-region reflective method with bounds, finite-difference
 Jacobian) from the current model's parameters.
@@ -9,7 +9,8 @@ Jacobian) from the current model's parameters.
 
 MEANS.csv (from bench_search): per position, the cable vectors
 d_i = P + h_i - A_i of the nominal geometry (12 columns, device frame, mm),
-the four mean readings and their fit weights. OUT.json: the seconds the
+the four mean readings and the whitening of the fit (each position's four
+readings as one block: ten lower-triangular entries). OUT.json: the seconds the
 search took, the effects added in order, the BIC changes and the final
 chi-square. The model kernel below is a re-implementation of those three
 built-ins (src/model/effects/exit_pulley.h, cable_gain.h, cable_offset.h;
@@ -62,7 +63,9 @@ def main():
     data = np.loadtxt(sys.argv[1], delimiter=",", skiprows=1)
     D = data[:, 0:12].reshape(-1, 4, 3)
     mean = data[:, 12:16]
-    sw = np.sqrt(data[:, 16:20])
+    # each position's whitening (lower triangular, ten entries row by row)
+    L = np.zeros((len(data), 4, 4))
+    L[:, [0, 1, 1, 2, 2, 2, 3, 3, 3, 3], [0, 0, 1, 0, 1, 2, 0, 1, 2, 3]] = data[:, 16:26]
     n_obs = mean.size
 
     def fit(active, x0):
@@ -70,7 +73,7 @@ def main():
         hi = np.concatenate([[EFFECTS[e][2]] * EFFECTS[e][0] for e in ORDER if e in active] or [[]])
 
         def res(x):
-            return (sw * (mean - predict(D, active, x))).ravel()
+            return np.einsum("pij,pj->pi", L, mean - predict(D, active, x)).ravel()
 
         if len(x0) == 0:
             r = res(np.zeros(0))

@@ -7,8 +7,6 @@
 
 #include <limits>
 
-#include <Eigen/SVD>
-
 namespace cdm {
 namespace diag {
 
@@ -88,8 +86,18 @@ Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos) {
         const Eigen::Matrix3d C = E.Jp[j] * Cl * E.Jp[j].transpose();
         for (int a = 0; a < 3; ++a) E.var_mean[j](a) = std::max(C(a, a), 1e-10);
         if (J.allFinite()) {
-            const Eigen::JacobiSVD<Eigen::Matrix<double, 4, 3>> svd(Eigen::Matrix<double, 4, 3>(J), Eigen::ComputeFullU);
-            const Eigen::Vector4d dir = svd.matrixU().col(3);
+            // The direction J's columns leave out: the four signed 3 x 3
+            // minors of J (the cross product's four-dimensional kin), unit
+            // length; none when the columns are not independent.
+            Eigen::Vector4d dir;
+            for (int i = 0; i < 4; ++i) {
+                Eigen::Matrix3d M;
+                for (int r = 0, k = 0; r < 4; ++r)
+                    if (r != i) M.row(k++) = J.row(r);
+                dir(i) = (i % 2 ? -1.0 : 1.0) * M.determinant();
+            }
+            const double nd = dir.norm();
+            dir = nd > 0 ? Eigen::Vector4d(dir / nd) : Eigen::Vector4d::Zero();
             const Eigen::Vector4d r = pos[j].mean - Eigen::Map<const Eigen::Vector4d>(&y[4 * slot[j]]);
             E.mis[j] = dir.dot(r);
             E.mis_var[j] = dir.dot(Cl * dir);

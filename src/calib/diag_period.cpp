@@ -31,6 +31,9 @@ namespace diag {
 
 namespace {
 
+// The free fit's budget before the profile search takes over.
+constexpr int kQuickEvals = 20;
+
 struct Point {
     double p = 0; // the period
     double chi2 = INFINITY;
@@ -59,6 +62,29 @@ bool fit_seeded_period(Model &m, const std::vector<PreparedPos> &pos, const FitO
     if (f.weigh_with && !f.weights) f.weights = fit_weights(*f.weigh_with, pos, f);
     int evals = 0;
     double seconds = 0;
+    // The free fit first, on a short budget: where the start is already in
+    // the linearisation's reach (most starts of a search with no ripple to
+    // find, and a ripple's own peak) it converges in a few evaluations, where
+    // the search would take ten or more points; only a fit that has not
+    // converged within it (a valley it would crawl) goes to the search, from
+    // the held start, its evaluations counted.
+    {
+        Model mq = m;
+        FitOptions fq = f;
+        fq.max_evals = kQuickEvals;
+        FitReport rq;
+        if (!fit_model(mq, pos, fq, rq)) {
+            rep = rq;
+            return false;
+        }
+        if (rq.converged || rq.abandoned) {
+            m = std::move(mq);
+            rep = std::move(rq);
+            return true;
+        }
+        evals += rq.evals;
+        seconds += rq.seconds;
+    }
     FitOptions fh = f;
     fh.hold = period;
     fh.abandon_above.clear();

@@ -39,7 +39,7 @@ V3 estimate_hole_std(const Eval &E, const Grid &G);
 // Each mean reading's own white error beyond the pots' noise of the mean
 // (pot hysteresis, a wiper's per-approach offset, a seat that tilts: per
 // position and cable), estimated from the cables' misclosure (Eval::mis) by
-// second differences along the plate: variance (mm^2) and its standard
+// fourth differences along the plate: variance (mm^2) and its standard
 // error over the plate's lines; sigma (mm) when the variance is more than
 // three standard errors above zero, else 0. Not tested (tested false) on a
 // scattered layout or fewer than 8 lines.

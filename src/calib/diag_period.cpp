@@ -47,7 +47,9 @@ bool fit_seeded_period(Model &m, const std::vector<PreparedPos> &pos, const FitO
                        const std::vector<std::pair<size_t, size_t>> &period, double start_chi2,
                        const std::vector<std::pair<const Model *, double>> &known, FitReport &rep) {
     if (period.size() != 1) return fit_model(m, pos, f0, rep); // (a user effect with several: the plain joint fit)
-    const auto [e, q] = period[0];
+    // (named, not a structured binding: a lambda below captures them, which
+    // C++17 does not allow of a binding)
+    const size_t e = period[0].first, q = period[0].second;
     const ParamDesc &pd = m.effect_desc(e).params[q];
     const double span = length_span(pos);
     // The walk's upper end: a quarter past the span, so that a minimum at the

@@ -50,6 +50,9 @@ struct ReadingNoise {
     // "re-estimated" (from the recommended model's misclosure, the
     // diagnosis run again with it).
     std::string source = "estimated";
+    // Re-estimated: the first estimate (on the model fitted first), beside
+    // the one in use above.
+    double first_variance = 0, first_se = 0;
 };
 ReadingNoise estimate_reading_noise(const Eval &E, const Grid &G);
 // The estimate as JSON (reading_noise_mm in the diagnosis and in cdm_fit's
@@ -97,9 +100,9 @@ Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free, const V3 
 // kOutlierScatteredFraction, only when those a round finds look like
 // references off (a probe in the wrong hole moves the holder any way) and
 // not like a reading effect or a local structure: at most a quarter of them
-// deviate as one cable's reading error would move the position
-// (one_cable_chi2 within chi-square(2)'s 1 % point: a worn spot on a track,
-// a slipping cable), and they are scattered over the plate as chance
+// deviate as one cable's reading error would move the position, counting
+// only cables that two or more of them do so on (one_cable_chi2 within chi-square(2)'s 1 % point:
+// a worn spot on a track, a slipping cable), and they are scattered over the plate as chance
 // scatters them (join_count_p at least kOutlierScatterLevel). Nor against a model far from the data
 // (kOutlierBulkRatio below).
 constexpr double kOutlierMaxFraction = 0.02;
@@ -130,8 +133,9 @@ std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, 
 // What is left of a position's deviation d (mm, variance var per axis) once
 // the best single cable's reading error is fitted to it (through Jp, the
 // position's move per mm of each reading), as a chi-square (2 dof): small
-// when one cable's reading explains d.
-double one_cable_chi2(const Eigen::Matrix<double, 3, 4> &Jp, const V3 &d, const V3 &var);
+// when one cable's reading explains d. cable (optional): which (0-3; -1
+// when no cable's reading moves the position).
+double one_cable_chi2(const Eigen::Matrix<double, 3, 4> &Jp, const V3 &d, const V3 &var, int *cable = nullptr);
 
 // The join-count test of spatial randomness: the number of neighbour links
 // (G.nb, as listed) between marked positions, against the same count when

@@ -108,13 +108,14 @@ std::string effect_advice(const Model &m, const FitReport &rep, const std::vecto
 // set aside.
 static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const DiagnoseOptions &opt, json &out,
                           Model &fitted, std::string &err, size_t already, size_t read,
-                          std::vector<Outlier> &outliers, Declined &declined, double &reading_retry) {
-    reading_retry = -1;
+                          std::vector<Outlier> &outliers, Declined &declined,
+                          std::optional<ReadingNoise> &reading_retry) {
+    reading_retry.reset();
     auto t0 = std::chrono::steady_clock::now();
     FitCalibrationOptions fopt;
     fopt.effects = opt.effects;
     fopt.jig_tolerance_mm = opt.jig_tolerance_mm;
-    fopt.reading_noise_mm = opt.reading_noise_mm;
+    fopt.reading_noise = opt.reading_noise;
     fopt.progress = opt.progress;
     fopt.fitted_maxima = false; // one pass over the rows below serves every evaluation
     fopt.threads = opt.threads;
@@ -428,27 +429,39 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
                                {"source", user_jig ? "user" : "estimated"},
                                {"note", repeats ? "white position-to-position scatter beyond the pots' repeatability, "
                                                   "from second differences along the plate; capped at 0.05 mm"
-                                                : "no repeated samples: the pots' noise and the jig's scatter cannot be "
-                                                  "told apart, both are in this estimate"}};
+                                                : "no repeated samples: the pots' noise is not measured apart; it is in "
+                                                  "the readings' own error (reading_noise_mm) where that is kept, and in "
+                                                  "this estimate where it is not"}};
     out["jig_tolerance_mm"]["plate_holes"] = vec3(cf.fit_options.hole_sigma);
     out["reading_noise_mm"] = reading_noise_json(cf.reading);
+    if (!repeats && cf.reading.sigma > 0)
+        out["reading_noise_mm"]["note"] = "no repeated samples: the pots' noise is not measured apart, and this "
+                                          "holds it with whatever each reading adds of its own";
     // The readings' own error again, from the recommended model's
     // misclosure: estimated first from the user's model, whose error leaks
     // into it where it is not smooth across the plate (a short ripple, a
     // worn spot: 0.0037 mm from a 0.15 mm ripple on the nominal model).
     // The misclosure's noise already holds the variance used, so the
     // estimate is what is beyond it (or short of it, below zero).
-    // diagnose() runs the diagnosis again with the total when that differs
-    // from the variance used by more than three of its standard errors and a
-    // fifth of that variance.
+    // The total is kept by the first estimate's rule (more than three
+    // standard errors above zero), and diagnose() runs the diagnosis again
+    // with it when what is kept differs from the variance used by more than
+    // three standard errors and a fifth of that variance (never when both
+    // are none).
     if (search) {
         const ReadingNoise again = estimate_reading_noise(sr.E, cf.grid);
         const double used = cf.reading.sigma * cf.reading.sigma;
-        const double total = std::max(0.0, used + again.variance);
-        out["reading_noise_mm"]["recommended_model"] = {
-            {"value", std::sqrt(total)}, {"beyond_used_mm2", again.variance}, {"se_mm2", again.se}};
-        if (again.tested && std::fabs(again.variance) > 3 * again.se && std::fabs(again.variance) > 0.2 * used)
-            reading_retry = std::sqrt(total);
+        ReadingNoise r = again;
+        r.variance = used + again.variance;
+        r.sigma = again.tested && r.variance > 3 * again.se ? std::sqrt(r.variance) : 0.0;
+        const double keep = r.sigma * r.sigma;
+        out["reading_noise_mm"]["recommended_model"] = {{"value", r.sigma},
+                                                         {"variance_mm2", r.variance},
+                                                         {"beyond_used_mm2", again.variance},
+                                                         {"se_mm2", again.se}};
+        if (again.tested && keep != used && std::fabs(keep - used) > 3 * again.se &&
+            std::fabs(keep - used) > 0.2 * used)
+            reading_retry = r;
     }
     out["jig_tolerance_mm"]["plate_holes_note"] =
         (cf.fit_options.hole_sigma.array() > 0).any()
@@ -556,11 +569,11 @@ bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOption
     // (diagnose_data): at most once.
     auto round = [&](const Dataset &d, size_t already, size_t read, std::vector<Outlier> &found, Declined &declined,
                      std::string &e) {
-        double retry = -1;
+        std::optional<ReadingNoise> retry;
         if (!diagnose_data(d, g, opt, out, fitted, e, already, read, found, declined, retry)) return false;
-        if (retry < 0 || opt.reading_noise_mm >= 0) return true;
+        if (!retry || opt.reading_noise) return true;
         DiagnoseOptions o2 = opt;
-        o2.reading_noise_mm = retry;
+        o2.reading_noise = retry;
         found.clear();
         declined = {};
         return diagnose_data(d, g, o2, out, fitted, e, already, read, found, declined, retry);

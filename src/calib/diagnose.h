@@ -5,12 +5,14 @@
 #pragma once
 
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "calib/dataset.h"
+#include "calib/diag_spatial.h"
 #include "model/model.h"
 
 namespace cdm {
@@ -30,10 +32,10 @@ struct DiagnoseOptions {
     // Threads for the search's independent fits (0: the machine's cores, at
     // most 8). The result does not depend on it.
     int threads = 0;
-    // Each reading's own white error (mm; < 0: estimated from the user's
+    // Each reading's own white error (none: estimated from the user's
     // model's misclosure). diagnose() sets it for a second run when the
     // recommended model's misclosure disagrees (docs/calibration.md).
-    double reading_noise_mm = -1;
+    std::optional<diag::ReadingNoise> reading_noise;
 };
 
 // The samples the dataset's glitch screen set aside (calib/dataset_glitches.h):

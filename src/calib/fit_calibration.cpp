@@ -81,16 +81,17 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
     // ripple of the noise and was recommended. Estimated from this model: a
     // model error that is not smooth across the plate (a short ripple left
     // unmodelled) leaks into it, and the diagnosis estimates it again on the
-    // model it recommends (opt.reading_noise_mm then set; diagnose.cpp). It
+    // model it recommends (opt.reading_noise then set; diagnose.cpp). It
     // is part of every position's noise from here on (var_mean, cov_mean):
     // the fits' weights, the positions' own tests, the noise floor, and
     // what the jig's tolerance is estimated beyond.
-    if (opt.reading_noise_mm >= 0) {
-        out.reading = diag::estimate_reading_noise(out.fitted, out.grid); // (its numbers, for the JSON)
-        out.reading.sigma = opt.reading_noise_mm;
+    out.reading = diag::estimate_reading_noise(out.fitted, out.grid);
+    if (opt.reading_noise) {
+        const diag::ReadingNoise first = out.reading;
+        out.reading = *opt.reading_noise;
         out.reading.source = "re-estimated";
-    } else {
-        out.reading = diag::estimate_reading_noise(out.fitted, out.grid);
+        out.reading.first_variance = first.variance;
+        out.reading.first_se = first.se;
     }
     bool refit = false;
     if (out.reading.sigma > 0) {

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,10 +17,10 @@ namespace cdm {
 struct FitCalibrationOptions {
     std::vector<std::string> effects; // "ellipsoid" is fitted in position space on top
     double jig_tolerance_mm = -1;     // < 0: estimated from the data
-    // Each reading's own white error (CalibrationFit::reading): < 0,
-    // estimated from the fitted model's misclosure; >= 0, this value (the
-    // diagnosis's second run, with the recommended model's estimate).
-    double reading_noise_mm = -1;
+    // Each reading's own white error (CalibrationFit::reading): none,
+    // estimated from the fitted model's misclosure; given, this estimate
+    // (the diagnosis's second run, with the recommended model's).
+    std::optional<diag::ReadingNoise> reading_noise;
     std::function<bool(const std::string &stage, double fraction)> progress;
     // Fill fitted's per-sample maxima (a pass over the rows). A caller that
     // makes its own pass at the end (diagnose) turns it off.

@@ -58,9 +58,10 @@ bool run_setting_aside_outliers(const Dataset &data, bool enabled, const Outlier
                        "and of its difference from the mean residual of its neighbours on the plate, "
                        "both beyond the 1 % family-wise level (Bonferroni over the positions); only when "
                        "the median position's chi-square is within twice chi2(3)'s median; at most 2 % of the "
-                       "positions read over all rounds (none below 50 positions), or up to 10 % when, of those each "
-                       "round finds, at most a quarter deviate as one cable's reading error would (chi-square, 2 dof, of the "
-                       "rest within its 1 % point) and they are scattered as chance scatters them (join count of "
+                       "positions read over all rounds (none below 50 positions), and none when more than a quarter of "
+                       "a round's deviate as one cable's reading error would (chi-square, 2 dof, of the rest within its 1 % "
+                       "point), counting only cables that two or more do so on (a reading effect); or up to 10 % when "
+                       "at most a quarter of those each round finds deviate so and they are scattered as chance scatters them (join count of "
                        "neighbouring pairs against 999 random relabelings, p >= 0.05), else none"},
               {"set_aside", set_aside},
               {"declined", {{"count", declined.count}, {"why", declined.why}}}};

@@ -72,10 +72,14 @@ void print_summary(const nlohmann::json &r) {
                 r["chi2_per_dof"].get<double>(), widened, r["structure"]["statistic"].get<double>(),
                 r["structure"]["p_value"].get<double>(), r["failing_positions"].get<int>(),
                 r["data"]["positions"].get<int>());
-    if (r.contains("reading_noise_mm") && r["reading_noise_mm"].value("value", 0.0) > 0)
-        std::printf("  the readings' own scatter beyond the pots' noise: %.4f mm per reading (from the cables' "
+    if (r.contains("reading_noise_mm") && r["reading_noise_mm"].value("value", 0.0) > 0) {
+        // (Without repeated samples the pots' noise is not measured apart: it is in this value.)
+        const bool apart = r["reading_noise_mm"].value("note", "").rfind("no repeated samples", 0) != 0;
+        std::printf("  the readings' own scatter%s: %.4f mm per reading (from the cables' "
                     "misclosure; in every weight and test)\n",
+                    apart ? " beyond the pots' noise" : ", the pots' noise in it (no repeated samples)",
                     r["reading_noise_mm"]["value"].get<double>());
+    }
     std::printf("  explained: %s\n", r["explained"].get<bool>() ? "yes" : "no");
     if (r["data"].contains("outliers") && r["data"]["outliers"]["count"].get<size_t>() > 0)
         std::printf("  outliers set aside: %zu of %zu positions (the verdict says which)\n",

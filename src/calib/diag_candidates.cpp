@@ -119,11 +119,9 @@ static double searched_periods(const std::string &effect, const std::vector<Prep
 
 bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
                       const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,
-                      std::string &err) {
+                      std::string &err, bool details) {
     out.clear();
-    const size_t P = ctx.pos.size();
     auto list = candidate_effects();
-    const size_t n_base = reading_effects(base).size();
     // Every candidate from every start, fitted as one batch (independent
     // fits: on ctx.threads threads); then judged in the catalogue's order.
     std::vector<FitJob> jobs;
@@ -202,21 +200,6 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         picked_of[i] = picked.size();
         picked.push_back(std::move(c));
     }
-    for_each_parallel(
-        ctx, picked.size(), [&](size_t q) { return has_user_effect(picked[q].m); },
-        [&](size_t q) {
-            Candidate &c = picked[q];
-            // What the model already does that this effect would: an effect
-            // the model's own effects reproduce cannot be told from them.
-            if (n_base > 0) {
-                Overlap ov = effect_overlap(c.m, ctx.pos, ctx.fo, c.name);
-                for (auto &pe : ov.per_effect)
-                    if (pe.second > 0.99) c.in_model.push_back(pe.first);
-                if (c.in_model.empty() && ov.all > 0.99)
-                    for (auto &pe : ov.per_effect) c.in_model.push_back(pe.first);
-            }
-            c.E = evaluate_cached(ctx, c.m);
-        });
     size_t done = 0;
     for (size_t i = 0; i < list.size(); ++i) {
         ++done;
@@ -237,6 +220,40 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         // the chi-square(k) one.
         if (const double M = searched_periods(c.name, ctx.pos); M > 1)
             c.p = std::max(c.p, false_alarm(chi2_sf(std::max(0.0, c.dchi2), std::max(1, c.k - 1)), M));
+        out.push_back(std::move(c));
+        if (!ctx.report(stage, double(done) / double(list.size()))) {
+            err = "fit cancelled";
+            return false;
+        }
+    }
+    for (auto &c : out) c.p_adj = std::min(1.0, c.p * double(out.size()));
+    std::sort(out.begin(), out.end(), [](const Candidate &a, const Candidate &b) { return a.bic < b.bic; });
+    if (details) complete_candidates(ctx, base, base_eval, out);
+    return true;
+}
+
+void complete_candidates(const DiagContext &ctx, const Model &base, const Eval &base_eval,
+                         std::vector<Candidate> &cands) {
+    const size_t P = ctx.pos.size();
+    const size_t n_base = reading_effects(base).size();
+    // In parallel (independent, each writes its own): what each overlaps in
+    // the model and its evaluation; then the rest in turn.
+    for_each_parallel(
+        ctx, cands.size(), [&](size_t q) { return has_user_effect(cands[q].m); },
+        [&](size_t q) {
+            Candidate &c = cands[q];
+            // What the model already does that this effect would: an effect
+            // the model's own effects reproduce cannot be told from them.
+            if (n_base > 0) {
+                Overlap ov = effect_overlap(c.m, ctx.pos, ctx.fo, c.name);
+                for (auto &pe : ov.per_effect)
+                    if (pe.second > 0.99) c.in_model.push_back(pe.first);
+                if (c.in_model.empty() && ov.all > 0.99)
+                    for (auto &pe : ov.per_effect) c.in_model.push_back(pe.first);
+            }
+            c.E = evaluate_cached(ctx, c.m);
+        });
+    for (Candidate &c : cands) {
         {
             const V3 oj = ctx.own_jig(c.E);
             c.v = judge(c.E, ctx.G, oj, c.rep.n_free, ctx.own_hole(c.E, oj));
@@ -261,15 +278,7 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         }
         c.shift_rms_mm = nn ? std::sqrt(ss / double(nn)) : 0;
         c.corr = (sxx > 0 && syy > 0) ? sxy / std::sqrt(sxx * syy) : 0;
-        out.push_back(std::move(c));
-        if (!ctx.report(stage, double(done) / double(list.size()))) {
-            err = "fit cancelled";
-            return false;
-        }
     }
-    for (auto &c : out) c.p_adj = std::min(1.0, c.p * double(out.size()));
-    std::sort(out.begin(), out.end(), [](const Candidate &a, const Candidate &b) { return a.bic < b.bic; });
-    return true;
 }
 
 void mark_confusions(const Eval &base_eval, const V3 &jig, std::vector<Candidate> &cands) {

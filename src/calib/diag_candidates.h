@@ -37,10 +37,18 @@ struct Candidate {
 
 // Scores every candidate on top of `base` (fitted; `base_free` its reading-
 // space free parameters, `base_chi2` its chi-square, `base_eval` its
-// evaluation). Sorted by BIC change. False + err when cancelled.
+// evaluation). Sorted by BIC change. False + err when cancelled. Without
+// details only the tests are filled (dchi2, k, bic, p, p_adj, m, rep: what a
+// search step chooses by); complete_candidates then adds the rest.
 bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
                       const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,
-                      std::string &err);
+                      std::string &err, bool details = true);
+
+// Fills what score_candidates leaves out without details: each candidate's
+// evaluation E, its verdict v, its fingerprint fp, shift_rms_mm, corr and
+// in_model (the same numbers as with details, whichever thread computes).
+void complete_candidates(const DiagContext &ctx, const Model &base, const Eval &base_eval,
+                         std::vector<Candidate> &cands);
 
 // Fills each candidate's `confused` list (in_model, plus candidates equally
 // good by BIC, within 10, explaining the same pattern, correlation > 0.9).

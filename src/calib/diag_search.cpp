@@ -53,7 +53,8 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
     // readings weighed as blocks, whose weights follow the model closer).
     // Kept when it lowers cur's own chi-square; E is cur's evaluation if
     // the refit moves nothing.
-    auto refit_own = [&](const std::string &stage) {
+    // (cur_E is cur's evaluation afterwards; `evaluated`: it is already.)
+    auto refit_own = [&](const std::string &stage, bool evaluated) {
         const Model w = cur;
         DiagContext pc = ctx;
         pc.fo.weigh_with = &w;
@@ -64,31 +65,35 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
             return false;
         }
         const double c2_chi2 = model_chi2(c2, ctx.pos, ctx.fo);
-        if (!(c2_chi2 < cur_chi2)) return true;
-        cur = std::move(c2);
-        cur_chi2 = c2_chi2;
-        cur_E = evaluate_cached(ctx, cur);
+        if (c2_chi2 < cur_chi2) {
+            cur = std::move(c2);
+            cur_chi2 = c2_chi2;
+            evaluated = false;
+        }
+        if (!evaluated) cur_E = evaluate_cached(ctx, cur);
         return true;
     };
-    if (!refit_own("search (the start refitted under its own weights)")) return false;
+    if (!refit_own("search (the start refitted under its own weights)", true)) return false;
     std::set<std::vector<std::string>> seen{sorted(reading_effects(cur))};
     if (seen_before) seen.insert(seen_before->begin(), seen_before->end());
     out.visited.push_back({reading_effects(cur), ctx.bic(cur_chi2, cur_free)});
-    // The search moves to model m, fitted as r (E: its evaluation, or
-    // evaluated here when the move's fit did not make one).
-    auto move_to = [&](const Model &m, const FitReport &r, const Eval *E, const std::string &stage) {
+    // The search moves to model m, fitted as r (evaluated here: a step's
+    // candidates are scored without their evaluations).
+    auto move_to = [&](const Model &m, const FitReport &r, const std::string &stage) {
         cur = m;
         cur_rep = r;
         cur_free = r.n_free;
         cur_chi2 = model_chi2(cur, ctx.pos, ctx.fo);
-        cur_E = E ? *E : evaluate_cached(ctx, cur);
-        return refit_own(stage);
+        return refit_own(stage, false);
     };
     std::vector<Candidate> cands;
     for (int step = 1; step <= 12; ++step) {
         DiagContext sc = ctx; // this step's fits, weighed as cur weighs
         sc.fo.weigh_with = &cur;
-        if (!score_candidates(sc, cur, cur_free, cur_chi2, cur_E, "search step " + std::to_string(step), cands, err))
+        // The tests alone (what a step chooses by); the rest of the table
+        // only for the candidates on top of where the search stops.
+        if (!score_candidates(sc, cur, cur_free, cur_chi2, cur_E, "search step " + std::to_string(step), cands, err,
+                              false))
             return false;
         for (auto &c : cands) {
             auto s = reading_effects(c.m);
@@ -139,12 +144,13 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
         if (add && add->bic <= best_rm) {
             st.added = add->name;
             st.bic_change = add->bic;
-            if (!move_to(add->m, add->rep, &add->E, "search step " + std::to_string(step) + " (refitted)")) return false;
+            if (!move_to(add->m, add->rep, "search step " + std::to_string(step) + " (refitted)")) return false;
         } else if (!rm_name.empty()) {
             st.removed = rm_name;
             st.bic_change = best_rm;
-            if (!move_to(rm_model, rm_rep, nullptr, "search step " + std::to_string(step) + " (refitted)")) return false;
+            if (!move_to(rm_model, rm_rep, "search step " + std::to_string(step) + " (refitted)")) return false;
         } else if (!swaps) {
+            complete_candidates(sc, cur, cur_E, cands);
             break; // cands are the candidates on top of cur
         } else {
             // Stuck on additions and removals: a one-effect swap can still
@@ -202,11 +208,14 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
                     sw_rep = r;
                 }
             }
-            if (sw_in.empty()) break; // no move lowers the criterion: cands are the candidates on top of cur
+            if (sw_in.empty()) { // no move lowers the criterion: cands are the candidates on top of cur
+                complete_candidates(sc, cur, cur_E, cands);
+                break;
+            }
             st.added = sw_in;
             st.removed = sw_out;
             st.bic_change = best_sw;
-            if (!move_to(sw_model, sw_rep, nullptr, "search step " + std::to_string(step) + " (refitted)")) return false;
+            if (!move_to(sw_model, sw_rep, "search step " + std::to_string(step) + " (refitted)")) return false;
         }
         st.x_rms_mm = x_rms(cur_E);
         seen.insert(sorted(reading_effects(cur)));

@@ -172,9 +172,10 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
                     jobs[of[a]] = std::move(again[a]);
         }
     }
-    // Each candidate's best start, then (in parallel: independent, each
-    // writes its own) what it overlaps in the model and its position
-    // errors; then judged in the catalogue's order.
+    // Each candidate's best start and its tests, in the catalogue's order;
+    // with details, complete_candidates then adds what it overlaps in the
+    // model, its position errors and its verdict (in the BIC order the
+    // table is sorted in).
     std::vector<Candidate> picked;
     std::vector<size_t> picked_of(list.size(), SIZE_MAX);
     for (size_t i = 0; i < list.size(); ++i) {

@@ -51,9 +51,9 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
     // refitted, and exit_pulley, which the data did not hold, then read
     // delta chi2 38 and was added (an independent reviewer's case, with the
     // readings weighed as blocks, whose weights follow the model closer).
-    // Kept when it lowers cur's own chi-square; E is cur's evaluation if
-    // the refit moves nothing.
-    // (cur_E is cur's evaluation afterwards; `evaluated`: it is already.)
+    // Kept when it lowers cur's own chi-square. cur_E is cur's evaluation
+    // afterwards (`evaluated`: it already is, and is kept when the refit
+    // moves nothing).
     auto refit_own = [&](const std::string &stage, bool evaluated) {
         const Model w = cur;
         DiagContext pc = ctx;

@@ -14,6 +14,7 @@
 
 #include "calib/dataset.h"
 #include "calib/diag_eval.h"
+#include "calib/diag_noise.h"
 #include "calib/diag_spatial.h"
 #include "calib/fit.h"
 #include "model/model.h"

@@ -12,7 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "calib/dataset.h"
-#include "calib/diag_spatial.h"
+#include "calib/diag_noise.h"
 #include "model/model.h"
 
 namespace cdm {

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "calib/diag_eval.h"
+#include "calib/diag_noise.h"
 #include "calib/diag_spatial.h"
 
 namespace cdm {

@@ -21,6 +21,7 @@
 #include <cfloat>
 
 #include "calib/diag_eval.h"
+#include "calib/diag_outliers.h"
 #include "calib/diag_spatial.h"
 #include "calib/diagnose.h"
 #include "calib/fit.h"

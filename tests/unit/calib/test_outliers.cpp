@@ -15,7 +15,8 @@
 #include <string>
 #include <vector>
 
-#include "calib/diag_spatial.h"
+#include "calib/diag_noise.h"
+#include "calib/diag_outliers.h"
 
 extern "C" {
 #include <cmocka.h>

@@ -1,8 +1,8 @@
 #include "calib/dataset.h"
 
 #include <algorithm>
-#include <charconv>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <unordered_map>
@@ -10,6 +10,7 @@
 
 #include "calib/dataset_glitches.h"
 #include "calib/dataset_heights.h"
+#include "io/decimal.h"
 #include "io/json.h"
 
 namespace cdm {
@@ -19,18 +20,17 @@ std::string at(const std::string &src, size_t line, size_t col) {
     return src + ":" + std::to_string(line) + ":" + std::to_string(col) + ": ";
 }
 
-// Splits one CSV line (no quoting in this format; fields are numbers).
+// Splits one CSV line (no quoting in this format; fields are numbers). A
+// plain loop: fields are a few characters, shorter than memchr's call.
 void split(const char *b, const char *e, std::vector<std::pair<const char *, const char *>> &f) {
     f.clear();
-    for (const char *s = b;;) {
-        const char *p = static_cast<const char *>(std::memchr(s, ',', size_t(e - s)));
-        if (!p) {
-            f.emplace_back(s, e);
-            return;
+    const char *s = b;
+    for (const char *p = b; p < e; ++p)
+        if (*p == ',') {
+            f.emplace_back(s, p);
+            s = p + 1;
         }
-        f.emplace_back(s, p);
-        s = p + 1;
-    }
+    f.emplace_back(s, e);
 }
 
 std::string trim(const char *b, const char *e) {
@@ -46,8 +46,7 @@ bool to_double(const char *b, const char *e, double &v) {
     while (b < e && (*b == ' ' || *b == '\t')) ++b;
     while (e > b && (e[-1] == ' ' || e[-1] == '\t' || e[-1] == '\r')) --e;
     if (b < e && *b == '+') ++b;
-    auto r = std::from_chars(b, e, v);
-    return r.ec == std::errc() && r.ptr == e && b != e;
+    return io::parse_decimal(b, e, v);
 }
 } // namespace
 
@@ -141,6 +140,7 @@ public:
 
 private:
     bool header(std::string &err);
+    bool same_ref(size_t g, const double *v, size_t line, std::string &err) const;
     const std::string &src_;
     Dataset &d_;
     const Dataset *expect_;
@@ -156,6 +156,8 @@ private:
     size_t ncols_ = 0;
     bool header_ = false;
     std::unordered_map<long, size_t> index_;
+    long last_id_ = 0;           // the last row's point
+    size_t last_g_ = SIZE_MAX;   // and its position (SIZE_MAX: none yet)
     std::vector<size_t> first_line_;
     DistinctValues distinct_[4];
 };
@@ -192,6 +194,19 @@ bool Parser::header(std::string &err) {
         else if (std::find(kDatasetColumns, kDatasetColumns + kDatasetValues, names[k]) ==
                  kDatasetColumns + kDatasetValues)
             d_.ignored_columns.push_back(names[k]);
+    return true;
+}
+
+// A known position's row: its reference must be the one its first line gave.
+bool Parser::same_ref(size_t g, const double *v, size_t line, std::string &err) const {
+    for (int k = 0; k < 3; ++k)
+        if (d_.pos[g].ref[k] != v[1 + k]) {
+            const auto &x = f_[size_t(colidx_[1 + k])];
+            err = at(src_, line, size_t(colidx_[1 + k]) + 1) + "point " + std::to_string(d_.pos[g].point) + " has " +
+                  kDatasetColumns[1 + k] + " " + shown(x.first, x.second) + " but line " +
+                  std::to_string(first_line_[g]) + " gave " + std::to_string(d_.pos[g].ref[k]);
+            return false;
+        }
     return true;
 }
 
@@ -236,9 +251,15 @@ bool Parser::line(const char *b, const char *le, std::string &err) {
         ++d_.rows;
         return true;
     }
-    auto it = index_.find(id);
+    // A position's rows are usually consecutive: the last one's index is
+    // tried before the map.
+    const bool again = last_g_ != SIZE_MAX && id == last_id_;
+    const auto it = again ? index_.end() : index_.find(id);
     size_t g;
-    if (it == index_.end()) {
+    if (again) {
+        g = last_g_;
+        if (!same_ref(g, v, line, err)) return false;
+    } else if (it == index_.end()) {
         g = d_.pos.size();
         if (expect_ && (g >= expect_->pos.size() || expect_->pos[g].point != id ||
                         !std::equal(v + 1, v + 4, expect_->pos[g].ref))) {
@@ -255,14 +276,10 @@ bool Parser::line(const char *b, const char *le, std::string &err) {
         if (!expect_) range_.push_back({INFINITY, INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY, -INFINITY});
     } else {
         g = it->second;
-        for (int k = 0; k < 3; ++k)
-            if (d_.pos[g].ref[k] != v[1 + k]) {
-                err = at(src, line, size_t(colidx[1 + k]) + 1) + "point " + std::to_string(id) + " has " +
-                      required[1 + k] + " " + shown(f[size_t(colidx[1 + k])].first, f[size_t(colidx[1 + k])].second) +
-                      " but line " + std::to_string(first_line_[g]) + " gave " + std::to_string(d_.pos[g].ref[k]);
-                return false;
-            }
+        if (!same_ref(g, v, line, err)) return false;
     }
+    last_id_ = id;
+    last_g_ = g;
     JigHole &h = d_.pos[g];
     double t = 0;
     if (tcol_ >= 0) {

@@ -10,6 +10,7 @@
 #include <cctype>
 #include <chrono>
 #include <cmath>
+#include <future>
 #include <thread>
 
 #include <sched.h>
@@ -119,15 +120,24 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     fopt.progress = opt.progress;
     fopt.fitted_maxima = false; // one pass over the rows below serves every evaluation
     fopt.threads = opt.threads;
+    // The nominal triangulation's pass over the rows runs on beside the
+    // candidates and the search (it fills the cores' gaps between a batch's
+    // fits): waited for at the pass at the end, which needs its ellipsoid.
+    // Declared in this order so that, on any way out, the pass ends before
+    // what it writes goes.
+    std::string nominal_err;
     CalibrationFit cf(g);
+    std::future<bool> nominal_pending;
+    fopt.nominal_pending = &nominal_pending;
+    fopt.nominal_err = &nominal_err;
     if (!fit_calibration(data, g, fopt, cf, err)) return false;
     const auto &pos = cf.pos;
     const size_t P = pos.size();
     Model &model = cf.model;
     FitReport &rep = cf.report;
     const V3 jig = cf.jig;
-    const Eval &nom = cf.nominal;
-    Ellipsoid ell = ellipsoid_on(nom, pos);
+    const Eval &nom = cf.nominal; // once nominal_pending is done
+    Ellipsoid ell;
     Eval ellE; // the seed's procedure with its ellipsoid: in the pass over the rows below
     Eval &cur = cf.fitted;
     const bool user_jig = opt.jig_tolerance_mm >= 0;
@@ -265,6 +275,11 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
             for (auto &c : sr.cands) linear.push_back(&c.E);
         }
         ctx.report("per-sample statistics", 0.0);
+        if (nominal_pending.valid() && !nominal_pending.get()) {
+            err = nominal_err;
+            return false;
+        }
+        ell = ellipsoid_on(nom, pos);
         if (!sample_pass(data, pos, linear, {{&g, &ell, &ellE}}, err)) return false;
     }
 

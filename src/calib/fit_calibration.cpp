@@ -40,16 +40,23 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
     // here, with one thread or none to be had). std::async's future waits
     // for it on every way out of this function, and get() hands on what
     // it threw.
-    std::string seed_err;
-    std::future<bool> seed;
+    // With opt.nominal_pending the caller waits for it instead (and it runs
+    // on beside the caller's own work): what it reads and writes is named
+    // here, not captured from this function's frame.
+    std::string own_err;
+    std::string *const seed_err = opt.nominal_pending ? opt.nominal_err : &own_err;
+    std::future<bool> own_seed;
+    std::future<bool> &seed = opt.nominal_pending ? *opt.nominal_pending : own_seed;
     if (!opt.fitted_maxima) {
-        auto run = [&] { return diag::evaluate_seed(g, data, pos, nullptr, out.nominal, seed_err); };
+        auto run = [&g, &data, p = &out.pos, nominal = &out.nominal, seed_err] {
+            return diag::evaluate_seed(g, data, *p, nullptr, *nominal, *seed_err);
+        };
         if (opt.threads != 1) try {
                 seed = std::async(std::launch::async, run);
             } catch (const std::system_error &) { // no thread to be had
             }
         if (!seed.valid() && !run()) {
-            err = seed_err;
+            err = *seed_err;
             return false;
         }
     }
@@ -129,8 +136,8 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
     }
     if (opt.fitted_maxima && !diag::sample_pass(data, pos, {&out.fitted}, {{&g, nullptr, &out.nominal}}, err))
         return false;
-    if (seed.valid() && !seed.get()) {
-        err = seed_err;
+    if (!opt.nominal_pending && seed.valid() && !seed.get()) {
+        err = *seed_err;
         return false;
     }
     return true;

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <functional>
+#include <future>
 #include <optional>
 #include <string>
 #include <vector>
@@ -31,6 +32,16 @@ struct FitCalibrationOptions {
     // runs on a second thread beside it (without fitted_maxima; with it,
     // both are one pass at the end).
     int threads = 0;
+    // Not null (with nominal_err): the nominal triangulation's pass over the
+    // rows, when it runs on a second thread, is left running beside the
+    // caller's own work, in *nominal_pending, and not waited for here
+    // (diagnose needs its result, CalibrationFit::nominal, only at its own
+    // pass at the end). The caller must get() it (false: *nominal_err says
+    // why) before reading `nominal`, and before `out`, the dataset, the
+    // geometry or *nominal_err go: declared after them, its destructor
+    // waits. Invalid when the pass ran here (and succeeded).
+    std::future<bool> *nominal_pending = nullptr;
+    std::string *nominal_err = nullptr;
 };
 
 struct CalibrationFit {

@@ -7,10 +7,11 @@
 namespace cdm::io {
 
 namespace {
-// The powers of ten that are exact doubles (5^22 < 2^53).
-constexpr double kPow10[] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,  1e8,  1e9,  1e10, 1e11,
-                             1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+// At most 15 digits: an integer below 10^15 < 2^53, over a power of ten
+// up to 10^15; both exact doubles.
 constexpr int kMaxDigits = 15;
+constexpr double kPow10[kMaxDigits + 1] = {1e0, 1e1, 1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
+                                           1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15};
 } // namespace
 
 bool parse_decimal(const char *b, const char *e, double &v) {
@@ -29,7 +30,7 @@ bool parse_decimal(const char *b, const char *e, double &v) {
             m = 10 * m + static_cast<unsigned>(*p - '0');
         fast = p != f0; // "5." goes to from_chars
     }
-    if (fast && p == e && digits <= kMaxDigits && frac <= 22) {
+    if (fast && p == e && digits <= kMaxDigits) { // (so frac <= 15)
         const double x = frac ? static_cast<double>(m) / kPow10[frac] : static_cast<double>(m);
         v = neg ? -x : x;
         return true;

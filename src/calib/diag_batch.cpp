@@ -28,6 +28,8 @@
 #include <mutex>
 #include <thread>
 
+#include <sched.h>
+
 #include "calib/diag_context.h"
 #include "model/effect.h"
 
@@ -353,6 +355,16 @@ void remember_evaluation(const DiagContext &ctx, const Model &m, const Eval &E) 
         c.evals.erase(c.eval_order.front());
         c.eval_order.pop_front();
     }
+}
+
+// The cores this process may run on (its affinity mask: taskset, cgroup
+// cpusets), at most 8.
+int usable_cores() {
+    cpu_set_t set;
+    int n = 0;
+    if (sched_getaffinity(0, sizeof set, &set) == 0) n = CPU_COUNT(&set);
+    if (n <= 0) n = int(std::thread::hardware_concurrency());
+    return std::clamp(n, 1, 8);
 }
 
 bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err) {

@@ -108,6 +108,10 @@ struct FitJob {
     std::vector<Model> more_starts;
 };
 
+// The cores this process may run on (its affinity mask: taskset, cgroup
+// cpusets), at most 8: the diagnosis's default ctx.threads.
+int usable_cores();
+
 // Fits every job, on ctx.threads threads, each job exactly as ctx.fit would
 // (the same start, the same noise model: the results do not depend on the
 // number of threads or on which thread took a job). Only the calling

@@ -3,7 +3,8 @@
 // missing), diag_search (the recommended model), diag_review (is each effect
 // earning its parameters), diag_validation (held-out heights),
 // diag_findings (beyond the catalogue), diag_verdict (the rule that ties
-// them); this file writes the JSON of docs/calibration.md.
+// them); this file writes the JSON of docs/calibration.md (its pieces and
+// the advice's words in diagnose_json).
 #include "calib/diagnose.h"
 
 #include <algorithm>
@@ -11,9 +12,6 @@
 #include <chrono>
 #include <cmath>
 #include <future>
-#include <thread>
-
-#include <sched.h>
 
 #include "calib/diag_candidates.h"
 #include "calib/diag_context.h"
@@ -23,6 +21,7 @@
 #include "calib/diag_search.h"
 #include "calib/diag_validation.h"
 #include "calib/diag_verdict.h"
+#include "calib/diagnose_json.h"
 #include "calib/fit_calibration.h"
 #include "calib/fit_outliers.h"
 #include "cdm/cdm.h"
@@ -36,69 +35,6 @@ namespace {
 using nlohmann::json;
 using namespace diag;
 const char *kAxis[3] = {"x", "y", "z"};
-
-// The cores this process may run on (its affinity mask: taskset, cgroup
-// cpusets), at most 8.
-int usable_cores() {
-    cpu_set_t set;
-    int n = 0;
-    if (sched_getaffinity(0, sizeof set, &set) == 0) n = CPU_COUNT(&set);
-    if (n <= 0) n = int(std::thread::hardware_concurrency());
-    return std::clamp(n, 1, 8);
-}
-
-json vec3(const V3 &v) { return json::array({v(0), v(1), v(2)}); }
-
-std::string join(const std::vector<std::string> &v, const char *sep, const std::string &none) {
-    if (v.empty()) return none;
-    std::string s;
-    for (size_t k = 0; k < v.size(); ++k) s += (k ? sep : "") + v[k];
-    return s;
-}
-
-json params_json(const Model &model, const FitReport &rep) {
-    json params = json::object();
-    for (size_t k = 0; k < model.effect_count(); ++k) {
-        const EffectDesc &d = model.effect_desc(k);
-        const auto &pv = model.effect_params(k);
-        json pj = json::object();
-        for (size_t q = 0; q < pv.size(); ++q) {
-            double sd = (k < rep.std.size() && q < rep.std[k].size()) ? rep.std[k][q] : 0.0;
-            pj[d.params[q].name] = {{"value", pv[q]}, {"std", sd}, {"unit", d.params[q].unit}};
-        }
-        params[model.effect_name(k)] = pj;
-    }
-    return params;
-}
-
-// Advice an effect carries when it is recommended: what a person does
-// about it, with the fitted number.
-std::string effect_advice(const Model &m, const FitReport &rep, const std::vector<PreparedPos> &pos) {
-    std::string s;
-    for (size_t k = 0; k < m.effect_count(); ++k) {
-        const EffectDesc &d = m.effect_desc(k);
-        const auto &p = m.effect_params(k);
-        if (d.name == "pot_drift") {
-            double tmin = INFINITY, tmax = -INFINITY;
-            for (auto &pp : pos) {
-                tmin = std::min(tmin, pp.t_s);
-                tmax = std::max(tmax, pp.t_s);
-            }
-            const double h0 = tmin / 3600, h1 = tmax / 3600;
-            double worst = 0;
-            for (int c = 0; c < 4; ++c)
-                worst = std::max(worst, std::fabs(p[size_t(c)] * (h1 - h0) + p[4] * (h1 * h1 - h0 * h0)));
-            s += " The readings drift by up to " + fmt_num(worst, 3) +
-                 " mm over the session: warm the device up before measuring, or re-measure a reference hole at "
-                 "intervals.";
-        } else if (d.name == "drum_eccentricity") {
-            const double sd = (k < rep.std.size() && !rep.std[k].empty()) ? rep.std[k][0] : 0.0;
-            s += " The drums ripple with a period of " + fmt_num(p[0], 2) + " +- " + fmt_num(sd, 2) +
-                 " mm of cable (one turn).";
-        }
-    }
-    return s;
-}
 
 } // namespace
 

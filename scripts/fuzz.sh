@@ -1,23 +1,23 @@
 #!/usr/bin/env bash
-# Fuzzing with libFuzzer: builds the whole library instrumented for coverage
-# (clang, -fsanitize=fuzzer-no-link,address,undefined; build-fuzz/) and runs
-# every fuzz target for SECONDS each (default 20: CI's short bounded run;
-# long runs by hand, e.g. `scripts/fuzz.sh 600`), starting from the binary
-# seed corpus in tests/fuzz/corpus/TARGET. New inputs go to a scratch corpus,
-# never into the tree. A crash, a leak or a sanitizer report fails the run
-# and leaves the input in build-fuzz/crashes/TARGET/. Prints one line per
-# target with its coverage (libFuzzer's "cov", edges reached).
+# Fuzzing with libFuzzer: runs every fuzz target for SECONDS each (default
+# 20: CI's short bounded run; long runs by hand, e.g. `scripts/fuzz.sh 600`),
+# starting from the binary seed corpus in tests/fuzz/corpus/TARGET. The
+# targets come from the address-sanitizer build (build-san-address/: clang,
+# -fsanitize=fuzzer-no-link,address,undefined over the whole library, so the
+# fuzzer sees inside the parsers it attacks), configured by
+# `scripts/sanitize.sh --configure address` if it is not there yet: CI's
+# sanitizer stage and this one share its objects. New inputs go to a scratch
+# corpus, never into the tree. A crash, a leak or a sanitizer report fails
+# the run and leaves the input in build-san-address/crashes/TARGET/. Prints
+# one line per target with its coverage (libFuzzer's "cov", edges reached).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # Usage: scripts/fuzz.sh [SECONDS [TARGET...]]  (no TARGET: every target)
 secs=${1:-20}
 shift || true
 only=("$@")
-dir=${CDM_FUZZ_BUILD_DIR:-build-fuzz}
-if [ ! -f "$dir/build.ninja" ]; then
-  CC=clang CXX=clang++ cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCDM_FUZZ=ON \
-    -DCDM_BUILD_BINDINGS_TESTS=OFF -DCDM_BUILD_BENCHMARKS=OFF > /dev/null
-fi
+scripts/sanitize.sh --configure address
+dir=${CDM_SAN_BUILD_PREFIX:-build-san}-address
 cmake --build "$dir" -j"$(nproc)" --target fuzz_all
 status=0
 targets=$(sed -n 's/^fuzz_target://p' "$dir/tests/fuzz/fuzz_targets.txt")

@@ -32,6 +32,7 @@ extern "C" {
 #include <cmocka.h>
 }
 #include "jig_text.h"
+#include "shard.h"
 
 using namespace cdm;
 
@@ -1212,7 +1213,7 @@ static void grid_ignores_a_misplaced_reference(void **) {
     assert_int_equal(G.nb[12].size(), 4); // the centre of the first plate, beside the moved one
 }
 
-int main(void) {
+int main(int argc, char** argv) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(per_sample_statistics_without_samples),
         cmocka_unit_test(clean_data_is_explained),
@@ -1243,5 +1244,5 @@ int main(void) {
         cmocka_unit_test(structure_test_is_calibrated),
         cmocka_unit_test(ripple_p_counts_the_periods_searched),
     };
-    return cmocka_run_group_tests(tests, NULL, NULL);
+    return cdm_test::run_shard(argc, argv, "calib_diagnose", tests);
 }

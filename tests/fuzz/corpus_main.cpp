@@ -1,8 +1,9 @@
 // Replays a fuzz target's corpus without libFuzzer (any compiler): every
 // file under the directories given goes through LLVMFuzzerTestOneInput once.
 // ctest runs this for every target, so each crash a fuzzer ever found (kept
-// in tests/fuzz/corpus/TARGET/) stays a test, in the plain and sanitizer
-// builds alike. A broken invariant aborts, which fails the test.
+// in tests/fuzz/corpus/TARGET/) stays a test, in the plain and TSan builds
+// (the ASan build is the fuzzing one: there the libFuzzer program replays the
+// corpus itself, with -runs=0). A broken invariant aborts, which fails the test.
 #include <dirent.h>
 #include <sys/stat.h>
 

@@ -1,7 +1,8 @@
-"""cdm.watch on the emulated master (run by `with_master --replug 1500,400`
-under umockdev-wrapper): the master present at the start arrives, leaves at
-the unplug and arrives again at the replug, through the Python binding's
-callback on libcdm's watcher thread."""
+"""cdm.watch on the emulated master (run by `with_master --replug 300,400
+--after-output arrived` under umockdev-wrapper: the unplug comes 300 ms after
+this program prints its first event): the master present at the start
+arrives, leaves at the unplug and arrives again at the replug, through the
+Python binding's callback on libcdm's watcher thread."""
 import sys
 import threading
 import time
@@ -14,13 +15,14 @@ done = threading.Event()
 
 def told(kind, info):
     seen.append((kind, info.uri, info.serial))
+    print("watch event: %s %s" % (kind, info.uri), flush=True)  # with_master's cue
     if len(seen) >= 3:
         done.set()
 
 
 with cdm.watch(told) as w:
     # Bounded wait for something to happen at all (a loaded machine); the
-    # replug comes at 1.2 s.
+    # replug comes 0.7 s after the first event.
     done.wait(10.0)
 assert w.closed
 n = len(seen)

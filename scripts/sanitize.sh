@@ -10,9 +10,10 @@
 # (-DCDM_FUZZ=ON) in one build, build-san-address/: its tests here, and the
 # fuzz targets scripts/fuzz.sh runs, come from the same objects (CI builds
 # the library three times, not four, besides the wheel test's own build;
-# clang built it instrumented in about a quarter of GCC's time). thread: GCC, TSan, build-san-thread/; warnings
-# stay warnings there, as GCC's instrumented inlining gives false "may be
-# used uninitialized" inside libstdc++.
+# on CI's 2 cores clang's build took 6.75 min where GCC's ASan build took
+# 15.2, docs/testing.md "CI's time"). thread: GCC, TSan, build-san-thread/;
+# warnings stay warnings there, as GCC's instrumented inlining gives false
+# "may be used uninitialized" inside libstdc++.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 prefix=${CDM_SAN_BUILD_PREFIX:-build-san}

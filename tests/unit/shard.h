@@ -1,7 +1,7 @@
 // Runs one shard of a CMocka group: `program K/N` runs the tests whose index
 // in the group is K-1 modulo N (K from 1 to N); no argument runs them all.
 // ctest registers a long program as N tests (cdm_add_cmocka_test ... SHARDS
-// N), so that the sanitizer builds, where one diagnosis costs 15-20 times the
+// N), so that the sanitizer builds, where calib_diagnose costs 20-26 times the
 // plain build's, spread it over the cores instead of waiting on it.
 #pragma once
 

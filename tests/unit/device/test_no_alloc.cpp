@@ -56,14 +56,16 @@ namespace {
 thread_local uint64_t t_calls = 0;
 std::atomic<uint64_t> g_calls{0};
 
-[[maybe_unused]] inline void count() { // unused when the counting is compiled out
-    ++t_calls;
-    g_calls.fetch_add(1, std::memory_order_relaxed);
-}
-
 } // namespace
 
 #if CDM_COUNT_ALLOCS
+namespace {
+inline void count() {
+    ++t_calls;
+    g_calls.fetch_add(1, std::memory_order_relaxed);
+}
+} // namespace
+
 extern "C" {
 void *__libc_malloc(size_t);
 void *__libc_calloc(size_t, size_t);

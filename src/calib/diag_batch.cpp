@@ -193,8 +193,34 @@ private:
         const size_t q = t.start;
         if (t.kind == Kind::Held) {
             f.hold = period_params(s.held[q], j.seeded);
+            // A held fit done before (bit-identical start and noise model:
+            // a screened job's, fitted in full when its step is decided on
+            // it, diag_search.cpp): its result.
+            std::string key;
+            if (ctx_.cache) {
+                key = fit_key(ctx_, s.held[q]) + "\2held " + j.seeded + '\0';
+                std::lock_guard<std::mutex> lk(ctx_.cache->mu);
+                auto it = ctx_.cache->done.find(key);
+                std::string e2;
+                bool hit = it != ctx_.cache->done.end();
+                for (size_t e = 0; hit && e < s.held[q].effect_count(); ++e)
+                    hit = s.held[q].set_effect_params(e, it->second.first[e], e2);
+                if (hit) {
+                    s.held_rep[q] = it->second.second;
+                    s.held_ok[q] = 1;
+                    s.shown_held[q] = period_shown(s.held[q], j.seeded, ctx_.pos);
+                    return;
+                }
+                if (it != ctx_.cache->done.end()) s.held[q] = s.starts[q]; // (a partial set: fitted as usual)
+            }
             s.held_ok[q] = fit_model(s.held[q], ctx_.pos, f, s.held_rep[q]);
             s.shown_held[q] = period_shown(s.held[q], j.seeded, ctx_.pos);
+            if (ctx_.cache && s.held_ok[q]) {
+                std::vector<std::vector<double>> v;
+                for (size_t e = 0; e < s.held[q].effect_count(); ++e) v.push_back(s.held[q].effect_params(e));
+                std::lock_guard<std::mutex> lk(ctx_.cache->mu);
+                ctx_.cache->done.emplace(key, std::make_pair(std::move(v), s.held_rep[q]));
+            }
             return;
         }
         s.joint[q] = s.held[q];
@@ -249,6 +275,23 @@ private:
                 if (s.shown_held[a] != s.shown_held[b]) return s.shown_held[a] > s.shown_held[b];
                 return chi2[a] < chi2[b];
             });
+            if (j.held_only) { // screened: the held fit put first is the result
+                const size_t pick = s.order[0];
+                int evals = 0;
+                double seconds = 0;
+                for (size_t q = 0; q < n; ++q) {
+                    evals += s.held_rep[q].evals;
+                    seconds += s.held_rep[q].seconds;
+                }
+                j.m = s.held[pick];
+                j.rep = s.held_rep[pick];
+                j.rep.n_free += int(period_params(j.m, j.seeded).size());
+                j.rep.evals = evals;
+                j.rep.seconds = seconds;
+                j.ok = true;
+                s.decided = true;
+                return;
+            }
             queue_.push_front({t.job, Kind::Joint, s.order[0]});
             for (size_t r = 1; r < n; ++r) queue_.push_back({t.job, Kind::Joint, s.order[r]});
             return;
@@ -376,7 +419,7 @@ bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err
         for (size_t k = 0; k < jobs.size(); ++k) {
             keys[k] = fit_key(ctx, jobs[k].m);
             if (!jobs[k].seeded.empty()) {
-                keys[k] += "\2seeded " + jobs[k].seeded + '\0';
+                keys[k] += (jobs[k].held_only ? "\2held only " : "\2seeded ") + jobs[k].seeded + '\0';
                 for (auto &m : jobs[k].more_starts) keys[k] += fit_key(ctx, m) + '\3';
             }
             auto it = ctx.cache->done.find(keys[k]);

@@ -119,7 +119,7 @@ static double searched_periods(const std::string &effect, const std::vector<Prep
 
 bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
                       const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,
-                      std::string &err, bool details) {
+                      std::string &err, bool details, bool screen) {
     out.clear();
     auto list = candidate_effects();
     // Every candidate from every start, fitted as one batch (independent
@@ -132,6 +132,7 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         if (!base.has_effect(d->name)) {
             FitJob j = start_job(base, reading_effects(base), d->name, effect_starts(base, d->name, ctx.pos),
                                  stage + " " + d->name);
+            j.held_only = screen && !j.seeded.empty();
             if (j.m.has_effect(d->name)) jobs.push_back(std::move(j));
         }
         span[i].second = jobs.size();
@@ -156,6 +157,7 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
                 if (jobs[q].ok && jobs[q].rep.chi2 > base_chi2 + 1) {
                     again.push_back(start_job(base, reading_effects(base), list[i]->name,
                                               effect_starts(base, list[i]->name, ctx.pos), jobs[q].stage + " again"));
+                    again.back().held_only = jobs[q].held_only;
                     of.push_back(q);
                     list_of.push_back(list[i]->name);
                 }
@@ -192,6 +194,7 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
             if (!have || r.chi2 < c.rep.chi2) {
                 c.m = m;
                 c.rep = r;
+                c.screened = jobs[q].held_only;
                 have = true;
             }
         }

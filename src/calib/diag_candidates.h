@@ -32,6 +32,7 @@ struct Candidate {
     std::vector<V3> fp;                  // per position: model residual - residual with it
     std::vector<std::string> in_model;   // model effects that reproduce it
     std::vector<std::string> confused;   // candidates (or model effects) it cannot be told from
+    bool screened = false; // fitted with its period held only (score_candidates' screen)
     bool significant() const { return p_adj < kFindingLevel; }
 };
 
@@ -39,10 +40,15 @@ struct Candidate {
 // space free parameters, `base_chi2` its chi-square, `base_eval` its
 // evaluation). Sorted by BIC change. False + err when cancelled. Without
 // details only the tests are filled (dchi2, k, bic, p, p_adj, m, rep: what a
-// search step chooses by); complete_candidates then adds the rest.
+// search step chooses by); complete_candidates then adds the rest. With
+// `screen`, a candidate whose period is seeded from the data is fitted with
+// the period held at its starts only (FitJob::held_only) and marked
+// `screened`: its chi-square is an upper bound on the full fit's (its
+// delta chi2 a lower bound), for a search step that fits it in full only
+// when it could decide the step (diag_search.cpp).
 bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
                       const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,
-                      std::string &err, bool details = true);
+                      std::string &err, bool details = true, bool screen = false);
 
 // Fills what score_candidates leaves out without details: each candidate's
 // evaluation E, its verdict v, its fingerprint fp, shift_rms_mm, corr and

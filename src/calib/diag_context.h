@@ -106,6 +106,12 @@ struct FitJob {
     bool ok = false;
     std::string seeded;
     std::vector<Model> more_starts;
+    // A seeded job screened (a search step that is not deciding on it:
+    // diag_search.cpp): its held fits only; m and rep are the one its held
+    // order puts first (shown periods first, then by chi-square), the
+    // period counted among rep.n_free as the joint fit counts it. Its
+    // chi-square is an upper bound on the joint fit's from that start.
+    bool held_only = false;
 };
 
 // The cores this process may run on (its affinity mask: taskset, cgroup

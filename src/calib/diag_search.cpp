@@ -90,24 +90,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
     for (int step = 1; step <= 12; ++step) {
         DiagContext sc = ctx; // this step's fits, weighed as cur weighs
         sc.fo.weigh_with = &cur;
-        // The tests alone (what a step chooses by); the rest of the table
-        // only for the candidates on top of where the search stops.
-        if (!score_candidates(sc, cur, cur_free, cur_chi2, cur_E, "search step " + std::to_string(step), cands, err,
-                              false))
-            return false;
-        for (auto &c : cands) {
-            auto s = reading_effects(c.m);
-            if (std::none_of(out.visited.begin(), out.visited.end(), [&](auto &v) { return sorted(v.first) == sorted(s); }))
-                out.visited.push_back({s, ctx.bic(c.rep.chi2, c.rep.n_free)});
-        }
-        // Best addition: lowers the BIC and passes the likelihood-ratio test.
-        const Candidate *add = nullptr;
-        for (auto &c : cands)
-            if (c.bic < 0 && c.significant() && !seen.count(sorted(reading_effects(c.m)))) {
-                add = &c;
-                break; // sorted by BIC
-            }
-        // Best removal.
+        // Best removal (it does not depend on the candidates).
         double best_rm = 0;
         std::string rm_name;
         Model rm_model{ctx.g};
@@ -138,6 +121,43 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
                     rm_rep = r;
                 }
             }
+        }
+        // The candidates by their tests alone (what a step chooses by); the
+        // rest of the table only for the candidates on top of where the
+        // search stops. A candidate whose period is seeded from the data
+        // (the ripple: its joint fits of the period were half the search's
+        // fitting and the critical path of every step, docs/performance.md)
+        // is first screened, fitted with the period held at its starts
+        // only: a delta chi2 no larger than its full fit's. It is fitted in
+        // full, and the step decided again, when it could be the step's
+        // move: when it is the best addition by the held fit, or when
+        // nothing else would move the search (the step the search stops on,
+        // whose candidates are the table shown, is always decided on full
+        // fits). Elsewhere the step moves by another effect, one that the
+        // full fit might have beaten: the search may then take another path,
+        // but where it stops no addition, removal or swap lowers the
+        // criterion by the full fits, as without the screen.
+        const std::string stage = "search step " + std::to_string(step);
+        auto pick_add = [&]() -> const Candidate * {
+            // Best addition: lowers the BIC and passes the likelihood-ratio test.
+            for (auto &c : cands)
+                if (c.bic < 0 && c.significant() && !seen.count(sorted(reading_effects(c.m))))
+                    return &c; // sorted by BIC
+            return nullptr;
+        };
+        if (!score_candidates(sc, cur, cur_free, cur_chi2, cur_E, stage, cands, err, false, true)) return false;
+        const Candidate *add = pick_add();
+        if (std::any_of(cands.begin(), cands.end(), [](const Candidate &c) { return c.screened; }) &&
+            ((add && add->screened) || (!add && rm_name.empty()))) {
+            // (The other candidates' fits are the fit cache's.)
+            if (!score_candidates(sc, cur, cur_free, cur_chi2, cur_E, stage, cands, err, false, false)) return false;
+            add = pick_add();
+        }
+        for (auto &c : cands) {
+            if (c.screened) continue; // a bound, not the model's criterion
+            auto s = reading_effects(c.m);
+            if (std::none_of(out.visited.begin(), out.visited.end(), [&](auto &v) { return sorted(v.first) == sorted(s); }))
+                out.visited.push_back({s, ctx.bic(c.rep.chi2, c.rep.n_free)});
         }
         SearchStep st;
         st.step = step;

@@ -15,6 +15,7 @@
 #include <cstdarg>
 #include <cstddef>
 #include <cstdint>
+#include <filesystem>
 #include <new>
 #include <stdexcept>
 #include <string>
@@ -333,5 +334,10 @@ int main(void) {
         cmocka_unit_test(test_dataset_writer_refuses_rows_after_commit),
         cmocka_unit_test(test_dataset_writer_write_failure_is_sticky),
     };
-    return cmocka_run_group_tests(tests, NULL, NULL);
+    const int failed = cmocka_run_group_tests(tests, NULL, NULL);
+    if (failed == 0) { // (kept to look at when a test failed)
+        std::error_code ec;
+        std::filesystem::remove_all(g_dir, ec);
+    }
+    return failed;
 }

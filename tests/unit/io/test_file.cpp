@@ -14,7 +14,9 @@
 #include <cstdarg>
 #include <cstddef>
 #include <cstdint>
+#include <filesystem>
 #include <string>
+#include <vector>
 
 #include "io/file.h"
 
@@ -26,10 +28,12 @@ using namespace cdm::io;
 
 namespace {
 std::string g_dir;
+std::vector<std::string> g_made; // removed when every test passed (kept to look at otherwise)
 
 std::string tmpdir() {
     char t[] = "/tmp/cdm_io_XXXXXX";
     assert_non_null(mkdtemp(t));
+    g_made.push_back(t);
     return t;
 }
 void put(const std::string &p, const std::string &s) {
@@ -247,5 +251,11 @@ int main(void) {
         cmocka_unit_test(test_write_full_disk_says_enospc_and_keeps_old),
         cmocka_unit_test(test_atomic_file_abandoned_leaves_nothing),
     };
-    return cmocka_run_group_tests(tests, NULL, NULL);
+    const int failed = cmocka_run_group_tests(tests, NULL, NULL);
+    if (failed == 0)
+        for (auto &d : g_made) {
+            std::error_code ec;
+            std::filesystem::remove_all(d, ec);
+        }
+    return failed;
 }

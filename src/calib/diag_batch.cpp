@@ -133,6 +133,8 @@ public:
         queue_ = std::move(held);
         for (auto &t : plain) queue_.push_back(t);
         const size_t nt = std::max<size_t>(1, std::min(threads, queue_.size()));
+        // One fit alone: its positions on the threads (FitOptions::threads).
+        solo_threads_ = queue_.size() == 1 ? int(threads) : 1;
         std::vector<std::thread> pool;
         for (size_t t = 1; t < nt; ++t) pool.emplace_back([this] { work(false); });
         work(true);
@@ -177,6 +179,7 @@ private:
     void fit(const Task &t, bool main) {
         FitJob &j = jobs_[t.job];
         FitOptions f = ctx_.fo;
+        f.threads = solo_threads_;
         std::atomic<bool> *stop = t.kind == Kind::Joint ? &seeded_[t.job].stop[t.start] : nullptr;
         if (main)
             f.progress = [&](double fr) {
@@ -185,6 +188,7 @@ private:
             };
         else
             f.progress = [&](double) { return !cancelled_.load() && !(stop && *stop); };
+        f.single_step = f.single_step || j.one_step;
         if (t.kind == Kind::Plain) {
             j.ok = fit_model(j.m, ctx_.pos, f, j.rep);
             return;
@@ -198,7 +202,7 @@ private:
             // it, diag_search.cpp): its result.
             std::string key;
             if (ctx_.cache) {
-                key = fit_key(ctx_, s.held[q]) + "\2held " + j.seeded + '\0';
+                key = fit_key(ctx_, s.held[q]) + (j.one_step ? "\2held one step " : "\2held ") + j.seeded + '\0';
                 std::lock_guard<std::mutex> lk(ctx_.cache->mu);
                 auto it = ctx_.cache->done.find(key);
                 std::string e2;
@@ -358,6 +362,7 @@ private:
     std::condition_variable cv_;
     std::deque<Task> queue_;
     size_t in_flight_ = 0;
+    int solo_threads_ = 1;
     std::exception_ptr failure_;
 
 public:
@@ -418,6 +423,7 @@ bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err
         std::lock_guard<std::mutex> lk(ctx.cache->mu);
         for (size_t k = 0; k < jobs.size(); ++k) {
             keys[k] = fit_key(ctx, jobs[k].m);
+            if (jobs[k].one_step) keys[k] += "\2one step";
             if (!jobs[k].seeded.empty()) {
                 keys[k] += (jobs[k].held_only ? "\2held only " : "\2seeded ") + jobs[k].seeded + '\0';
                 for (auto &m : jobs[k].more_starts) keys[k] += fit_key(ctx, m) + '\3';

@@ -119,7 +119,7 @@ static double searched_periods(const std::string &effect, const std::vector<Prep
 
 bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
                       const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,
-                      std::string &err, bool details, bool screen) {
+                      std::string &err, bool details, bool screen, const std::vector<std::string> &in_full) {
     out.clear();
     auto list = candidate_effects();
     // Every candidate from every start, fitted as one batch (independent
@@ -132,7 +132,9 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         if (!base.has_effect(d->name)) {
             FitJob j = start_job(base, reading_effects(base), d->name, effect_starts(base, d->name, ctx.pos),
                                  stage + " " + d->name);
-            j.held_only = screen && !j.seeded.empty();
+            const bool scr = screen && std::find(in_full.begin(), in_full.end(), d->name) == in_full.end();
+            j.held_only = scr && !j.seeded.empty();
+            j.one_step = scr;
             if (j.m.has_effect(d->name)) jobs.push_back(std::move(j));
         }
         span[i].second = jobs.size();
@@ -154,10 +156,10 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         std::vector<std::string> list_of;
         for (size_t i = 0; i < list.size(); ++i)
             for (size_t q = span[i].first; q < span[i].second; ++q)
-                if (jobs[q].ok && jobs[q].rep.chi2 > base_chi2 + 1) {
+                if (jobs[q].ok && !jobs[q].one_step && jobs[q].rep.chi2 > base_chi2 + 1) {
                     again.push_back(start_job(base, reading_effects(base), list[i]->name,
                                               effect_starts(base, list[i]->name, ctx.pos), jobs[q].stage + " again"));
-                    again.back().held_only = jobs[q].held_only;
+                    again.back().held_only = jobs[q].held_only; // (one_step jobs are not refitted)
                     of.push_back(q);
                     list_of.push_back(list[i]->name);
                 }
@@ -194,7 +196,7 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
             if (!have || r.chi2 < c.rep.chi2) {
                 c.m = m;
                 c.rep = r;
-                c.screened = jobs[q].held_only;
+                c.screened = jobs[q].held_only || jobs[q].one_step;
                 have = true;
             }
         }

@@ -48,7 +48,8 @@ struct Candidate {
 // when it could decide the step (diag_search.cpp).
 bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
                       const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,
-                      std::string &err, bool details = true, bool screen = false);
+                      std::string &err, bool details = true, bool screen = false,
+                      const std::vector<std::string> &in_full = {});
 
 // Fills what score_candidates leaves out without details: each candidate's
 // evaluation E, its verdict v, its fingerprint fp, shift_rms_mm, corr and

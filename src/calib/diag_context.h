@@ -62,8 +62,10 @@ struct DiagContext {
 
     bool report(const std::string &stage, double f) const { return !progress || progress(stage, f); }
     // Fits m's reading-space effects from their current values.
+    // A fit alone: its positions evaluated on `threads` threads.
     bool fit(Model &m, const std::string &stage, FitReport &r) const {
         FitOptions f = fo;
+        f.threads = threads;
         f.progress = [&](double fr) { return report(stage, fr); };
         return fit_model(m, pos, f, r);
     }
@@ -112,6 +114,10 @@ struct FitJob {
     // period counted among rep.n_free as the joint fit counts it. Its
     // chi-square is an upper bound on the joint fit's from that start.
     bool held_only = false;
+    // Screened further: one Gauss-Newton step from the start (each held
+    // start of a seeded job), FitOptions::single_step: a chi-square no lower
+    // than the fit's from there, at the cost of one Jacobian.
+    bool one_step = false;
 };
 
 // The cores this process may run on (its affinity mask: taskset, cgroup

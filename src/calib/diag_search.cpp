@@ -12,6 +12,11 @@ namespace diag {
 
 namespace {
 
+// A search step fits in full the candidates its screen puts first (by the
+// BIC change of one Gauss-Newton step), this many at a time, until the best
+// addition is one fitted in full (model_search).
+constexpr size_t kFullFits = 3;
+
 std::vector<std::string> sorted(std::vector<std::string> v) {
     std::sort(v.begin(), v.end());
     return v;
@@ -25,7 +30,8 @@ double x_rms(const Eval &E) {
 
 bool model_search(const DiagContext &ctx, const Model &start, const FitReport &start_rep,
                   bool swaps, SearchResult &out, std::string &err,
-                  const std::set<std::vector<std::string>> *seen_before) {
+                  const std::set<std::vector<std::string>> *seen_before,
+                  const std::function<bool(const Eval &)> &restarts) {
     Model cur = model_with(start, reading_effects(start), "");
     int cur_free = start_rep.n_free;
     // The ellipsoid's three parameters are fitted in position space, not
@@ -145,13 +151,31 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
                     return &c; // sorted by BIC
             return nullptr;
         };
-        if (!score_candidates(sc, cur, cur_free, cur_chi2, cur_E, stage, cands, err, false, true)) return false;
-        const Candidate *add = pick_add();
-        if (std::any_of(cands.begin(), cands.end(), [](const Candidate &c) { return c.screened; }) &&
-            ((add && add->screened) || (!add && rm_name.empty()))) {
-            // (The other candidates' fits are the fit cache's.)
-            if (!score_candidates(sc, cur, cur_free, cur_chi2, cur_E, stage, cands, err, false, false)) return false;
+        const Candidate *add = nullptr;
+        std::vector<std::string> in_full;
+        for (;;) { // (the fits done before are the fit cache's)
+            if (!score_candidates(sc, cur, cur_free, cur_chi2, cur_E, stage, cands, err, false, true, in_full))
+                return false;
             add = pick_add();
+            if (add && !add->screened) break;
+            if (!add && !rm_name.empty()) break; // the step removes
+            if (!add && restarts && restarts(cur_E)) { // searched again from here: no full fits
+                out.provisional = true;
+                break;
+            }
+            if (!add) { // nothing moves by the screen: every candidate in full
+                if (!score_candidates(sc, cur, cur_free, cur_chi2, cur_E, stage, cands, err, false, false))
+                    return false;
+                add = pick_add();
+                break;
+            }
+            // The best few by the screen in full.
+            size_t more = 0;
+            for (auto &c : cands)
+                if (c.screened && c.bic < 0 && more < kFullFits) {
+                    in_full.push_back(c.name);
+                    ++more;
+                }
         }
         for (auto &c : cands) {
             if (c.screened) continue; // a bound, not the model's criterion
@@ -159,6 +183,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
             if (std::none_of(out.visited.begin(), out.visited.end(), [&](auto &v) { return sorted(v.first) == sorted(s); }))
                 out.visited.push_back({s, ctx.bic(c.rep.chi2, c.rep.n_free)});
         }
+        if (out.provisional) break;
         SearchStep st;
         st.step = step;
         if (add && add->bic <= best_rm) {

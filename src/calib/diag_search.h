@@ -9,6 +9,7 @@
 // one-effect swap that does; a set once visited is not visited again.
 #pragma once
 
+#include <functional>
 #include <set>
 #include <string>
 #include <vector>
@@ -41,6 +42,10 @@ struct SearchResult {
     // Every set the search stood on (sorted names), those of seen_before
     // included.
     std::set<std::vector<std::string>> seen;
+    // Stopped where its screen found no move, and `restarts` said the
+    // search goes on from here under another noise model (cands are then
+    // the screen's: not a table to show).
+    bool provisional = false;
 };
 
 // start: the user's model, fitted (its Position-stage effects are ignored).
@@ -55,9 +60,16 @@ struct SearchResult {
 // weighs the data, and those weights differ from model to model, so two
 // models could each be preferred from the other: a search that went on
 // from another's end without its sets could go back and forth.
+// restarts: true for a model's evaluation when the diagnosis will search
+// again from that model under a noise model re-estimated from it. A step
+// whose screen (diag_search.cpp) finds no move then ends the search without
+// fitting every candidate in full: those fits would be judged under a noise
+// model about to change, and the next search fits them under the new one
+// (as the swaps, above).
 bool model_search(const DiagContext &ctx, const Model &start, const FitReport &start_rep,
                   bool swaps, SearchResult &out, std::string &err,
-                  const std::set<std::vector<std::string>> *seen_before = nullptr);
+                  const std::set<std::vector<std::string>> *seen_before = nullptr,
+                  const std::function<bool(const Eval &)> &restarts = nullptr);
 
 // The models the data cannot tell from the recommended one: every set
 // visited within 10 of its BIC (not a superset of it: those add what the data

@@ -11,6 +11,7 @@
 #include <cctype>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <future>
 
 #include "calib/diag_candidates.h"
@@ -108,8 +109,18 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     std::vector<std::pair<std::vector<std::string>, double>> alts;
     const bool search = opt.search && opt.candidates;
     DiagContext sctx = ctx; // the search's noise model, re-estimated below
+    int rounds = 0; // noise-model re-estimations (below)
+    // Whether the search goes on from a model with E under the noise model
+    // re-estimated from E (below): its estimate differs by more than 5 %.
+    const std::function<bool(const Eval &)> renoise = [&](const Eval &E) {
+        if (user_jig || rounds >= 3) return false;
+        const V3 j2 = sctx.own_jig(E), h2 = sctx.own_hole(E, j2);
+        const auto tol = 0.05 * sctx.jig.array().abs().max(1e-6);
+        return !((j2 - sctx.jig).array().abs() <= tol).all() ||
+               !((h2 - sctx.fo.hole_sigma).array().abs() <= tol).all();
+    };
     if (search) {
-        if (!model_search(ctx, model, rep, false, sr, err)) return false;
+        if (!model_search(sctx, model, rep, false, sr, err, nullptr, renoise)) return false;
         // The search's steps appended to sr's path; the sets it fitted
         // replace sr's, or join them when fitted under the same noise model
         // (their BICs compare: the alternatives read them).
@@ -132,35 +143,40 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
         // step's fits are the cache's: the same start, the same noise
         // model); a swap that moves the model sends its estimate to the
         // same check.
-        int rounds = 0;
         // Bounded: three re-estimations, and a swap search after each
-        // and after the first search, at most.
+        // and after the first search, at most. A search that ends here
+        // provisionally (model_search's `restarts`) is always searched again.
         for (int pass = 0; pass < 4 + 3; ++pass) {
-            if (!user_jig && rounds < 3) {
+            if (renoise(sr.E)) {
                 const V3 j2 = sctx.own_jig(sr.E), h2 = sctx.own_hole(sr.E, j2);
-                const auto tol = 0.05 * sctx.jig.array().abs().max(1e-6);
-                if (!((j2 - sctx.jig).array().abs() <= tol).all() ||
-                    !((h2 - sctx.fo.hole_sigma).array().abs() <= tol).all()) {
-                    ++rounds;
-                    sctx.jig = j2;
-                    set_jig_noise(sctx.fo, j2, h2);
-                    Model start = sr.model;
-                    FitReport r0;
-                    if (!sctx.fit(start, "search (noise model re-estimated)", r0)) {
-                        err = r0.message.empty() ? "fit cancelled" : r0.message;
-                        return false;
-                    }
-                    SearchResult next(g);
-                    if (!model_search(sctx, start, r0, false, next, err)) return false;
-                    take(next, false);
-                    continue;
+                ++rounds;
+                sctx.jig = j2;
+                set_jig_noise(sctx.fo, j2, h2);
+                Model start = sr.model;
+                FitReport r0;
+                if (!sctx.fit(start, "search (noise model re-estimated)", r0)) {
+                    err = r0.message.empty() ? "fit cancelled" : r0.message;
+                    return false;
                 }
+                SearchResult next(g);
+                if (!model_search(sctx, start, r0, false, next, err, nullptr, renoise)) return false;
+                take(next, false);
+                continue;
+            }
+            if (sr.provisional) { // (renoise said so for this very evaluation)
+                err = "internal error: the search ended provisionally without a new noise model";
+                return false;
             }
             SearchResult next(g);
             if (!model_search(sctx, sr.model, sr.rep, true, next, err, &sr.seen)) return false;
             const bool moved = !next.path.empty();
             take(next, true);
             if (!moved || user_jig || rounds >= 3) break;
+        }
+        // The table shown is of full fits (the screen's are bounds).
+        if (sr.provisional || std::any_of(sr.cands.begin(), sr.cands.end(), [](const Candidate &c) { return c.screened; })) {
+            err = "internal error: the search's last candidates are the screen's, not full fits";
+            return false;
         }
         mark_confusions(sr.E, sctx.jig, sr.cands);
         if (!search_alternatives(sctx, sr, alts, err)) return false;
@@ -191,6 +207,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     {
         FitOptions bfo = search ? sctx.fo : use_top ? uc.fo : ctx.fo;
         bfo.progress = [&](double f) { return ctx.report("residual analysis", f); };
+        bfo.threads = ctx.threads; // (its two fits run alone)
         if (!fixture_lr(basis, pos, bfo, flr, err)) return false;
     }
     JigAnalysis ja = jig_analysis(bE, cf.grid, pos, bjig, noise_floor(bE, bjig), &flr);

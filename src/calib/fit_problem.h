@@ -12,7 +12,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <string>
+#include <system_error>
+#include <thread>
 #include <vector>
 
 #include <Eigen/Dense>
@@ -327,30 +330,33 @@ struct Problem {
         const bool batch_ok = batched && eval_rows(false, true);
         std::vector<Eigen::Matrix<double, 4, 3>> dPs;
         if (hole_model()) dPs.resize(rows.size());
-        for (size_t r = 0; r < rows.size(); ++r) {
-            const auto &pp = pos[rows[r]];
-            Eigen::Vector4d y;
-            Eigen::Matrix<double, 4, 3> dP;
-            if (batched)
-                dP = batch_ok ? batch.dydP[r] : Eigen::Matrix<double, 4, 3>::Zero();
-            else if (!eval_position(size_t(rows[r]), y, nullptr, &dP))
-                dP.setZero();
-            Eigen::Matrix4d C = pp.cov_mean;
-            C.diagonal() = pp.var_mean;
-            // (A derivative that is not a number, a degenerate geometry:
-            // the pots' noise alone, rather than a weight of zero that would
-            // drop the position from a chi-square that still counts it.)
-            if (dP.allFinite()) C += dP * S * dP.transpose();
-            const Eigen::LLT<Eigen::Matrix4d> llt(C);
-            if (C.allFinite() && llt.info() == Eigen::Success &&
-                llt.matrixL().toDenseMatrix().diagonal().minCoeff() > 0) {
-                wh[r] = llt.matrixL().solve(Eigen::Matrix4d::Identity());
-            } else { // (not positive definite: NaN readings' derivatives) each reading alone
-                wh[r].setZero();
-                for (int c = 0; c < 4; ++c) wh[r](c, c) = C(c, c) > 0 ? 1.0 / std::sqrt(C(c, c)) : 0.0;
+        over_rows([&](size_t r0, size_t r1) {
+            for (size_t r = r0; r < r1; ++r) {
+                const auto &pp = pos[rows[r]];
+                Eigen::Vector4d y;
+                Eigen::Matrix<double, 4, 3> dP;
+                if (batched)
+                    dP = batch_ok ? batch.dydP[r] : Eigen::Matrix<double, 4, 3>::Zero();
+                else if (!eval_position(size_t(rows[r]), y, nullptr, &dP)) // (a user effect: on one thread)
+                    dP.setZero();
+                Eigen::Matrix4d C = pp.cov_mean;
+                C.diagonal() = pp.var_mean;
+                // (A derivative that is not a number, a degenerate geometry:
+                // the pots' noise alone, rather than a weight of zero that would
+                // drop the position from a chi-square that still counts it.)
+                if (dP.allFinite()) C += dP * S * dP.transpose();
+                const Eigen::LLT<Eigen::Matrix4d> llt(C);
+                if (C.allFinite() && llt.info() == Eigen::Success &&
+                    llt.matrixL().toDenseMatrix().diagonal().minCoeff() > 0) {
+                    wh[r] = llt.matrixL().solve(Eigen::Matrix4d::Identity());
+                } else { // (not positive definite: NaN readings' derivatives) each reading alone
+                    wh[r].setZero();
+                    for (int c = 0; c < 4; ++c) wh[r](c, c) = C(c, c) > 0 ? 1.0 / std::sqrt(C(c, c)) : 0.0;
+                }
+                if (!dPs.empty()) dPs[r] = dP.allFinite() ? dP : Eigen::Matrix<double, 4, 3>::Zero();
             }
-            if (!dPs.empty()) dPs[r] = dP.allFinite() ? dP : Eigen::Matrix<double, 4, 3>::Zero();
-        }
+            return true;
+        });
         if (!dPs.empty()) build_holes(dPs);
     }
 
@@ -362,6 +368,43 @@ struct Problem {
                 L(3, 0) * v(0) + L(3, 1) * v(1) + L(3, 2) * v(2) + L(3, 3) * v(3)};
     }
 
+    // body(r0, r1) for the used positions' rows [r0, r1), in contiguous
+    // ranges on opt.threads threads (this one included) when the model has
+    // no user effect (FitOptions::threads) and each range has at least
+    // kRowsPerThread rows; in one range otherwise. Each range writes only
+    // its own rows, so the result does not depend on the number of
+    // threads. False when a range's body is. An exception in a range is
+    // rethrown here once every range has ended.
+    static constexpr size_t kRowsPerThread = 256;
+    template <class Body> bool over_rows(Body &&body) const {
+        const size_t n = rows.size();
+        size_t T = 1;
+        if (opt.threads > 1 && !ev.has_user() && !ev.has_batch())
+            T = std::min<size_t>(size_t(opt.threads), n / kRowsPerThread);
+        if (T <= 1) return body(size_t(0), n);
+        std::vector<char> ok(T, 1);
+        std::vector<std::exception_ptr> thrown(T);
+        auto run = [&](size_t t) {
+            try {
+                ok[t] = body(n * t / T, n * (t + 1) / T);
+            } catch (...) {
+                thrown[t] = std::current_exception();
+            }
+        };
+        std::vector<std::thread> pool;
+        size_t started = 1;
+        try {
+            for (; started < T; ++started) pool.emplace_back(run, started);
+        } catch (const std::system_error &) { // no thread to be had: the rest here
+        }
+        run(0);
+        for (size_t t = started; t < T; ++t) run(t);
+        for (auto &th : pool) th.join();
+        for (auto &e : thrown)
+            if (e) std::rethrow_exception(e);
+        return std::all_of(ok.begin(), ok.end(), [](char c) { return c != 0; });
+    }
+
     // Whitened residuals (wh (mean - y)) and Jacobian of y. False
     // when a user effect's apply fails (message in `failure`).
     bool residuals(Eigen::VectorXd &res, Eigen::MatrixXd *J) {
@@ -369,31 +412,35 @@ struct Problem {
         res.resize(4 * int(rows.size()));
         if (J) J->resize(4 * int(rows.size()), n);
         if (J && F > 0) J->rightCols(F).setZero(); // the rest is written below
-        Eigen::Matrix<double, 4, Eigen::Dynamic> Jp(4, ev.size());
-        Eigen::Matrix<double, 4, 3> dP;
         const bool batched = ev.has_batch();
         if (batched && !eval_rows(J != nullptr, J && F > 0)) return false;
-        for (size_t r = 0; r < rows.size(); ++r) {
-            const size_t j = size_t(rows[r]);
-            const auto &pp = pos[j];
-            Eigen::Vector4d y;
-            if (batched) {
-                y = batch.y[r];
-                if (J) Jp = batch.J[r];
-                if (J && F > 0) dP = batch.dydP[r];
-            } else if (!eval_position(j, y, J ? &Jp : nullptr, J && F > 0 ? &dP : nullptr, 1)) {
-                return false;
+        const bool ok = over_rows([&](size_t r0, size_t r1) {
+            Eigen::Matrix<double, 4, Eigen::Dynamic> Jp(4, ev.size());
+            Eigen::Matrix<double, 4, 3> dP;
+            for (size_t r = r0; r < r1; ++r) {
+                const size_t j = size_t(rows[r]);
+                const auto &pp = pos[j];
+                Eigen::Vector4d y;
+                if (batched) {
+                    y = batch.y[r];
+                    if (J) Jp = batch.J[r];
+                    if (J && F > 0) dP = batch.dydP[r];
+                } else if (!eval_position(j, y, J ? &Jp : nullptr, J && F > 0 ? &dP : nullptr, 1)) {
+                    return false; // (a user effect: on one thread)
+                }
+                const Eigen::Matrix4d &L = wh[r]; // lower triangular
+                res.segment<4>(4 * long(r)) = lower4(L, pp.mean - y);
+                if (!J) continue;
+                // The position's four rows at once: each column's four entries
+                // are adjacent in the column-major J.
+                for (int k = 0; k < ev.size(); ++k) J->block<4, 1>(4 * long(r), k) = lower4(L, Jp.col(k));
+                // d y / d (jig-frame x): the device-frame x derivative; the
+                // jig's rotation (a few mrad) is left out of this column.
+                if (F > 0) J->block<4, 1>(4 * long(r), ev.size() + opt.fixture[j]) = lower4(L, dP.col(0));
             }
-            const Eigen::Matrix4d &L = wh[r]; // lower triangular
-            res.segment<4>(4 * long(r)) = lower4(L, pp.mean - y);
-            if (!J) continue;
-            // The position's four rows at once: each column's four entries
-            // are adjacent in the column-major J.
-            for (int k = 0; k < ev.size(); ++k) J->block<4, 1>(4 * long(r), k) = lower4(L, Jp.col(k));
-            // d y / d (jig-frame x): the device-frame x derivative; the
-            // jig's rotation (a few mrad) is left out of this column.
-            if (F > 0) J->block<4, 1>(4 * long(r), ev.size() + opt.fixture[j]) = lower4(L, dP.col(0));
-        }
+            return true;
+        });
+        if (!ok) return false;
         decorrelate(res, J);
         return true;
     }

@@ -313,6 +313,8 @@ void ReadingEvaluator::Impl::chain(size_t e, const Eigen::Vector4d *out, const D
     y = out[0];
 }
 
+bool ReadingEvaluator::has_user() const { return impl_->lay.has_user; }
+
 bool ReadingEvaluator::has_batch() const {
     for (const EffectDesc *d : impl_->desc)
         if (d->stage == Stage::User && d->apply_batch) return true;

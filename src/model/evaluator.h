@@ -62,6 +62,10 @@ public:
                     bool want_dydP, Batch &out, std::string *err) const;
     // A user effect of the model works on arrays: eval_batch saves calls.
     bool has_batch() const;
+    // The model has a user effect: its callback may not be called from
+    // several threads at once. Without one, eval may be (it is const and
+    // keeps no state between calls).
+    bool has_user() const;
 
 private:
     struct Impl;

@@ -2,15 +2,119 @@
 #include "calib/diag_eval.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <condition_variable>
 #include <cstring>
-
+#include <exception>
+#include <functional>
 #include <limits>
+#include <mutex>
+#include <system_error>
+#include <thread>
 
 namespace cdm {
 namespace diag {
 
 namespace {
+// for_each_sample with visit run on a second thread, in file order: the
+// rows are parsed here in chunks, and each chunk is visited there while the
+// next is parsed (two buffers). The visits are the same calls in the same
+// order as for_each_sample's, so what they compute is the same bit for bit;
+// the pass takes about the longer of the parse and the visits instead of
+// their sum. In turn on this thread when no thread can be started.
+bool for_each_sample_piped(const Dataset &d, const std::function<void(size_t, const double *)> &visit,
+                           std::string &err) {
+    constexpr size_t kChunk = 4096;
+    struct Chunk {
+        std::vector<size_t> j;
+        std::vector<std::array<double, 4>> l;
+    };
+    Chunk buf[2];
+    for (auto &b : buf) {
+        b.j.reserve(kChunk);
+        b.l.reserve(kChunk);
+    }
+    std::mutex mu;
+    std::condition_variable cv;
+    int ready = -1;    // the chunk handed over, not yet taken
+    bool busy = false; // the visiting thread is in a chunk
+    bool end = false;
+    std::exception_ptr thrown;
+    auto consume = [&] {
+        for (;;) {
+            int b;
+            {
+                std::unique_lock<std::mutex> lk(mu);
+                cv.wait(lk, [&] { return ready >= 0 || end; });
+                if (ready < 0) return;
+                b = ready;
+                ready = -1;
+                busy = true;
+            }
+            cv.notify_all();
+            try {
+                for (size_t i = 0; i < buf[b].j.size(); ++i) visit(buf[b].j[i], buf[b].l[i].data());
+            } catch (...) {
+                std::lock_guard<std::mutex> lk(mu);
+                if (!thrown) thrown = std::current_exception();
+            }
+            {
+                std::lock_guard<std::mutex> lk(mu);
+                busy = false;
+            }
+            cv.notify_all();
+        }
+    };
+    std::thread worker;
+    try {
+        worker = std::thread(consume);
+    } catch (const std::system_error &) {
+        return for_each_sample(d, visit, err);
+    }
+    int fill = 0;
+    // Hands buf[fill] over once the other buffer is visited; fills that one next.
+    auto hand = [&] {
+        {
+            std::unique_lock<std::mutex> lk(mu);
+            cv.wait(lk, [&] { return ready < 0 && !busy; });
+            ready = fill;
+        }
+        cv.notify_all();
+        fill = 1 - fill;
+        buf[fill].j.clear();
+        buf[fill].l.clear();
+    };
+    // The visiting thread ends once every chunk handed over is visited.
+    auto finish = [&] {
+        {
+            std::unique_lock<std::mutex> lk(mu);
+            cv.wait(lk, [&] { return ready < 0 && !busy; });
+            end = true;
+        }
+        cv.notify_all();
+        worker.join();
+    };
+    bool ok = false;
+    try {
+        ok = for_each_sample(
+            d,
+            [&](size_t j, const double *l) {
+                buf[fill].j.push_back(j);
+                buf[fill].l.push_back({l[0], l[1], l[2], l[3]});
+                if (buf[fill].j.size() == kChunk) hand();
+            },
+            err);
+        if (ok && !buf[fill].j.empty()) hand();
+    } catch (...) {
+        finish();
+        throw;
+    }
+    finish();
+    if (thrown) std::rethrow_exception(thrown);
+    return ok;
+}
+
 Eval init_eval(size_t P) {
     Eval E;
     E.res.assign(P, V3::Zero());
@@ -173,7 +277,7 @@ bool sample_pass(const Dataset &d, const std::vector<PreparedPos> &pos, const st
             ++cnt[k][j];
         }
     };
-    if (!for_each_sample(d, visit, err)) return false;
+    if (!for_each_sample_piped(d, visit, err)) return false;
     for (auto &[to, from] : copies)
         for (int a = 0; a < 3; ++a) {
             to->err[a].mx = from->err[a].mx;

@@ -19,6 +19,8 @@
 #include <cstdint>
 
 #include <cfloat>
+#include <fcntl.h>
+#include <unistd.h>
 
 #include "calib/diag_eval.h"
 #include "calib/diag_outliers.h"
@@ -906,6 +908,44 @@ static void per_sample_statistics_without_samples(void **) {
     }
 }
 
+// The pass over the rows parses on one thread and visits on another, in
+// chunks (diag_eval.cpp). A file changed in place after it was loaded, on a
+// row in its second chunk, fails the pass there with the reader's error
+// naming that row's line, and the pass ends (no visit left waiting, no
+// thread left): as the pass in turn would.
+static void sample_pass_on_a_file_changed_late_fails(void **) {
+    JigSimOptions so = test::half_jig(12);
+    so.samples = 10; // 845 positions x 10: 8,450 rows, three chunks of 4,096
+    std::vector<std::string> lines = test::simulated_lines(so);
+    char p[] = "/tmp/cdm_sp_XXXXXX";
+    const int fd = mkstemp(p);
+    assert_true(fd >= 0);
+    const std::string text = test::join(lines);
+    assert_int_equal(write(fd, text.data(), text.size()), ssize_t(text.size()));
+    Dataset d;
+    std::string err;
+    assert_true(load_dataset(p, d, err));
+    const auto pos = prepare(d);
+    const DeviceGeometry g;
+    diag::Eval E = diag::evaluate(Model{g}, pos), S;
+    assert_true(diag::sample_pass(d, pos, {&E}, {{&g, nullptr, &S}}, err)); // unchanged: passes
+    // Row 6,000's reference height changed in place (its first digit: the
+    // same length), in the second chunk.
+    const size_t k = 6000; // lines[0] is the header: line k + 1
+    const size_t c0 = lines[k].find(',') + 1;
+    char &digit = lines[k][c0];
+    digit = digit == '9' ? '8' : char(digit + 1);
+    const std::string changed = test::join(lines);
+    assert_int_equal(pwrite(fd, changed.data(), changed.size(), 0), ssize_t(changed.size()));
+    close(fd);
+    err.clear();
+    assert_false(diag::sample_pass(d, pos, {&E}, {{&g, nullptr, &S}}, err));
+    const std::string where = std::string(p) + ":" + std::to_string(k + 1) + ":";
+    if (err.find(where) == std::string::npos) // (the reader's words: the point's x_ref disagrees with its own rows)
+        fail_msg("error \"%s\" does not name %s", err.c_str(), where.c_str());
+    unlink(p);
+}
+
 // Spikes in the pots' readings (0.2 % of the samples, 2 to 10 mm, as a
 // loose wiper gives) change nothing but the count the verdict reports: the
 // same recommended model as the clean file and the same noise floor. Left
@@ -1216,6 +1256,7 @@ static void grid_ignores_a_misplaced_reference(void **) {
 int main(int argc, char** argv) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(per_sample_statistics_without_samples),
+        cmocka_unit_test(sample_pass_on_a_file_changed_late_fails),
         cmocka_unit_test(clean_data_is_explained),
         cmocka_unit_test(each_hidden_effect_is_found),
         cmocka_unit_test(effect_outside_catalogue),

@@ -188,7 +188,10 @@ private:
             };
         else
             f.progress = [&](double) { return !cancelled_.load() && !(stop && *stop); };
-        f.single_step = f.single_step || j.one_step;
+        if (j.one_step) { // (a screen's fit: its chi-square alone is read)
+            f.single_step = true;
+            f.statistics = false;
+        }
         if (t.kind == Kind::Plain) {
             j.ok = fit_model(j.m, ctx_.pos, f, j.rep);
             return;
@@ -197,34 +200,8 @@ private:
         const size_t q = t.start;
         if (t.kind == Kind::Held) {
             f.hold = period_params(s.held[q], j.seeded);
-            // A held fit done before (bit-identical start and noise model:
-            // a screened job's, fitted in full when its step is decided on
-            // it, diag_search.cpp): its result.
-            std::string key;
-            if (ctx_.cache) {
-                key = fit_key(ctx_, s.held[q]) + (j.one_step ? "\2held one step " : "\2held ") + j.seeded + '\0';
-                std::lock_guard<std::mutex> lk(ctx_.cache->mu);
-                auto it = ctx_.cache->done.find(key);
-                std::string e2;
-                bool hit = it != ctx_.cache->done.end();
-                for (size_t e = 0; hit && e < s.held[q].effect_count(); ++e)
-                    hit = s.held[q].set_effect_params(e, it->second.first[e], e2);
-                if (hit) {
-                    s.held_rep[q] = it->second.second;
-                    s.held_ok[q] = 1;
-                    s.shown_held[q] = period_shown(s.held[q], j.seeded, ctx_.pos);
-                    return;
-                }
-                if (it != ctx_.cache->done.end()) s.held[q] = s.starts[q]; // (a partial set: fitted as usual)
-            }
             s.held_ok[q] = fit_model(s.held[q], ctx_.pos, f, s.held_rep[q]);
             s.shown_held[q] = period_shown(s.held[q], j.seeded, ctx_.pos);
-            if (ctx_.cache && s.held_ok[q]) {
-                std::vector<std::vector<double>> v;
-                for (size_t e = 0; e < s.held[q].effect_count(); ++e) v.push_back(s.held[q].effect_params(e));
-                std::lock_guard<std::mutex> lk(ctx_.cache->mu);
-                ctx_.cache->done.emplace(key, std::make_pair(std::move(v), s.held_rep[q]));
-            }
             return;
         }
         s.joint[q] = s.held[q];

@@ -32,7 +32,7 @@ struct Candidate {
     std::vector<V3> fp;                  // per position: model residual - residual with it
     std::vector<std::string> in_model;   // model effects that reproduce it
     std::vector<std::string> confused;   // candidates (or model effects) it cannot be told from
-    bool screened = false; // fitted with its period held only (score_candidates' screen)
+    bool screened = false; // fitted by the screen's one step only (score_candidates' screen)
     bool significant() const { return p_adj < kFindingLevel; }
 };
 
@@ -41,11 +41,10 @@ struct Candidate {
 // evaluation). Sorted by BIC change. False + err when cancelled. Without
 // details only the tests are filled (dchi2, k, bic, p, p_adj, m, rep: what a
 // search step chooses by); complete_candidates then adds the rest. With
-// `screen`, a candidate whose period is seeded from the data is fitted with
-// the period held at its starts only (FitJob::held_only) and marked
-// `screened`: its chi-square is an upper bound on the full fit's (its
-// delta chi2 a lower bound), for a search step that fits it in full only
-// when it could decide the step (diag_search.cpp).
+// `screen`, every candidate not named in `in_full` is fitted by the screen
+// only (FitJob::one_step: one Gauss-Newton step from its start; a seeded
+// period's held starts, one step each) and marked `screened`: its numbers
+// are estimates for ranking, not a candidate's fit (diag_search.cpp).
 bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
                       const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,
                       std::string &err, bool details = true, bool screen = false,

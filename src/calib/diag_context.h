@@ -108,15 +108,15 @@ struct FitJob {
     bool ok = false;
     std::string seeded;
     std::vector<Model> more_starts;
-    // A seeded job screened (a search step that is not deciding on it:
-    // diag_search.cpp): its held fits only; m and rep are the one its held
-    // order puts first (shown periods first, then by chi-square), the
-    // period counted among rep.n_free as the joint fit counts it. Its
-    // chi-square is an upper bound on the joint fit's from that start.
+    // A screen's job (score_candidates with `screen`, a search step:
+    // diag_search.cpp): one Gauss-Newton step from the start
+    // (FitOptions::single_step, without the standard errors), and for a
+    // seeded job its held fits only, each one step, rep the one its held
+    // order puts first, the period counted among rep.n_free as the joint
+    // fit counts it. Its chi-square is an estimate for ranking, usually
+    // above the full fit's, not a bound: a full fit damps a step that gains
+    // less than a quarter of its promise and may end elsewhere.
     bool held_only = false;
-    // Screened further: one Gauss-Newton step from the start (each held
-    // start of a seeded job), FitOptions::single_step: a chi-square no lower
-    // than the fit's from there, at the cost of one Jacobian.
     bool one_step = false;
 };
 

@@ -78,6 +78,7 @@ bool for_each_sample_piped(const Dataset &d, const std::function<void(size_t, co
         {
             std::unique_lock<std::mutex> lk(mu);
             cv.wait(lk, [&] { return ready < 0 && !busy; });
+            if (thrown) std::rethrow_exception(thrown); // a visit threw: the pass ends here
             ready = fill;
         }
         cv.notify_all();
@@ -230,7 +231,7 @@ Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos) {
 // optionally the ellipsoid of eq. 4 subtracted from x), and so is a maximum:
 // both read the rows again.
 bool sample_pass(const Dataset &d, const std::vector<PreparedPos> &pos, const std::vector<Eval *> &linear,
-                 const std::vector<SeedRequest> &seeds, std::string &err) {
+                 const std::vector<SeedRequest> &seeds, std::string &err, bool piped) {
     const size_t P = pos.size();
     for (Eval *E : linear)
         for (int a = 0; a < 3; ++a) E->err[a].mx = E->within[a].mx = 0;
@@ -277,7 +278,7 @@ bool sample_pass(const Dataset &d, const std::vector<PreparedPos> &pos, const st
             ++cnt[k][j];
         }
     };
-    if (!for_each_sample_piped(d, visit, err)) return false;
+    if (!(piped ? for_each_sample_piped(d, visit, err) : for_each_sample(d, visit, err))) return false;
     for (auto &[to, from] : copies)
         for (int a = 0; a < 3; ++a) {
             to->err[a].mx = from->err[a].mx;
@@ -297,8 +298,8 @@ bool sample_pass(const Dataset &d, const std::vector<PreparedPos> &pos, const st
 }
 
 bool evaluate_seed(const DeviceGeometry &g, const Dataset &d, const std::vector<PreparedPos> &pos,
-                   const Ellipsoid *ell, Eval &out, std::string &err) {
-    return sample_pass(d, pos, {}, {{&g, ell, &out}}, err);
+                   const Ellipsoid *ell, Eval &out, std::string &err, bool piped) {
+    return sample_pass(d, pos, {}, {{&g, ell, &out}}, err, piped);
 }
 
 // The seed's eq. 5: the ellipsoid fitted to the x error of an evaluation

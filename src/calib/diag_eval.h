@@ -58,11 +58,13 @@ struct SeedRequest {
 // One pass over the dataset's rows (for_each_sample) for what needs every
 // sample: the maxima of `linear` (evaluations from evaluate() on `pos`) and
 // the seed evaluations asked for. False + err when the rows cannot be read
-// again (the file changed since it was loaded).
+// again (the file changed since it was loaded). piped: the rows parsed on
+// this thread and visited on a second one (the same results, bit for bit:
+// diag_eval.cpp); false, all on this thread.
 bool sample_pass(const Dataset &d, const std::vector<PreparedPos> &pos, const std::vector<Eval *> &linear,
-                 const std::vector<SeedRequest> &seeds, std::string &err);
+                 const std::vector<SeedRequest> &seeds, std::string &err, bool piped = false);
 bool evaluate_seed(const DeviceGeometry &g, const Dataset &d, const std::vector<PreparedPos> &pos,
-                   const Ellipsoid *ell, Eval &out, std::string &err);
+                   const Ellipsoid *ell, Eval &out, std::string &err, bool piped = false);
 Ellipsoid ellipsoid_on(const Eval &E, const std::vector<PreparedPos> &pos);
 
 // Per axis: the samples' scatter about their position mean, through the

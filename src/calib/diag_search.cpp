@@ -130,19 +130,21 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
         }
         // The candidates by their tests alone (what a step chooses by); the
         // rest of the table only for the candidates on top of where the
-        // search stops. A candidate whose period is seeded from the data
-        // (the ripple: its joint fits of the period were half the search's
-        // fitting and the critical path of every step, docs/performance.md)
-        // is first screened, fitted with the period held at its starts
-        // only: a delta chi2 no larger than its full fit's. It is fitted in
-        // full, and the step decided again, when it could be the step's
-        // move: when it is the best addition by the held fit, or when
-        // nothing else would move the search (the step the search stops on,
-        // whose candidates are the table shown, is always decided on full
-        // fits). Elsewhere the step moves by another effect, one that the
-        // full fit might have beaten: the search may then take another path,
-        // but where it stops no addition, removal or swap lowers the
-        // criterion by the full fits, as without the screen.
+        // search stops. Every candidate is first screened by one
+        // Gauss-Newton step from its start (a seeded period: its held
+        // starts, one step each; the ripple's joint fits of the period were
+        // half the search's fitting, docs/performance.md). The best few by
+        // the screen that the step could take are fitted in full, more while
+        // a screened one still ranks first, and the step moves by full fits.
+        // Where the screen finds no move every candidate is fitted in full
+        // and the step decided again: the step the search stops on, whose
+        // candidates are the table shown, is always decided on full fits, so
+        // where the search stops no addition, removal or swap lowers the
+        // criterion by the full fits, as without the screen. The screen's
+        // one step is an estimate, not a bound (a full fit damps a step that
+        // gains less than it promised): a candidate whose full fit would have
+        // won a step may rank below the few fitted in full, and the search
+        // then takes another path.
         const std::string stage = "search step " + std::to_string(step);
         auto pick_add = [&]() -> const Candidate * {
             // Best addition: lowers the BIC and passes the likelihood-ratio test.
@@ -171,8 +173,8 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
             }
             // The best few by the screen in full.
             size_t more = 0;
-            for (auto &c : cands)
-                if (c.screened && c.bic < 0 && more < kFullFits) {
+            for (auto &c : cands) // (by the screen's BIC: a set already stood on cannot be the move)
+                if (c.screened && c.bic < 0 && more < kFullFits && !seen.count(sorted(reading_effects(c.m)))) {
                     in_full.push_back(c.name);
                     ++more;
                 }

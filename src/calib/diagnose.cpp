@@ -173,7 +173,12 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
             take(next, true);
             if (!moved || user_jig || rounds >= 3) break;
         }
-        // The table shown is of full fits (the screen's are bounds).
+        if (sr.provisional) { // the passes ran out on a provisional end: searched once more, in full
+            SearchResult next(g);
+            if (!model_search(sctx, sr.model, sr.rep, true, next, err, &sr.seen)) return false;
+            take(next, true);
+        }
+        // The table shown is of full fits (not the screen's estimates).
         if (sr.provisional || std::any_of(sr.cands.begin(), sr.cands.end(), [](const Candidate &c) { return c.screened; })) {
             err = "internal error: the search's last candidates are the screen's, not full fits";
             return false;
@@ -233,7 +238,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
             return false;
         }
         ell = ellipsoid_on(nom, pos);
-        if (!sample_pass(data, pos, linear, {{&g, &ell, &ellE}}, err)) return false;
+        if (!sample_pass(data, pos, linear, {{&g, &ell, &ellE}}, err, ctx.threads > 1)) return false;
     }
 
     // --- verdict

@@ -110,9 +110,10 @@ struct FitOptions {
     std::vector<std::pair<std::pair<size_t, size_t>, double>> abandon_above;
     // The positions' readings, Jacobian and weights evaluated on this many
     // threads (each position's on one: the results are the same bit for bit
-    // on any number). For a fit that runs alone while cores are free (the
-    // diagnosis's refits); a model with a user effect is evaluated on the
-    // calling thread whatever this says (its callback need not be reentrant).
+    // on any number). For a fit that runs alone (the diagnosis's refits;
+    // early on, the nominal pass may still run beside it); a model with a
+    // user effect is evaluated on the calling thread whatever this says (its
+    // callback need not be reentrant).
     int threads = 1;
 };
 

@@ -393,9 +393,10 @@ struct Problem {
         };
         std::vector<std::thread> pool;
         size_t started = 1;
-        try {
+        try { // (reserved first: a vector growing past a started thread would end the process)
+            pool.reserve(T - 1);
             for (; started < T; ++started) pool.emplace_back(run, started);
-        } catch (const std::system_error &) { // no thread to be had: the rest here
+        } catch (...) { // no thread, or no memory for one: the rest here
         }
         run(0);
         for (size_t t = started; t < T; ++t) run(t);

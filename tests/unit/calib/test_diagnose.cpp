@@ -858,13 +858,21 @@ static void per_sample_statistics_without_samples(void **) {
     assert_true(truth.add_effect_random("exit_pulley", 3, err));
     JigSimOptions so = test::half_jig(9);
     so.n = 5;
-    so.samples = 25;
+    so.samples = 70; // 125 positions: 8,750 rows, three of the piped pass's chunks
     Dataset d;
     assert_true(simulate_jig(truth, so, d, err));
     const auto pos = prepare(d);
     diag::Eval E = diag::evaluate(truth, pos), S;
     for (int a = 0; a < 3; ++a) assert_true(std::isnan(E.err[a].mx)); // no maximum before the pass
-    assert_true(diag::sample_pass(d, pos, {&E}, {{&truth.geometry(), nullptr, &S}}, err));
+    diag::Eval E1 = E, S1;
+    assert_true(diag::sample_pass(d, pos, {&E}, {{&truth.geometry(), nullptr, &S}}, err, true));
+    // In turn on one thread: the same, bit for bit.
+    assert_true(diag::sample_pass(d, pos, {&E1}, {{&truth.geometry(), nullptr, &S1}}, err, false));
+    for (int a = 0; a < 3; ++a) {
+        assert_true(E1.err[a].mx == E.err[a].mx && E1.within[a].mx == E.within[a].mx);
+        assert_true(S1.err[a].s == S.err[a].s && S1.err[a].ss == S.err[a].ss && S1.err[a].mx == S.err[a].mx);
+    }
+    for (size_t j = 0; j < pos.size(); ++j) assert_true(S1.est[j] == S.est[j]);
 
     diag::Acc err_ref[3], within_ref[3], seed_ref[3];
     std::vector<diag::V3> seed_sum(pos.size(), diag::V3::Zero());
@@ -928,7 +936,7 @@ static void sample_pass_on_a_file_changed_late_fails(void **) {
     const auto pos = prepare(d);
     const DeviceGeometry g;
     diag::Eval E = diag::evaluate(Model{g}, pos), S;
-    assert_true(diag::sample_pass(d, pos, {&E}, {{&g, nullptr, &S}}, err)); // unchanged: passes
+    assert_true(diag::sample_pass(d, pos, {&E}, {{&g, nullptr, &S}}, err, true)); // unchanged: passes
     // Row 6,000's reference height changed in place (its first digit: the
     // same length), in the second chunk.
     const size_t k = 6000; // lines[0] is the header: line k + 1
@@ -939,7 +947,7 @@ static void sample_pass_on_a_file_changed_late_fails(void **) {
     assert_int_equal(pwrite(fd, changed.data(), changed.size(), 0), ssize_t(changed.size()));
     close(fd);
     err.clear();
-    assert_false(diag::sample_pass(d, pos, {&E}, {{&g, nullptr, &S}}, err));
+    assert_false(diag::sample_pass(d, pos, {&E}, {{&g, nullptr, &S}}, err, true));
     const std::string where = std::string(p) + ":" + std::to_string(k + 1) + ":";
     if (err.find(where) == std::string::npos) // (the reader's words: the point's x_ref disagrees with its own rows)
         fail_msg("error \"%s\" does not name %s", err.c_str(), where.c_str());

@@ -256,7 +256,7 @@ private:
                 if (s.shown_held[a] != s.shown_held[b]) return s.shown_held[a] > s.shown_held[b];
                 return chi2[a] < chi2[b];
             });
-            if (j.held_only) { // screened: the held fit put first is the result
+            if (j.one_step) { // screened: the held fit put first is the result
                 const size_t pick = s.order[0];
                 int evals = 0;
                 double seconds = 0;
@@ -402,7 +402,7 @@ bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err
             keys[k] = fit_key(ctx, jobs[k].m);
             if (jobs[k].one_step) keys[k] += "\2one step";
             if (!jobs[k].seeded.empty()) {
-                keys[k] += (jobs[k].held_only ? "\2held only " : "\2seeded ") + jobs[k].seeded + '\0';
+                keys[k] += "\2seeded " + jobs[k].seeded + '\0';
                 for (auto &m : jobs[k].more_starts) keys[k] += fit_key(ctx, m) + '\3';
             }
             auto it = ctx.cache->done.find(keys[k]);

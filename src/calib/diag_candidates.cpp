@@ -132,9 +132,7 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         if (!base.has_effect(d->name)) {
             FitJob j = start_job(base, reading_effects(base), d->name, effect_starts(base, d->name, ctx.pos),
                                  stage + " " + d->name);
-            const bool scr = screen && std::find(in_full.begin(), in_full.end(), d->name) == in_full.end();
-            j.held_only = scr && !j.seeded.empty();
-            j.one_step = scr;
+            j.one_step = screen && std::find(in_full.begin(), in_full.end(), d->name) == in_full.end();
             if (j.m.has_effect(d->name)) jobs.push_back(std::move(j));
         }
         span[i].second = jobs.size();
@@ -159,7 +157,6 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
                 if (jobs[q].ok && !jobs[q].one_step && jobs[q].rep.chi2 > base_chi2 + 1) {
                     again.push_back(start_job(base, reading_effects(base), list[i]->name,
                                               effect_starts(base, list[i]->name, ctx.pos), jobs[q].stage + " again"));
-                    again.back().held_only = jobs[q].held_only; // (one_step jobs are not refitted)
                     of.push_back(q);
                     list_of.push_back(list[i]->name);
                 }
@@ -196,7 +193,7 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
             if (!have || r.chi2 < c.rep.chi2) {
                 c.m = m;
                 c.rep = r;
-                c.screened = jobs[q].held_only || jobs[q].one_step;
+                c.screened = jobs[q].one_step;
                 have = true;
             }
         }

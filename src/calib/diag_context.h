@@ -110,13 +110,12 @@ struct FitJob {
     std::vector<Model> more_starts;
     // A screen's job (score_candidates with `screen`, a search step:
     // diag_search.cpp): one Gauss-Newton step from the start
-    // (FitOptions::single_step, without the standard errors), and for a
-    // seeded job its held fits only, each one step, rep the one its held
+    // (FitOptions::single_step, without the standard errors); a seeded job
+    // runs its held fits only, each one step, and rep is the one its held
     // order puts first, the period counted among rep.n_free as the joint
     // fit counts it. Its chi-square is an estimate for ranking, usually
     // above the full fit's, not a bound: a full fit damps a step that gains
     // less than a quarter of its promise and may end elsewhere.
-    bool held_only = false;
     bool one_step = false;
 };
 

@@ -180,7 +180,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
                 }
         }
         for (auto &c : cands) {
-            if (c.screened) continue; // a bound, not the model's criterion
+            if (c.screened) continue; // an estimate, not the model's criterion
             auto s = reading_effects(c.m);
             if (std::none_of(out.visited.begin(), out.visited.end(), [&](auto &v) { return sorted(v.first) == sorted(s); }))
                 out.visited.push_back({s, ctx.bic(c.rep.chi2, c.rep.n_free)});

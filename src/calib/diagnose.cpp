@@ -111,13 +111,19 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     DiagContext sctx = ctx; // the search's noise model, re-estimated below
     int rounds = 0; // noise-model re-estimations (below)
     // Whether the search goes on from a model with E under the noise model
-    // re-estimated from E (below): its estimate differs by more than 5 %.
-    const std::function<bool(const Eval &)> renoise = [&](const Eval &E) {
+    // re-estimated from E (below): its estimate (j2, h2) differs by more
+    // than 5 %.
+    auto new_noise = [&](const Eval &E, V3 &j2, V3 &h2) {
         if (user_jig || rounds >= 3) return false;
-        const V3 j2 = sctx.own_jig(E), h2 = sctx.own_hole(E, j2);
+        j2 = sctx.own_jig(E);
+        h2 = sctx.own_hole(E, j2);
         const auto tol = 0.05 * sctx.jig.array().abs().max(1e-6);
         return !((j2 - sctx.jig).array().abs() <= tol).all() ||
                !((h2 - sctx.fo.hole_sigma).array().abs() <= tol).all();
+    };
+    const std::function<bool(const Eval &)> renoise = [&](const Eval &E) {
+        V3 j2, h2;
+        return new_noise(E, j2, h2);
     };
     if (search) {
         if (!model_search(sctx, model, rep, false, sr, err, nullptr, renoise)) return false;
@@ -144,11 +150,12 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
         // model); a swap that moves the model sends its estimate to the
         // same check.
         // Bounded: three re-estimations, and a swap search after each
-        // and after the first search, at most. A search that ends here
-        // provisionally (model_search's `restarts`) is always searched again.
+        // and after the first search, at most. A search that ended
+        // provisionally (model_search's `restarts`) is searched again: under
+        // the new noise model, or by the swap search, or after the loop.
         for (int pass = 0; pass < 4 + 3; ++pass) {
-            if (renoise(sr.E)) {
-                const V3 j2 = sctx.own_jig(sr.E), h2 = sctx.own_hole(sr.E, j2);
+            V3 j2, h2;
+            if (new_noise(sr.E, j2, h2)) {
                 ++rounds;
                 sctx.jig = j2;
                 set_jig_noise(sctx.fo, j2, h2);
@@ -162,10 +169,6 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
                 if (!model_search(sctx, start, r0, false, next, err, nullptr, renoise)) return false;
                 take(next, false);
                 continue;
-            }
-            if (sr.provisional) { // (renoise said so for this very evaluation)
-                err = "internal error: the search ended provisionally without a new noise model";
-                return false;
             }
             SearchResult next(g);
             if (!model_search(sctx, sr.model, sr.rep, true, next, err, &sr.seen)) return false;

@@ -197,7 +197,6 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
             st.bic_change = best_rm;
             if (!move_to(rm_model, rm_rep, "search step " + std::to_string(step) + " (refitted)")) return false;
         } else if (!swaps) {
-            complete_candidates(sc, cur, cur_E, cands);
             break; // cands are the candidates on top of cur
         } else {
             // Stuck on additions and removals: a one-effect swap can still
@@ -255,10 +254,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
                     sw_rep = r;
                 }
             }
-            if (sw_in.empty()) { // no move lowers the criterion: cands are the candidates on top of cur
-                complete_candidates(sc, cur, cur_E, cands);
-                break;
-            }
+            if (sw_in.empty()) break; // no move lowers the criterion: cands are the candidates on top of cur
             st.added = sw_in;
             st.removed = sw_out;
             st.bic_change = best_sw;

@@ -35,7 +35,11 @@ struct SearchResult {
     double chi2 = 0, bic = 0;
     Eval E;
     std::vector<SearchStep> path;
-    // Candidates on top of the recommended model (the last forward step).
+    // Candidates on top of the recommended model (the last forward step),
+    // scored (their tests) but not completed: the diagnosis completes the
+    // last search's only (complete_candidates, weighed as the recommended
+    // model weighs), since a search followed by another is work thrown away
+    // (a third of the diagnosis' candidate evaluations, docs/performance.md).
     std::vector<Candidate> cands;
     // Every set fitted on the way: its effects and BIC (for the alternatives).
     std::vector<std::pair<std::vector<std::string>, double>> visited;

@@ -186,6 +186,11 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
             err = "internal error: the search's last candidates are the screen's, not full fits";
             return false;
         }
+        {
+            DiagContext rc = sctx; // as the search's last step weighed them
+            rc.fo.weigh_with = &sr.model;
+            complete_candidates(rc, sr.model, sr.E, sr.cands);
+        }
         mark_confusions(sr.E, sctx.jig, sr.cands);
         if (!search_alternatives(sctx, sr, alts, err)) return false;
     }

@@ -2,9 +2,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <condition_variable>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <system_error>
+#include <thread>
 #include <unordered_map>
 #include <utility>
 
@@ -86,6 +92,13 @@ public:
     void add(double v) {
         if (v == last_ || full_) return; // quantised data repeats itself
         last_ = v;
+        // A position's samples repeat a few values: one seen lately (a
+        // small table by the value's bits) is not sorted in again.
+        uint64_t bits;
+        std::memcpy(&bits, &v, sizeof bits);
+        double &seen = recent_[size_t((bits * 0x9E3779B97F4A7C15ull) >> 54)];
+        if (seen == v) return;
+        seen = v;
         pending_.push_back(v);
         if (pending_.size() >= 4096) flush();
     }
@@ -111,6 +124,7 @@ private:
         full_ = sorted_.size() >= kDatasetResolutionValues;
     }
     std::vector<double> sorted_, pending_;
+    std::vector<double> recent_ = std::vector<double>(1024, NAN); // (NaN equals nothing)
     double last_ = NAN;
     bool full_ = false;
 };
@@ -134,13 +148,27 @@ public:
         d_.path = src;
     }
     bool line(const char *b, const char *le, std::string &err);
+    // The values of a plain data row (value stage, any thread, once the
+    // header is read): false when the line is anything else (blank, a
+    // comment, a field count or a value line() would refuse), which then
+    // goes to line(). Reads only the header's layout, fixed once read.
+    // 1: a data row (v, t, t_ok); 0: a blank or comment line; -1 otherwise.
+    int values(const char *b, const char *le, double *v, double &t, bool &t_ok,
+               std::vector<std::pair<const char *, const char *>> &f) const;
+    // The rest of line() for a row whose values() are v, t, t_ok, as line
+    // number `line` (the file's lines are counted by the caller); b..le is
+    // the line, for a message.
+    bool row(size_t line, const double *v, double t, bool t_ok, const char *b, const char *le, std::string &err);
     bool finish(std::string &err);
+    bool have_header() const { return header_; }
+    size_t lines() const { return line_; }
+    void set_lines(size_t n) { line_ = n; }
     // Per position, the readings' range (ReadingRange), from a first pass.
     std::vector<ReadingRange> &range() { return range_; }
 
 private:
     bool header(std::string &err);
-    bool same_ref(size_t g, const double *v, size_t line, std::string &err) const;
+    bool same_ref(size_t g, const double *v, size_t line, const char *b, const char *le, std::string &err);
     const std::string &src_;
     Dataset &d_;
     const Dataset *expect_;
@@ -198,9 +226,10 @@ bool Parser::header(std::string &err) {
 }
 
 // A known position's row: its reference must be the one its first line gave.
-bool Parser::same_ref(size_t g, const double *v, size_t line, std::string &err) const {
+bool Parser::same_ref(size_t g, const double *v, size_t line, const char *b, const char *le, std::string &err) {
     for (int k = 0; k < 3; ++k)
         if (d_.pos[g].ref[k] != v[1 + k]) {
+            split(b, le, f_); // (row() is not given the fields)
             const auto &x = f_[size_t(colidx_[1 + k])];
             err = at(src_, line, size_t(colidx_[1 + k]) + 1) + "point " + std::to_string(d_.pos[g].point) + " has " +
                   kDatasetColumns[1 + k] + " " + shown(x.first, x.second) + " but line " +
@@ -243,6 +272,40 @@ bool Parser::line(const char *b, const char *le, std::string &err) {
                   dataset_fault_text(fault, k, required[k], shown(x.first, x.second));
             return false;
         }
+    // The time is refused in row(), where a row left out whole is not.
+    double t = 0;
+    bool t_ok = true;
+    if (tcol_ >= 0) {
+        auto &x = f[size_t(tcol_)];
+        t_ok = to_double(x.first, x.second, t) && std::isfinite(t);
+    }
+    return row(line, v, t, t_ok, b, le, err);
+}
+
+int Parser::values(const char *b, const char *le, double *v, double &t, bool &t_ok,
+                   std::vector<std::pair<const char *, const char *>> &f) const {
+    if (le > b && le[-1] == '\r') --le;
+    if (le == b || *b == '#') return 0;
+    split(b, le, f);
+    if (f.size() != ncols_) return -1;
+    for (int k = 0; k < kDatasetValues; ++k) {
+        auto &x = f[size_t(colidx_[k])];
+        if (!to_double(x.first, x.second, v[k]) || dataset_value_fault(k, v[k]) != DatasetFault::None) return -1;
+    }
+    t = 0;
+    t_ok = true;
+    if (tcol_ >= 0) {
+        auto &x = f[size_t(tcol_)];
+        t_ok = to_double(x.first, x.second, t) && std::isfinite(t);
+    }
+    return 1;
+}
+
+bool Parser::row(size_t line, const double *v, double t, bool t_ok, const char *b, const char *le,
+                 std::string &err) {
+    const std::string &src = src_;
+    const auto &colidx = colidx_;
+    if (le > b && le[-1] == '\r') --le;
     long id = long(v[0]);
     if (skip_ && std::binary_search(skip_->begin(), skip_->end(), id)) {
         // A point left out whole: counted in rows (the row indices stay the
@@ -258,7 +321,7 @@ bool Parser::line(const char *b, const char *le, std::string &err) {
     size_t g;
     if (again) {
         g = last_g_;
-        if (!same_ref(g, v, line, err)) return false;
+        if (!same_ref(g, v, line, b, le, err)) return false;
     } else if (it == index_.end()) {
         g = d_.pos.size();
         if (expect_ && (g >= expect_->pos.size() || expect_->pos[g].point != id ||
@@ -276,18 +339,16 @@ bool Parser::line(const char *b, const char *le, std::string &err) {
         if (!expect_) range_.push_back({INFINITY, INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY, -INFINITY});
     } else {
         g = it->second;
-        if (!same_ref(g, v, line, err)) return false;
+        if (!same_ref(g, v, line, b, le, err)) return false;
     }
     last_id_ = id;
     last_g_ = g;
     JigHole &h = d_.pos[g];
-    double t = 0;
-    if (tcol_ >= 0) {
-        auto &x = f[size_t(tcol_)];
-        if (!to_double(x.first, x.second, t) || !std::isfinite(t)) {
-            err = at(src, line, size_t(tcol_) + 1) + "t_s is not a finite number: '" + shown(x.first, x.second) + "'";
-            return false;
-        }
+    if (!t_ok) {
+        split(b, le, f_);
+        auto &x = f_[size_t(tcol_)];
+        err = at(src, line, size_t(tcol_) + 1) + "t_s is not a finite number: '" + shown(x.first, x.second) + "'";
+        return false;
     }
     const size_t row = d_.rows;
     if (exclude_ && next_excluded_ < exclude_->size() && (*exclude_)[next_excluded_] == row) {
@@ -360,29 +421,238 @@ bool Parser::finish(std::string &err) {
     return true;
 }
 
-// Feeds `read(buf, n)` (bytes read, 0 at the end, < 0 on error) to the
-// parser line by line through a bounded buffer: `chunk` bytes, or one line
-// when a line is longer.
-template <class Read> bool stream_lines(Read read, Parser &p, std::string &err, size_t chunk = size_t(1) << 20) {
-    std::vector<char> buf(chunk);
-    size_t have = 0, scanned = 0; // bytes in buf (from a line's start); of them, known to hold no '\n'
-    for (;;) {
-        if (have == buf.size()) buf.resize(buf.size() * 2); // one line longer than the buffer
-        const long n = read(buf.data() + have, buf.size() - have);
-        if (n < 0) return false;
-        if (n == 0) break;
-        have += size_t(n);
-        const char *b = buf.data(), *end = b + have, *s = b + scanned;
-        while (const char *nl = static_cast<const char *>(memchr(s, '\n', size_t(end - s)))) {
-            if (!p.line(b, nl, err)) return false;
-            b = s = nl + 1;
-        }
-        have = size_t(end - b);
-        scanned = have;
-        if (b != buf.data() && have) std::memmove(buf.data(), b, have);
-        if (have < chunk && buf.size() > chunk) buf.resize(chunk), buf.shrink_to_fit();
+// The reader's two stages. A line's values (Parser::values: the fields
+// split and converted, the bulk of the work) need nothing but the header,
+// so they are found for a block of lines on whichever thread is free; the
+// rest (Parser::row: the position, its statistics, the checks against
+// what came before) runs on the calling thread, block after block in file
+// order, so every statistic is summed in the order of a reading in turn,
+// bit for bit. A line the value stage leaves (anything but a plain data
+// row or a blank or comment line: a header, a field count or a value
+// line() refuses) and every line after it in its block go to
+// Parser::line, which says what is wrong as a reading in turn would.
+struct Block {
+    struct Row {
+        double v[kDatasetValues];
+        double t;
+        uint32_t rel, b, e; // its line within the block (0-based), its bytes in text
+        bool t_ok;
+    };
+    std::vector<char> text; // whole lines (the file's last may lack its '\n')
+    std::vector<Row> rows;  // the data rows before `slow`
+    size_t slow = SIZE_MAX; // byte offset of the first line left to Parser::line
+    size_t slow_rel = 0;    // its line within the block
+    size_t lines = 0;       // the block's lines, when none is left to Parser::line
+    enum { Read, Claimed, Done } state = Read;
+};
+
+// The value stage of a block (any thread).
+void block_values(const Parser &p, Block &bk, std::vector<std::pair<const char *, const char *>> &f) {
+    bk.rows.clear();
+    bk.slow = SIZE_MAX;
+    bk.lines = 0;
+    if (bk.text.size() > UINT32_MAX) { // (a text beyond a file's bound, parse_dataset's: offsets of 32 bits)
+        bk.slow = 0;
+        return;
     }
-    if (have && !p.line(buf.data(), buf.data() + have, err)) return false;
+    const char *const base = bk.text.data(), *const end = base + bk.text.size();
+    for (const char *b = base; b < end; ++bk.lines) {
+        const char *nl = static_cast<const char *>(memchr(b, '\n', size_t(end - b)));
+        const char *le = nl ? nl : end;
+        Block::Row r;
+        const int k = p.values(b, le, r.v, r.t, r.t_ok, f);
+        if (k < 0) {
+            bk.slow = size_t(b - base);
+            bk.slow_rel = bk.lines;
+            return;
+        }
+        if (k > 0) {
+            r.rel = uint32_t(bk.lines);
+            r.b = uint32_t(b - base);
+            r.e = uint32_t(le - base);
+            bk.rows.push_back(r);
+        }
+        b = nl ? nl + 1 : end;
+    }
+}
+
+// The row stage of a block whose values are found, on the parser's thread.
+bool block_rows(Parser &p, const Block &bk, std::string &err) {
+    const size_t base = p.lines();
+    const char *const text = bk.text.data();
+    for (const auto &r : bk.rows)
+        if (!p.row(base + r.rel + 1, r.v, r.t, r.t_ok, text + r.b, text + r.e, err)) return false;
+    if (bk.slow == SIZE_MAX) {
+        p.set_lines(base + bk.lines);
+        return true;
+    }
+    p.set_lines(base + bk.slow_rel);
+    const char *const end = text + bk.text.size();
+    for (const char *b = text + bk.slow; b < end;) {
+        const char *nl = static_cast<const char *>(memchr(b, '\n', size_t(end - b)));
+        if (!p.line(b, nl ? nl : end, err)) return false;
+        b = nl ? nl + 1 : end;
+    }
+    return true;
+}
+
+// Feeds `read(buf, n)` (bytes read, 0 at the end, < 0 on error) to the
+// parser line by line, in blocks of whole lines of about kBlock bytes (a
+// line longer than that is held whole), with at most kAhead blocks read
+// ahead: memory stays bounded whatever the file's length. Once the header
+// is read, a second thread finds the values of blocks ahead while this
+// one takes the rows of the block in turn (Block); in turn on this thread
+// alone when the input is one block, the machine has one processor, or no
+// thread can be started.
+template <class Read> bool stream_lines(Read read, Parser &p, std::string &err) {
+    constexpr size_t kBlock = size_t(1) << 18, kAhead = 4;
+    std::vector<char> carry; // bytes read after the last block's last '\n'
+    bool eof = false;
+    // The next block: 1, or 0 at the end, or -1 when read failed.
+    auto next = [&](Block &bk) -> int {
+        bk.text.swap(carry);
+        carry.clear();
+        for (;;) {
+            if (eof) return bk.text.empty() ? 0 : 1;
+            const size_t have = bk.text.size();
+            bk.text.resize(have + kBlock);
+            const long n = read(bk.text.data() + have, kBlock);
+            if (n < 0) return -1;
+            bk.text.resize(have + size_t(n));
+            if (n == 0) {
+                eof = true;
+                continue;
+            }
+            const void *nl = memrchr(bk.text.data() + have, '\n', size_t(n));
+            if (!nl) continue; // no line ends yet: one longer than a block is held whole
+            const size_t cut = size_t(static_cast<const char *>(nl) - bk.text.data()) + 1;
+            carry.assign(bk.text.begin() + long(cut), bk.text.end());
+            bk.text.resize(cut);
+            return 1;
+        }
+    };
+    std::vector<std::pair<const char *, const char *>> f;
+    std::vector<std::unique_ptr<Block>> pool;
+    for (size_t k = 0; k <= kAhead; ++k) pool.push_back(std::make_unique<Block>());
+    // In turn until the header is read (every line to Parser::line).
+    Block *first = pool[0].get();
+    for (;;) {
+        const int r = next(*first);
+        if (r < 0) return false;
+        if (r == 0) return p.finish(err);
+        if (!p.have_header()) {
+            first->rows.clear();
+            first->slow = 0;
+            first->slow_rel = 0;
+        } else {
+            block_values(p, *first, f);
+        }
+        if (!block_rows(p, *first, err)) return false;
+        if (p.have_header()) break;
+    }
+    std::mutex mu;
+    std::condition_variable cv;
+    std::deque<Block *> queue; // read, in file order (this thread pushes and pops)
+    bool stop = false;
+    auto claim = [&]() -> Block * { // under mu
+        for (Block *b : queue)
+            if (b->state == Block::Read) {
+                b->state = Block::Claimed;
+                return b;
+            }
+        return nullptr;
+    };
+    auto done = [&](Block *b) {
+        {
+            std::lock_guard<std::mutex> lk(mu);
+            b->state = Block::Done;
+        }
+        cv.notify_all();
+    };
+    std::thread helper;
+    if (!eof && std::thread::hardware_concurrency() > 1) {
+        try {
+            helper = std::thread([&] {
+                std::vector<std::pair<const char *, const char *>> fields;
+                for (;;) {
+                    Block *b;
+                    {
+                        std::unique_lock<std::mutex> lk(mu);
+                        cv.wait(lk, [&] { return stop || std::any_of(queue.begin(), queue.end(), [](Block *q) {
+                                                     return q->state == Block::Read;
+                                                 }); });
+                        if (stop) return;
+                        b = claim();
+                    }
+                    try {
+                        block_values(p, *b, fields);
+                    } catch (...) { // (out of memory): the block's lines go to Parser::line, on the parser's thread
+                        b->rows.clear();
+                        b->slow = 0;
+                        b->slow_rel = 0;
+                    }
+                    done(b);
+                }
+            });
+        } catch (const std::system_error &) {
+            // in turn, on this thread
+        }
+    }
+    // The helper ends however this does (an error, a tap that throws).
+    struct Join {
+        std::thread &t;
+        std::mutex &mu;
+        std::condition_variable &cv;
+        bool &stop;
+        ~Join() {
+            if (!t.joinable()) return;
+            {
+                std::lock_guard<std::mutex> lk(mu);
+                stop = true;
+            }
+            cv.notify_all();
+            t.join();
+        }
+    } join{helper, mu, cv, stop};
+    std::vector<Block *> spare;
+    for (auto &b : pool) spare.push_back(b.get());
+    for (;;) {
+        while (queue.size() < kAhead && !spare.empty()) {
+            Block *b = spare.back();
+            const int r = next(*b);
+            if (r < 0) return false;
+            if (r == 0) break;
+            spare.pop_back();
+            {
+                std::lock_guard<std::mutex> lk(mu);
+                b->state = Block::Read;
+                queue.push_back(b);
+            }
+            cv.notify_all();
+        }
+        if (queue.empty()) break;
+        Block *front = queue.front();
+        for (;;) { // front's values: found here, or by the helper (this thread meanwhile finds another's)
+            Block *mine;
+            {
+                std::unique_lock<std::mutex> lk(mu);
+                cv.wait(lk, [&] { return front->state != Block::Claimed || std::any_of(queue.begin(), queue.end(), [](Block *q) {
+                                             return q->state == Block::Read;
+                                         }); });
+                if (front->state == Block::Done) break;
+                mine = front->state == Block::Read ? front : claim();
+                mine->state = Block::Claimed;
+            }
+            block_values(p, *mine, f);
+            done(mine);
+        }
+        if (!block_rows(p, *front, err)) return false;
+        {
+            std::lock_guard<std::mutex> lk(mu);
+            queue.pop_front();
+        }
+        spare.push_back(front);
+    }
     return p.finish(err);
 }
 

@@ -127,8 +127,11 @@ DatasetFault dataset_value_fault(int column, double v);
 // length in mm, at most 10000 (got -1)".
 std::string dataset_fault_text(DatasetFault f, int column, const std::string &name, const std::string &shown);
 
-// Parses and groups, streaming (load_dataset reads the file in 1 MiB
-// pieces; a line longer than that is held whole). On error returns false with `err` naming the file,
+// Parses and groups, streaming (load_dataset reads the file in blocks of
+// whole lines of 256 KiB, at most four ahead, a line longer than that held
+// whole; a second thread converts the fields of blocks ahead while the
+// rows are grouped in file order, so every statistic is the same, bit for
+// bit, as when read in turn). On error returns false with `err` naming the file,
 // line and column (1-based), e.g. "jig.csv:17:6: l2 is not a number: 'abc'".
 // Refuses duplicate columns, non-finite values and magnitudes outside the
 // ranges above; a field echoed in a message is cut to ~40 characters.

@@ -275,6 +275,125 @@ static void file_in_pieces_equals_whole_text(void **) {
     if (!strstr(err.c_str(), where.c_str())) fail_msg("error \"%s\" does not name \"%s\"", err.c_str(), where.c_str());
 }
 
+// A file of many blocks (the reader's values are found for blocks ahead on
+// a second thread, dataset.cpp): every position's statistics are Welford's
+// update in file order, bit for bit, as the test computes them here row by
+// row; blank and comment lines between rows, CRLF ends and a last line
+// without its '\n' change nothing but the line count.
+static void many_blocks_sum_in_file_order(void **) {
+    std::string t = "point,x_ref,y_ref,z_ref,l1,l2,l3,l4,t_s\r\n";
+    struct Ref {
+        long n = 0;
+        double mean[4] = {}, m2[4][4] = {}, t = 0;
+    };
+    std::vector<Ref> ref(23);
+    char row[160];
+    const int rows = 120000; // ~5.5 MB: about twenty blocks
+    for (int r = 0; r < rows; ++r) {
+        const int pt = (r / 7) % 23; // runs of seven rows, each position revisited
+        const double l[4] = {300 + pt + 0.01 * (r % 13), 301 - 0.001 * (r % 17), 302 + 0.02 * (r % 5), 303 + 0.1 * pt};
+        const double ts = 0.01 * r;
+        std::snprintf(row, sizeof row, "%d,%d,%d,0,%.3f,%.3f,%.3f,%.3f,%.2f", pt, 30 + 10 * (pt % 3), pt, l[0], l[1], l[2],
+                      l[3], ts);
+        t += row;
+        if (r + 1 < rows) t += "\r\n";
+        if (r % 9001 == 5) t += "\r\n# a comment between rows\r\n";
+        // What the file says, as the reader converts it (the printed digits).
+        double lv[4], tv;
+        std::sscanf(row, "%*d,%*d,%*d,0,%lf,%lf,%lf,%lf,%lf", &lv[0], &lv[1], &lv[2], &lv[3], &tv);
+        Ref &h = ref[size_t(pt)];
+        const double n = double(++h.n);
+        double dx[4];
+        for (int c = 0; c < 4; ++c) {
+            dx[c] = lv[c] - h.mean[c];
+            h.mean[c] += dx[c] / n;
+        }
+        for (int a = 0; a < 4; ++a)
+            for (int c = a; c < 4; ++c) h.m2[a][c] += dx[a] * (lv[c] - h.mean[c]);
+        h.t += tv;
+    }
+    assert_true(t.size() > (size_t(5) << 20));
+    TempCsv f(t);
+    for (int from_file = 0; from_file < 2; ++from_file) {
+        Dataset d;
+        std::string err;
+        if (!(from_file ? load_dataset(f.path, d, err) : parse_dataset(t, "m.csv", d, err))) fail_msg("%s", err.c_str());
+        assert_int_equal(d.rows, rows);
+        assert_int_equal(d.pos.size(), 23);
+        for (size_t g = 0; g < d.pos.size(); ++g) {
+            const Ref &h = ref[size_t(d.pos[g].point)];
+            assert_int_equal(d.pos[g].n, h.n);
+            for (int a = 0; a < 4; ++a) {
+                if (d.pos[g].mean[a] != h.mean[a]) fail_msg("position %zu cable %d: mean %.17g, in turn %.17g", g, a,
+                                                            d.pos[g].mean[a], h.mean[a]);
+                for (int c = a; c < 4; ++c)
+                    if (d.pos[g].cov[a][c] != h.m2[a][c] / double(h.n - 1)) fail_msg("position %zu: covariance differs", g);
+            }
+            assert_true(d.pos[g].t_s == h.t / double(h.n));
+        }
+        // Read again (for_each_sample): every row, in file order.
+        size_t k = 0;
+        bool in_order = true;
+        assert_true(for_each_sample(d, [&](size_t g, const double *) {
+            in_order = in_order && d.pos[g].point == long((k / 7) % 23);
+            ++k;
+        }, err));
+        assert_int_equal(k, rows);
+        assert_true(in_order);
+    }
+}
+
+// Whichever block a fault is in, and whichever thread found its line's
+// values, the error is the one a reading in turn meets first: its line and
+// column, and an earlier fault of another kind (a reference that moved)
+// before a later one (a value).
+static void faults_in_later_blocks_name_their_line(void **) {
+    std::vector<std::string> lines{"point,x_ref,y_ref,z_ref,l1,l2,l3,l4,t_s"};
+    char row[160];
+    for (int r = 0; r < 100000; ++r) {
+        const int pt = (r / 10) % 50;
+        std::snprintf(row, sizeof row, "%d,%d,%d,0,%.3f,301,302,303,%.2f", pt, 30 + 10 * (pt % 5), pt,
+                      300 + 0.001 * (r % 11), 0.01 * r);
+        lines.push_back(row);
+    }
+    auto text = [&](const std::vector<std::string> &v) {
+        std::string s;
+        for (auto &l : v) s += l + "\n";
+        return s;
+    };
+    struct Case {
+        size_t line; // 1-based
+        std::string with, where;
+    };
+    const std::vector<Case> cases{
+        {60001, "7,40,7,0,300,301,302,303,1", ":60001:2: point 7 has x_ref 40"}, // 7 is at 50
+        {70001, "7,50,7,0,300,301,302,303,oops", ":70001:9: t_s is not a finite number"},
+        {80001, "7,50,7,0,300,301,302,abc,1", ":80001:8: l4 is not a finite number"},
+        {90001, "7,50,7,0,300,301", ":90001:7: expected 9 fields"},
+    };
+    for (const auto &c : cases) {
+        auto v = lines;
+        v[c.line - 1] = c.with;
+        Dataset d;
+        std::string err;
+        assert_false(parse_dataset(text(v), "late.csv", d, err));
+        if (!strstr(err.c_str(), ("late.csv" + c.where).c_str())) fail_msg("error \"%s\" does not name \"%s\"", err.c_str(), c.where.c_str());
+    }
+    // Two faults: the first in the file is the one named, whichever kind.
+    auto v = lines;
+    v[80000] = cases[2].with; // line 80001, a value
+    v[85000] = "7,40,7,0,300,301,302,303,1"; // line 85001, a moved reference
+    Dataset d;
+    std::string err;
+    assert_false(parse_dataset(text(v), "two.csv", d, err));
+    assert_non_null(strstr(err.c_str(), "two.csv:80001:8: l4"));
+    v[80000] = lines[80000];
+    v[60000] = "7,40,7,0,300,301,302,303,1"; // line 60001, a moved reference, before a value at 70001
+    v[70000] = "7,50,7,0,300,301,302,abc,1";
+    assert_false(parse_dataset(text(v), "two.csv", d, err));
+    assert_non_null(strstr(err.c_str(), "two.csv:60001:2: point 7 has x_ref 40"));
+}
+
 // The resolution is the smallest step between distinct readings of a cable,
 // whatever their order and repetitions; a cable with one value has none.
 static void resolution_is_the_smallest_step(void **) {
@@ -411,6 +530,8 @@ int main(void) {
         cmocka_unit_test(test_dataset_insane_magnitudes_refused),
         cmocka_unit_test(test_dataset_missing_file_is_io_failure),
         cmocka_unit_test(file_in_pieces_equals_whole_text),
+        cmocka_unit_test(many_blocks_sum_in_file_order),
+        cmocka_unit_test(faults_in_later_blocks_name_their_line),
         cmocka_unit_test(resolution_is_the_smallest_step),
         cmocka_unit_test(samples_read_again_in_order),
         cmocka_unit_test(changed_file_is_refused),

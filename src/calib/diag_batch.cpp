@@ -354,7 +354,7 @@ bool has_user_effect(const Model &m) {
     return false;
 }
 
-Eval evaluate_cached(const DiagContext &ctx, const Model &m) {
+Eval evaluate_cached(const DiagContext &ctx, const Model &m, int threads) {
     if (!ctx.cache || has_user_effect(m)) return evaluate(m, ctx.pos); // (a user's callback may not be pure)
     std::string k;
     model_key(k, m);
@@ -363,7 +363,7 @@ Eval evaluate_cached(const DiagContext &ctx, const Model &m) {
         auto it = ctx.cache->evals.find(k);
         if (it != ctx.cache->evals.end()) return it->second;
     }
-    Eval E = evaluate(m, ctx.pos);
+    Eval E = evaluate(m, ctx.pos, threads);
     remember_evaluation(ctx, m, E);
     return E;
 }

@@ -135,9 +135,10 @@ int usable_cores();
 // are then stopped) when a fit fails or is cancelled.
 bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err);
 
-// evaluate(m, ctx.pos), or the same evaluation made before (FitCache).
-// Models with a user effect are evaluated every time.
-Eval evaluate_cached(const DiagContext &ctx, const Model &m);
+// evaluate(m, ctx.pos, threads), or the same evaluation made before
+// (FitCache). Models with a user effect are evaluated every time. threads:
+// ctx.threads for an evaluation alone; 1 within a batch already parallel.
+Eval evaluate_cached(const DiagContext &ctx, const Model &m, int threads = 1);
 // Stores E as evaluate(m, ctx.pos), which it must be (bit for bit).
 void remember_evaluation(const DiagContext &ctx, const Model &m, const Eval &E);
 

@@ -13,6 +13,9 @@
 #include <system_error>
 #include <thread>
 
+#include "calib/in_ranges.h"
+#include "model/effect.h"
+
 namespace cdm {
 namespace diag {
 
@@ -135,7 +138,7 @@ Eval init_eval(size_t P) {
 // second order in the noise (1e-4 mm at 0.05 mm noise). Over a position's
 // samples sum(l_s - mean) = 0 and sum (Jp_a (l_s - mean))^2 = Jp_a M Jp_a'
 // with M the co-moment matrix (n - 1) cov: the moments need no sample.
-Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos) {
+Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos, int threads) {
     const size_t P = pos.size();
     Eval E = init_eval(P);
     // Every position's FK of its mean readings, at its acquisition time
@@ -149,7 +152,16 @@ Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos) {
         for (int c = 0; c < 4; ++c) l[4 * j + size_t(c)] = pos[j].mean(c);
         ts[j] = pos[j].t_s;
     }
-    m.positions(P, l.data(), ts.data(), est.data(), st.data());
+    // Each position's alone: on `threads` threads in contiguous ranges when
+    // no user effect's callback is called (it need not be reentrant).
+    size_t T = threads > 1 ? size_t(threads) : 1;
+    for (size_t k = 0; k < m.effect_count(); ++k)
+        if (m.effect_desc(k).stage == Stage::User) T = 1;
+    constexpr size_t kPositionsPerThread = 256;
+    in_ranges(P, T, kPositionsPerThread, [&](size_t a, size_t b) {
+        m.positions(b - a, l.data() + 4 * a, ts.data() + a, est.data() + 3 * a, st.data() + a);
+        return true;
+    });
     // Only the converged ones need a Jacobian: pack them.
     std::vector<size_t> conv;
     std::vector<double> pc, tc;
@@ -159,7 +171,10 @@ Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos) {
             pc.insert(pc.end(), {est[3 * j], est[3 * j + 1], est[3 * j + 2]});
             tc.push_back(ts[j]);
         }
-    m.readings_jacobians(conv.size(), pc.data(), tc.data(), y.data(), dr.data(), stj.data());
+    in_ranges(conv.size(), T, kPositionsPerThread, [&](size_t a, size_t b) {
+        m.readings_jacobians(b - a, pc.data() + 3 * a, tc.data() + a, y.data() + 4 * a, dr.data() + 12 * a, stj.data() + a);
+        return true;
+    });
     std::vector<size_t> slot(P, 0);
     size_t n_reading = 0;
     for (size_t c = 0; c < conv.size(); ++c) slot[conv[c]] = c;

@@ -44,8 +44,9 @@ struct Eval {
 // readings, and the per-sample error's mean, std and RMS through the local
 // linearisation (exact from each position's mean and covariance). The
 // per-sample maxima (err[].mx, within[].mx) need every sample: NaN (null in
-// JSON) until sample_pass() fills them.
-Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos);
+// JSON) until sample_pass() fills them. The positions on `threads` threads
+// (the same numbers, bit for bit; in turn with a user effect).
+Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos, int threads = 1);
 
 // The seed's procedure (triangulation, optionally the ellipsoid) applied to
 // every sample, into `out`.

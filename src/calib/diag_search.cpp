@@ -48,7 +48,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
     double cur_chi2 = model_chi2(cur, ctx.pos, ctx.fo);
     FitReport cur_rep = start_rep;
     cur_rep.n_free = cur_free;
-    Eval cur_E = evaluate_cached(ctx, cur);
+    Eval cur_E = evaluate_cached(ctx, cur, ctx.threads);
     // cur refitted once under its own weights. It was fitted under those of
     // the model before it (the step that added it was weighed as that one),
     // and the next step's fits, each under cur's weights from cur's values,
@@ -64,6 +64,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
         const Model w = cur;
         DiagContext pc = ctx;
         pc.fo.weigh_with = &w;
+        pc.fo.statistics = false; // (kept or not by its chi-square; cur_rep stays the fit that chose cur)
         Model c2 = cur;
         FitReport r2;
         if (!pc.fit(c2, stage, r2)) {
@@ -76,7 +77,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
             cur_chi2 = c2_chi2;
             evaluated = false;
         }
-        if (!evaluated) cur_E = evaluate_cached(ctx, cur);
+        if (!evaluated) cur_E = evaluate_cached(ctx, cur, ctx.threads);
         return true;
     };
     if (!refit_own("search (the start refitted under its own weights)", true)) return false;

@@ -21,6 +21,7 @@
 #include <Eigen/Dense>
 
 #include "calib/fit.h"
+#include "calib/in_ranges.h"
 #include "model/effect.h"
 #include "model/evaluator.h"
 
@@ -377,33 +378,8 @@ struct Problem {
     // rethrown here once every range has ended.
     static constexpr size_t kRowsPerThread = 256;
     template <class Body> bool over_rows(Body &&body) const {
-        const size_t n = rows.size();
-        size_t T = 1;
-        if (opt.threads > 1 && !ev.has_user() && !ev.has_batch())
-            T = std::min<size_t>(size_t(opt.threads), n / kRowsPerThread);
-        if (T <= 1) return body(size_t(0), n);
-        std::vector<char> ok(T, 1);
-        std::vector<std::exception_ptr> thrown(T);
-        auto run = [&](size_t t) {
-            try {
-                ok[t] = body(n * t / T, n * (t + 1) / T);
-            } catch (...) {
-                thrown[t] = std::current_exception();
-            }
-        };
-        std::vector<std::thread> pool;
-        size_t started = 1;
-        try { // (reserved first: a vector growing past a started thread would end the process)
-            pool.reserve(T - 1);
-            for (; started < T; ++started) pool.emplace_back(run, started);
-        } catch (...) { // no thread, or no memory for one: the rest here
-        }
-        run(0);
-        for (size_t t = started; t < T; ++t) run(t);
-        for (auto &th : pool) th.join();
-        for (auto &e : thrown)
-            if (e) std::rethrow_exception(e);
-        return std::all_of(ok.begin(), ok.end(), [](char c) { return c != 0; });
+        const bool threaded = opt.threads > 1 && !ev.has_user() && !ev.has_batch();
+        return in_ranges(rows.size(), threaded ? size_t(opt.threads) : 1, kRowsPerThread, body);
     }
 
     // Whitened residuals (wh (mean - y)) and Jacobian of y. False

@@ -26,6 +26,29 @@ double x_rms(const Eval &E) {
     return E.err[0].n > 0 ? std::sqrt(E.err[0].ss / E.err[0].n) : 0.0;
 }
 
+// A swap's criterion from below, without fitting it: cur - out + in is
+// cur + in with out's parameters held at their identity, so its chi-square
+// is at least that of cur + in (fitted in full on the step the swap search
+// stands on: `cands`), and it has at most out's parameter count fewer free
+// parameters. Its BIC change from cur is then at least in's change less
+// out's parameters' penalty. -INFINITY when `cands` has no full fit of in.
+// (An inequality between the two models' best fits: a local fit of the swap
+// that found a better minimum than cur + in's fit did could pass it.)
+double swap_bound(const DiagContext &ctx, const Model &cur, const std::string &out,
+                  const std::string &in, const std::vector<Candidate> &cands) {
+    size_t p_out = 0;
+    for (size_t k = 0; k < cur.effect_count(); ++k)
+        if (cur.effect_desc(k).name == out) p_out = cur.effect_desc(k).params.size();
+    for (const auto &c : cands)
+        if (c.name == in && !c.screened) return c.bic - double(p_out) * std::log(ctx.n_obs);
+    return -INFINITY;
+}
+
+// A swap whose bound is this far above the model it leaves is fitted
+// neither by the search (which needs it below -2) nor for the alternatives
+// (which list models within 10 of the recommended).
+constexpr double kSwapBoundSkip = 10;
+
 } // namespace
 
 bool model_search(const DiagContext &ctx, const Model &start, const FitReport &start_rep,
@@ -236,6 +259,7 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
                     auto s2 = keep;
                     s2.push_back(d->name);
                     if (seen.count(sorted(s2))) continue;
+                    if (swap_bound(ctx, cur, names[k], d->name, cands) >= kSwapBoundSkip) continue;
                     FitJob j = start_job(cur, keep, d->name, starts[i], "search step " + std::to_string(step) + " swaps");
                     if (!j.m.has_effect(d->name)) continue; // it could not be added: no swap
                     jobs.push_back(std::move(j));
@@ -311,6 +335,8 @@ bool search_alternatives(const DiagContext &ctx, const SearchResult &r,
             if (listed.count(s)) continue;
             if (std::any_of(r.visited.begin(), r.visited.end(), [&](auto &v) { return sorted(v.first) == s; }))
                 continue; // fitted by the search: judged above
+            if (swap_bound(ctx, r.model, out_name, d->name, r.cands) >= kSwapBoundSkip)
+                continue; // at least 10 above the recommended model: no alternative
             Alt a{keep, s, jobs.size(), 0};
             a.set.push_back(d->name);
             FitJob j = start_job(r.model, keep, d->name, effect_starts(r.model, d->name, ctx.pos), "alternatives");

@@ -284,6 +284,16 @@ void complete_candidates(const DiagContext &ctx, const Model &base, const Eval &
     }
 }
 
+double swap_bound(const DiagContext &ctx, const Model &base, const std::string &out, const std::string &in,
+                  const std::vector<Candidate> &cands) {
+    size_t p_out = 0;
+    for (size_t k = 0; k < base.effect_count(); ++k)
+        if (base.effect_desc(k).name == out) p_out = base.effect_desc(k).params.size();
+    for (const auto &c : cands)
+        if (c.name == in && !c.screened) return c.bic - double(p_out) * std::log(ctx.n_obs);
+    return -INFINITY;
+}
+
 void mark_confusions(const Eval &base_eval, const V3 &jig, std::vector<Candidate> &cands) {
     const size_t P = base_eval.res.size();
     auto fp_corr = [&](const Candidate &a, const Candidate &b) {

@@ -56,6 +56,18 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
 void complete_candidates(const DiagContext &ctx, const Model &base, const Eval &base_eval,
                          std::vector<Candidate> &cands);
 
+// A one-effect swap's BIC change from `base`, from below, without fitting
+// it: base - out + in is base + in with out's parameters held at their
+// identity, so its chi-square is at least that of base + in (`cands`: the
+// candidates on top of base, fitted in full, as ctx weighs) and it has at
+// most out's parameter count fewer free parameters; its BIC change is then
+// at least in's as a candidate less out's parameters' penalty. -INFINITY
+// when `cands` has no full fit of in. (An inequality between the two
+// models' best fits: a local fit of the swap that found a better minimum
+// than base + in's fit did could pass it.)
+double swap_bound(const DiagContext &ctx, const Model &base, const std::string &out, const std::string &in,
+                  const std::vector<Candidate> &cands);
+
 // Fills each candidate's `confused` list (in_model, plus candidates equally
 // good by BIC, within 10, explaining the same pattern, correlation > 0.9).
 void mark_confusions(const Eval &base_eval, const V3 &jig, std::vector<Candidate> &cands);

@@ -12,7 +12,8 @@ namespace diag {
 
 using nlohmann::json;
 
-bool review_model(const DiagContext &ctx, const Model &model, int n_free, double chi2, json &out, std::string &err) {
+bool review_model(const DiagContext &ctx, const Model &model, int n_free, double chi2, json &out, std::string &err,
+                  const std::vector<Candidate> *cands_fitted) {
     out = json::array();
     const double bic_cur = ctx.bic(chi2, n_free);
     const auto names = reading_effects(model);
@@ -30,8 +31,7 @@ bool review_model(const DiagContext &ctx, const Model &model, int n_free, double
     // from the model's residual): once per effect, not once per removal.
     const auto cands = candidate_effects();
     std::vector<std::vector<ParamValues>> starts(cands.size());
-    for (size_t c = 0; c < cands.size(); ++c)
-        if (!model.has_effect(cands[c]->name)) starts[c] = effect_starts(model, cands[c]->name, ctx.pos);
+    std::vector<char> have_start(cands.size(), 0);
     std::vector<FitJob> jobs;
     std::vector<size_t> removal(names.size());
     std::vector<std::vector<Swap>> swaps(names.size());
@@ -45,6 +45,12 @@ bool review_model(const DiagContext &ctx, const Model &model, int n_free, double
         for (size_t c = 0; c < cands.size(); ++c) {
             const std::string &cn = cands[c]->name;
             if (model.has_effect(cn)) continue;
+            // (better_swap needs a change below -10)
+            if (cands_fitted && swap_bound(ctx, model, name, cn, *cands_fitted) >= -10) continue;
+            if (!have_start[c]) {
+                starts[c] = effect_starts(model, cn, ctx.pos);
+                have_start[c] = 1;
+            }
             FitJob j = start_job(model, keep, cn, starts[c], "reviewing " + name);
             if (!j.m.has_effect(cn)) continue; // it could not be added: no swap
             swaps[i].push_back({jobs.size(), cn});

@@ -6,15 +6,19 @@
 
 #include <nlohmann/json.hpp>
 
+#include "calib/diag_candidates.h"
 #include "calib/diag_context.h"
 
 namespace cdm {
 namespace diag {
 
 // model: fitted; n_free, chi2: its reading-space free parameters and
-// chi-square. False + err when cancelled.
+// chi-square. cands (optional): the candidates on top of it, fitted in
+// full as ctx weighs; a swap whose bound (swap_bound) says it cannot gain
+// the 10 a better_swap needs is then not fitted. False + err when
+// cancelled.
 bool review_model(const DiagContext &ctx, const Model &model, int n_free, double chi2, nlohmann::json &out,
-                  std::string &err);
+                  std::string &err, const std::vector<Candidate> *cands = nullptr);
 
 } // namespace diag
 } // namespace cdm

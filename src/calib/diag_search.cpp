@@ -26,27 +26,9 @@ double x_rms(const Eval &E) {
     return E.err[0].n > 0 ? std::sqrt(E.err[0].ss / E.err[0].n) : 0.0;
 }
 
-// A swap's criterion from below, without fitting it: cur - out + in is
-// cur + in with out's parameters held at their identity, so its chi-square
-// is at least that of cur + in (fitted in full on the step the swap search
-// stands on: `cands`), and it has at most out's parameter count fewer free
-// parameters. Its BIC change from cur is then at least in's change less
-// out's parameters' penalty. -INFINITY when `cands` has no full fit of in.
-// (An inequality between the two models' best fits: a local fit of the swap
-// that found a better minimum than cur + in's fit did could pass it.)
-double swap_bound(const DiagContext &ctx, const Model &cur, const std::string &out,
-                  const std::string &in, const std::vector<Candidate> &cands) {
-    size_t p_out = 0;
-    for (size_t k = 0; k < cur.effect_count(); ++k)
-        if (cur.effect_desc(k).name == out) p_out = cur.effect_desc(k).params.size();
-    for (const auto &c : cands)
-        if (c.name == in && !c.screened) return c.bic - double(p_out) * std::log(ctx.n_obs);
-    return -INFINITY;
-}
-
-// A swap whose bound is this far above the model it leaves is fitted
-// neither by the search (which needs it below -2) nor for the alternatives
-// (which list models within 10 of the recommended).
+// A swap whose bound (swap_bound) is this far above the model it leaves is
+// fitted neither by the search (which needs it below -2) nor for the
+// alternatives (which list models within 10 of the recommended).
 constexpr double kSwapBoundSkip = 10;
 
 } // namespace
@@ -238,11 +220,10 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
             Model sw_model{ctx.g};
             FitReport sw_rep;
             // The starts depend on cur and the effect only, not on what
-            // is swapped out.
+            // is swapped out: found once, for the swaps fitted.
             const auto cands_all = candidate_effects();
             std::vector<std::vector<ParamValues>> starts(cands_all.size());
-            for (size_t i = 0; i < cands_all.size(); ++i)
-                if (!cur.has_effect(cands_all[i]->name)) starts[i] = effect_starts(cur, cands_all[i]->name, ctx.pos);
+            std::vector<char> have_start(cands_all.size(), 0);
             std::vector<FitJob> jobs;
             struct Swap {
                 size_t k;
@@ -260,6 +241,10 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
                     s2.push_back(d->name);
                     if (seen.count(sorted(s2))) continue;
                     if (swap_bound(ctx, cur, names[k], d->name, cands) >= kSwapBoundSkip) continue;
+                    if (!have_start[i]) {
+                        starts[i] = effect_starts(cur, d->name, ctx.pos);
+                        have_start[i] = 1;
+                    }
                     FitJob j = start_job(cur, keep, d->name, starts[i], "search step " + std::to_string(step) + " swaps");
                     if (!j.m.has_effect(d->name)) continue; // it could not be added: no swap
                     jobs.push_back(std::move(j));

@@ -197,7 +197,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
 
     // --- model review
     json review = json::array();
-    if (!review_model(uc, model, model_free, chi2_cur, review, err)) return false;
+    if (!review_model(uc, model, model_free, chi2_cur, review, err, opt.candidates ? &cands : nullptr)) return false;
 
     // --- leave-one-height-out validation
     json validation = nullptr;

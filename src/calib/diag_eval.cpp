@@ -20,20 +20,43 @@ namespace cdm {
 namespace diag {
 
 namespace {
-// for_each_sample with visit run on a second thread, in file order: the
-// rows are parsed here in chunks, and each chunk is visited there while the
-// next is parsed (two buffers). The visits are the same calls in the same
-// order as for_each_sample's, so what they compute is the same bit for bit;
-// the pass takes about the longer of the parse and the visits instead of
+// The rows handed on in chunks (position index, readings), in file order.
+struct SampleChunk {
+    std::vector<size_t> j;
+    std::vector<std::array<double, 4>> l;
+};
+using ChunkVisit = std::function<void(const SampleChunk &)>;
+constexpr size_t kChunk = 4096;
+
+// for_each_sample, the rows handed to visit in chunks of kChunk, in file
+// order, on this thread.
+bool for_each_sample_chunk(const Dataset &d, const ChunkVisit &visit, std::string &err) {
+    SampleChunk c;
+    c.j.reserve(kChunk);
+    c.l.reserve(kChunk);
+    const bool ok = for_each_sample(
+        d,
+        [&](size_t j, const double *l) {
+            c.j.push_back(j);
+            c.l.push_back({l[0], l[1], l[2], l[3]});
+            if (c.j.size() == kChunk) {
+                visit(c);
+                c.j.clear();
+                c.l.clear();
+            }
+        },
+        err);
+    if (ok && !c.j.empty()) visit(c);
+    return ok;
+}
+
+// The same with visit run on a second thread: each chunk is visited there
+// while the next is read here (two buffers). The chunks are the same, in
+// the same order, so what the visits compute is the same bit for bit; the
+// pass takes about the longer of the reading and the visits instead of
 // their sum. In turn on this thread when no thread can be started.
-bool for_each_sample_piped(const Dataset &d, const std::function<void(size_t, const double *)> &visit,
-                           std::string &err) {
-    constexpr size_t kChunk = 4096;
-    struct Chunk {
-        std::vector<size_t> j;
-        std::vector<std::array<double, 4>> l;
-    };
-    Chunk buf[2];
+bool for_each_sample_piped(const Dataset &d, const ChunkVisit &visit, std::string &err) {
+    SampleChunk buf[2];
     for (auto &b : buf) {
         b.j.reserve(kChunk);
         b.l.reserve(kChunk);
@@ -57,7 +80,7 @@ bool for_each_sample_piped(const Dataset &d, const std::function<void(size_t, co
             }
             cv.notify_all();
             try {
-                for (size_t i = 0; i < buf[b].j.size(); ++i) visit(buf[b].j[i], buf[b].l[i].data());
+                visit(buf[b]);
             } catch (...) {
                 std::lock_guard<std::mutex> lk(mu);
                 if (!thrown) thrown = std::current_exception();
@@ -73,7 +96,7 @@ bool for_each_sample_piped(const Dataset &d, const std::function<void(size_t, co
     try {
         worker = std::thread(consume);
     } catch (const std::system_error &) {
-        return for_each_sample(d, visit, err);
+        return for_each_sample_chunk(d, visit, err);
     }
     int fill = 0;
     // Hands buf[fill] over once the other buffer is visited; fills that one next.
@@ -269,31 +292,52 @@ bool sample_pass(const Dataset &d, const std::vector<PreparedPos> &pos, const st
     std::vector<Eval> sv(seeds.size(), init_eval(P));
     std::vector<std::vector<V3>> sum(seeds.size(), std::vector<V3>(P, V3::Zero()));
     std::vector<std::vector<int>> cnt(seeds.size(), std::vector<int>(P, 0));
-    auto visit = [&](size_t j, const double *ls) {
-        if (j >= P) return; // for_each_sample checked the positions; pos comes from the same dataset
-        const Eigen::Vector4d dl(ls[0] - pos[j].mean(0), ls[1] - pos[j].mean(1), ls[2] - pos[j].mean(2),
-                                 ls[3] - pos[j].mean(3));
+    // A chunk at a time: each evaluation's maxima over the chunk's samples
+    // (a maximum is the same in any order), then the seeds' sums sample by
+    // sample, in file order.
+    std::vector<Eigen::Vector4d> dl;
+    auto visit = [&](const SampleChunk &c) {
+        const size_t n = c.j.size();
+        dl.resize(n);
+        for (size_t s = 0; s < n; ++s) {
+            const size_t j = c.j[s];
+            if (j >= P) continue; // for_each_sample checked the positions; pos comes from the same dataset
+            for (int k = 0; k < 4; ++k) dl[s](k) = c.l[s][size_t(k)] - pos[j].mean(k);
+        }
         for (Eval *E : visited) {
-            if (!E->ok[j]) continue;
-            const V3 dev = E->Jp[j] * dl;
+            double me[3] = {0, 0, 0}, mw[3] = {0, 0, 0};
+            for (size_t s = 0; s < n; ++s) {
+                const size_t j = c.j[s];
+                if (j >= P || !E->ok[j]) continue;
+                const V3 dev = E->Jp[j] * dl[s];
+                for (int a = 0; a < 3; ++a) {
+                    me[a] = std::max(me[a], std::fabs(E->res[j](a) + dev(a)));
+                    mw[a] = std::max(mw[a], std::fabs(dev(a)));
+                }
+            }
             for (int a = 0; a < 3; ++a) {
-                E->err[a].add_extreme(E->res[j](a) + dev(a));
-                E->within[a].add_extreme(dev(a));
+                E->err[a].add_extreme(me[a]);
+                E->within[a].add_extreme(mw[a]);
             }
         }
-        for (size_t k = 0; k < seeds.size(); ++k) {
-            double p[3];
-            if (!triangulate(*seeds[k].geometry, ls, p)) {
-                ++sv[k].bad_samples;
-                continue;
+        for (size_t s = 0; s < n; ++s) {
+            const size_t j = c.j[s];
+            if (j >= P) continue;
+            const double *ls = c.l[s].data();
+            for (size_t k = 0; k < seeds.size(); ++k) {
+                double p[3];
+                if (!triangulate(*seeds[k].geometry, ls, p)) {
+                    ++sv[k].bad_samples;
+                    continue;
+                }
+                if (seeds[k].ellipsoid) p[0] -= seeds[k].ellipsoid->xc(p[1], p[2]);
+                for (int a = 0; a < 3; ++a) sv[k].err[a].add(p[a] - pos[j].ref(a));
+                sum[k][j] += V3(p[0], p[1], p[2]);
+                ++cnt[k][j];
             }
-            if (seeds[k].ellipsoid) p[0] -= seeds[k].ellipsoid->xc(p[1], p[2]);
-            for (int a = 0; a < 3; ++a) sv[k].err[a].add(p[a] - pos[j].ref(a));
-            sum[k][j] += V3(p[0], p[1], p[2]);
-            ++cnt[k][j];
         }
     };
-    if (!(piped ? for_each_sample_piped(d, visit, err) : for_each_sample(d, visit, err))) return false;
+    if (!(piped ? for_each_sample_piped(d, visit, err) : for_each_sample_chunk(d, visit, err))) return false;
     for (auto &[to, from] : copies)
         for (int a = 0; a < 3; ++a) {
             to->err[a].mx = from->err[a].mx;

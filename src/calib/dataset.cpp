@@ -93,14 +93,18 @@ public:
         if (v == last_ || full_) return; // quantised data repeats itself
         last_ = v;
         // A position's samples repeat a few values: one seen lately (a
-        // small table by the value's bits) is not sorted in again.
+        // small table by the value's bits; it is in sorted_ or pending_
+        // already) is not sorted in again. The flushes still come every
+        // 4096 values, as when each was kept, so the set kept once full is
+        // the same.
         uint64_t bits;
         std::memcpy(&bits, &v, sizeof bits);
         double &seen = recent_[size_t((bits * 0x9E3779B97F4A7C15ull) >> 54)];
-        if (seen == v) return;
-        seen = v;
-        pending_.push_back(v);
-        if (pending_.size() >= 4096) flush();
+        if (seen != v) {
+            seen = v;
+            pending_.push_back(v);
+        }
+        if (++counted_ >= 4096) flush();
     }
     // Smallest step between distinct values (> 1e-9), 0 when there is none.
     double min_step() {
@@ -113,6 +117,7 @@ public:
 
 private:
     void flush() {
+        counted_ = 0;
         if (pending_.empty()) return;
         std::sort(pending_.begin(), pending_.end());
         pending_.erase(std::unique(pending_.begin(), pending_.end()), pending_.end());
@@ -125,6 +130,7 @@ private:
     }
     std::vector<double> sorted_, pending_;
     std::vector<double> recent_ = std::vector<double>(1024, NAN); // (NaN equals nothing)
+    size_t counted_ = 0; // values since the last flush, each kept or seen lately
     double last_ = NAN;
     bool full_ = false;
 };
@@ -453,6 +459,7 @@ void block_values(const Parser &p, Block &bk, std::vector<std::pair<const char *
     bk.lines = 0;
     if (bk.text.size() > UINT32_MAX) { // (a text beyond a file's bound, parse_dataset's: offsets of 32 bits)
         bk.slow = 0;
+        bk.slow_rel = 0;
         return;
     }
     const char *const base = bk.text.data(), *const end = base + bk.text.size();
@@ -499,17 +506,28 @@ bool block_rows(Parser &p, const Block &bk, std::string &err) {
 // Feeds `read(buf, n)` (bytes read, 0 at the end, < 0 on error) to the
 // parser line by line, in blocks of whole lines of about kBlock bytes (a
 // line longer than that is held whole), with at most kAhead blocks read
-// ahead: memory stays bounded whatever the file's length. Once the header
-// is read, a second thread finds the values of blocks ahead while this
-// one takes the rows of the block in turn (Block); in turn on this thread
-// alone when the input is one block, the machine has one processor, or no
-// thread can be started.
-template <class Read> bool stream_lines(Read read, Parser &p, std::string &err) {
+// ahead: memory stays bounded by the file's own bound (io::kDatasetMaxBytes;
+// five blocks of very long lines may hold most of it) and otherwise by the
+// blocks. Once the header is read and two blocks wait, a second thread
+// finds the values of blocks ahead while this one takes the rows of the
+// block in turn (Block); in turn on this thread alone when the input is
+// shorter, the machine has one processor, or no thread can be started.
+// read_error (optional): set when the failure returned is read's (a fault
+// in the lines read before it is returned first, as in turn).
+template <class Read> bool stream_lines(Read read, Parser &p, std::string &err, bool *read_error = nullptr) {
     constexpr size_t kBlock = size_t(1) << 18, kAhead = 4;
     std::vector<char> carry; // bytes read after the last block's last '\n'
-    bool eof = false;
-    // The next block: 1, or 0 at the end, or -1 when read failed.
+    bool eof = false, failed = false;
+    // A read that failed (err says why) ends the reading; the lines read
+    // before it are still taken first, as a reading in turn would have
+    // taken them, and a fault among them is the error.
+    auto read_failed = [&] {
+        if (read_error) *read_error = true;
+        return false;
+    };
+    // The next block: 1, or 0 at the end, or -1 once a read failed.
     auto next = [&](Block &bk) -> int {
+        if (failed) return -1;
         bk.text.swap(carry);
         carry.clear();
         for (;;) {
@@ -517,7 +535,14 @@ template <class Read> bool stream_lines(Read read, Parser &p, std::string &err) 
             const size_t have = bk.text.size();
             bk.text.resize(have + kBlock);
             const long n = read(bk.text.data() + have, kBlock);
-            if (n < 0) return -1;
+            if (n < 0) {
+                failed = true;
+                bk.text.resize(have);
+                const void *nl = memrchr(bk.text.data(), '\n', have);
+                if (!nl) return -1;
+                bk.text.resize(size_t(static_cast<const char *>(nl) - bk.text.data()) + 1);
+                return 1; // its whole lines; the failure next time
+            }
             bk.text.resize(have + size_t(n));
             if (n == 0) {
                 eof = true;
@@ -536,19 +561,14 @@ template <class Read> bool stream_lines(Read read, Parser &p, std::string &err) 
     for (size_t k = 0; k <= kAhead; ++k) pool.push_back(std::make_unique<Block>());
     // In turn until the header is read (every line to Parser::line).
     Block *first = pool[0].get();
-    for (;;) {
+    while (!p.have_header()) {
         const int r = next(*first);
-        if (r < 0) return false;
+        if (r < 0) return read_failed();
         if (r == 0) return p.finish(err);
-        if (!p.have_header()) {
-            first->rows.clear();
-            first->slow = 0;
-            first->slow_rel = 0;
-        } else {
-            block_values(p, *first, f);
-        }
+        first->rows.clear();
+        first->slow = 0;
+        first->slow_rel = 0;
         if (!block_rows(p, *first, err)) return false;
-        if (p.have_header()) break;
     }
     std::mutex mu;
     std::condition_variable cv;
@@ -570,7 +590,10 @@ template <class Read> bool stream_lines(Read read, Parser &p, std::string &err) 
         cv.notify_all();
     };
     std::thread helper;
-    if (!eof && std::thread::hardware_concurrency() > 1) {
+    // Started once two blocks wait (a shorter input is read in turn).
+    bool helper_tried = std::thread::hardware_concurrency() <= 1;
+    auto start_helper = [&] {
+        helper_tried = true;
         try {
             helper = std::thread([&] {
                 std::vector<std::pair<const char *, const char *>> fields;
@@ -597,7 +620,7 @@ template <class Read> bool stream_lines(Read read, Parser &p, std::string &err) 
         } catch (const std::system_error &) {
             // in turn, on this thread
         }
-    }
+    };
     // The helper ends however this does (an error, a tap that throws).
     struct Join {
         std::thread &t;
@@ -620,8 +643,8 @@ template <class Read> bool stream_lines(Read read, Parser &p, std::string &err) 
         while (queue.size() < kAhead && !spare.empty()) {
             Block *b = spare.back();
             const int r = next(*b);
-            if (r < 0) return false;
-            if (r == 0) break;
+            if (r < 0 && queue.empty()) return read_failed();
+            if (r <= 0) break;
             spare.pop_back();
             {
                 std::lock_guard<std::mutex> lk(mu);
@@ -631,6 +654,7 @@ template <class Read> bool stream_lines(Read read, Parser &p, std::string &err) 
             cv.notify_all();
         }
         if (queue.empty()) break;
+        if (!helper_tried && queue.size() >= 2) start_helper();
         Block *front = queue.front();
         for (;;) { // front's values: found here, or by the helper (this thread meanwhile finds another's)
             Block *mine;
@@ -742,14 +766,9 @@ bool load_dataset(const std::string &path, Dataset &out, std::string &err, bool 
     }
     // A read error part-way is an I/O failure too, not a malformed file.
     bool read_failed = false;
-    auto reader = [&, r = SourceReader{*s, err}](char *buf, size_t n) mutable {
-        const long k = r(buf, n);
-        read_failed = k < 0;
-        return k;
-    };
     Dataset d;
     Parser p(path, d, nullptr, nullptr);
-    if (!stream_lines(reader, p, err)) {
+    if (!stream_lines(SourceReader{*s, err}, p, err, &read_failed)) {
         if (io_failure) *io_failure = read_failed;
         return false;
     }

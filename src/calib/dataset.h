@@ -129,9 +129,9 @@ std::string dataset_fault_text(DatasetFault f, int column, const std::string &na
 
 // Parses and groups, streaming (load_dataset reads the file in blocks of
 // whole lines of 256 KiB, at most four ahead, a line longer than that held
-// whole; a second thread converts the fields of blocks ahead while the
-// rows are grouped in file order, so every statistic is the same, bit for
-// bit, as when read in turn). On error returns false with `err` naming the file,
+// whole; on a longer input a second thread converts the fields of blocks
+// ahead while the rows are grouped in file order, so every statistic is
+// the same, bit for bit, as when read in turn). On error returns false with `err` naming the file,
 // line and column (1-based), e.g. "jig.csv:17:6: l2 is not a number: 'abc'".
 // Refuses duplicate columns, non-finite values and magnitudes outside the
 // ranges above; a field echoed in a message is cut to ~40 characters.

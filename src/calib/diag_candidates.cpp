@@ -13,6 +13,7 @@
 #include "calib/diag_findings.h"
 #include "calib/diag_stats.h"
 #include "model/effect.h"
+#include "model/evaluator.h"
 
 namespace cdm {
 namespace diag {
@@ -286,12 +287,36 @@ void complete_candidates(const DiagContext &ctx, const Model &base, const Eval &
 
 double swap_bound(const DiagContext &ctx, const Model &base, const std::string &out, const std::string &in,
                   const std::vector<Candidate> &cands) {
+    const Candidate *c = nullptr;
+    for (const auto &x : cands)
+        if (x.name == in && !x.screened) c = &x;
+    if (!c) return -INFINITY;
     size_t p_out = 0;
+    bool builtin = false;
     for (size_t k = 0; k < base.effect_count(); ++k)
-        if (base.effect_desc(k).name == out) p_out = base.effect_desc(k).params.size();
-    for (const auto &c : cands)
-        if (c.name == in && !c.screened) return c.bic - double(p_out) * std::log(ctx.n_obs);
-    return -INFINITY;
+        if (base.effect_desc(k).name == out) {
+            p_out = base.effect_desc(k).params.size();
+            builtin = base.effect_desc(k).stage != Stage::User;
+        }
+    // A user effect need not have an identity within its bounds.
+    if (!builtin) return -INFINITY;
+    // Nested only when no other effect's gauge depends on out (with the jig
+    // transform fitted, the anchors' common rigid motion is fixed; with a
+    // gain, the stretch's constant term): the same free directions for
+    // every other effect with out and without it.
+    std::vector<std::string> keep;
+    for (const auto &e : reading_effects(c->m))
+        if (e != out) keep.push_back(e);
+    const Model without = model_with(c->m, keep, "");
+    for (size_t k = 0; k < c->m.effect_count(); ++k) {
+        const EffectDesc &d = c->m.effect_desc(k);
+        if (d.name == out || d.stage == Stage::Position) continue;
+        for (size_t w = 0; w < without.effect_count(); ++w)
+            if (without.effect_desc(w).name == d.name &&
+                effect_gauge_basis(c->m, k).cols() != effect_gauge_basis(without, w).cols())
+                return -INFINITY;
+    }
+    return c->bic - double(p_out) * std::log(ctx.n_obs);
 }
 
 void mark_confusions(const Eval &base_eval, const V3 &jig, std::vector<Candidate> &cands) {

@@ -56,15 +56,19 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
 void complete_candidates(const DiagContext &ctx, const Model &base, const Eval &base_eval,
                          std::vector<Candidate> &cands);
 
-// A one-effect swap's BIC change from `base`, from below, without fitting
-// it: base - out + in is base + in with out's parameters held at their
-// identity, so its chi-square is at least that of base + in (`cands`: the
-// candidates on top of base, fitted in full, as ctx weighs) and it has at
-// most out's parameter count fewer free parameters; its BIC change is then
-// at least in's as a candidate less out's parameters' penalty. -INFINITY
-// when `cands` has no full fit of in. (An inequality between the two
-// models' best fits: a local fit of the swap that found a better minimum
-// than base + in's fit did could pass it.)
+// A one-effect swap's BIC change from `base`, estimated from below without
+// fitting it: base - out + in is base + in with out's parameters held at
+// their identity, so its chi-square is at least that of base + in (`cands`:
+// the candidates on top of base, fitted in full, as ctx weighs) and it has
+// at most out's parameter count fewer free parameters; its BIC change is
+// then at least in's as a candidate less out's parameters' penalty. Not a
+// proof: the inequality is between best fits of the data term, and each fit
+// minimises it plus a weak prior anchored at its own start (a swap's local
+// fit that found a better minimum, or a prior that moved, could pass it;
+// callers keep a margin). -INFINITY (no bound) when `cands` has no full fit
+// of in, when out is a user effect (it need not have an identity within
+// its bounds), or when another effect's gauge depends on out (the two
+// models are then not nested).
 double swap_bound(const DiagContext &ctx, const Model &base, const std::string &out, const std::string &in,
                   const std::vector<Candidate> &cands);
 

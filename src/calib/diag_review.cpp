@@ -45,8 +45,8 @@ bool review_model(const DiagContext &ctx, const Model &model, int n_free, double
         for (size_t c = 0; c < cands.size(); ++c) {
             const std::string &cn = cands[c]->name;
             if (model.has_effect(cn)) continue;
-            // (better_swap needs a change below -10)
-            if (cands_fitted && swap_bound(ctx, model, name, cn, *cands_fitted) >= -10) continue;
+            // (better_swap needs a change below -10; 5 of margin, as the search's)
+            if (cands_fitted && swap_bound(ctx, model, name, cn, *cands_fitted) >= -5) continue;
             if (!have_start[c]) {
                 starts[c] = effect_starts(model, cn, ctx.pos);
                 have_start[c] = 1;

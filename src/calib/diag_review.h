@@ -15,7 +15,7 @@ namespace diag {
 // model: fitted; n_free, chi2: its reading-space free parameters and
 // chi-square. cands (optional): the candidates on top of it, fitted in
 // full as ctx weighs; a swap whose bound (swap_bound) says it cannot gain
-// the 10 a better_swap needs is then not fitted. False + err when
+// the 10 a better_swap needs (with a margin of 5) is then not fitted. False + err when
 // cancelled.
 bool review_model(const DiagContext &ctx, const Model &model, int n_free, double chi2, nlohmann::json &out,
                   std::string &err, const std::vector<Candidate> *cands = nullptr);

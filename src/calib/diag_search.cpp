@@ -28,8 +28,10 @@ double x_rms(const Eval &E) {
 
 // A swap whose bound (swap_bound) is this far above the model it leaves is
 // fitted neither by the search (which needs it below -2) nor for the
-// alternatives (which list models within 10 of the recommended).
-constexpr double kSwapBoundSkip = 10;
+// alternatives (which list models within 10 of the recommended): 10 and a
+// margin of 5 for what the bound leaves out (the fits' weak prior; the
+// recommended model's BIC under its own weights after a swap moved).
+constexpr double kSwapBoundSkip = 15;
 
 } // namespace
 
@@ -321,7 +323,7 @@ bool search_alternatives(const DiagContext &ctx, const SearchResult &r,
             if (std::any_of(r.visited.begin(), r.visited.end(), [&](auto &v) { return sorted(v.first) == s; }))
                 continue; // fitted by the search: judged above
             if (swap_bound(ctx, r.model, out_name, d->name, r.cands) >= kSwapBoundSkip)
-                continue; // at least 10 above the recommended model: no alternative
+                continue; // 10 above the recommended model and more: no alternative
             Alt a{keep, s, jobs.size(), 0};
             a.set.push_back(d->name);
             FitJob j = start_job(r.model, keep, d->name, effect_starts(r.model, d->name, ctx.pos), "alternatives");

@@ -204,6 +204,7 @@ def run(uri, seconds, scale, control_hz=500.0, feedforward=True, verbose=True):
     mapper = TeleopMapper(tool_pos, tool_quat, scale)
     pos_err, rot_err, speeds = [], [], []
     clutch_presses, last_clutch, prev_target = 0, False, None
+    max_late = 0.0  # how late a control cycle started (s): a stall of this process
     with cdm.open(uri) as dev:
         pose = dev.wait_pose(2.0, after=0)  # the first pose, even one already published
         info = dev.info()
@@ -217,6 +218,7 @@ def run(uri, seconds, scale, control_hz=500.0, feedforward=True, verbose=True):
             now = time.monotonic() - t0
             if now >= seconds:
                 break
+            max_late = max(max_late, now - next_t)
             if now < next_t:
                 time.sleep(next_t - now)
             next_t += period
@@ -248,6 +250,7 @@ def run(uri, seconds, scale, control_hz=500.0, feedforward=True, verbose=True):
         "max_deg": float(r.max()),
         "rms_target_speed_mm_s": float(np.sqrt(np.mean(np.square(speeds))) * 1000.0) if speeds else 0.0,
         "clutch_presses": int(clutch_presses),
+        "max_late_s": float(max_late),
         "sim_time_s": float(arm.data.time),
         # What a plain position servo would lag by at this speed: the yardstick.
         "servo_lag_mm": float(np.sqrt(np.mean(np.square(speeds))) * 1000.0 * arm.lag_s.max()) if speeds else 0.0,
@@ -275,6 +278,14 @@ def main(argv=None):
     if not a.seconds > 0 or not a.scale > 0:
         ap.error("--seconds and --scale must be positive")
     res = run(a.uri, a.seconds, a.scale, feedforward=not a.no_feedforward)
+    # A cycle that started more than 50 ms (25 periods) late: the machine did
+    # not run this process in time, and the arm was stepped across the stall
+    # on a stale set point. Tracking through it says nothing of the servos:
+    # not judged (exit 77, which ctest reports as skipped), and said so.
+    if a.check and res["max_late_s"] > 0.05:
+        print("mujoco_teleop: a control cycle started %.0f ms late (the process was not run in time): "
+              "tracking not judged" % (1000 * res["max_late_s"]))
+        return 77
     # What remains with feed-forward is second order (acceleration, the 15 Hz
     # velocity filter's delay, one control period): well under a quarter of
     # the lag a plain servo shows at the same speed.

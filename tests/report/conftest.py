@@ -12,9 +12,28 @@ import pytest
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 PYROOT = ROOT / "bindings" / "python"
-# CDM_REPORT_SCRIPT: test another copy of the tool (e.g. a deliberately broken one).
+# CDM_REPORT_SCRIPT: test another copy of the tool (e.g. a deliberately broken one);
+# its package is the report/ directory beside it.
 SCRIPT = Path(os.environ.get("CDM_REPORT_SCRIPT", PYROOT / "cdm" / "report.py"))
 sys.path.insert(0, str(HERE))
+
+
+def report_package():
+    """The report package beside SCRIPT, imported as SCRIPT imports it (under the name
+    cdm_report, without cdm/__init__.py), with its submodules loaded."""
+    if "cdm_report" not in sys.modules:
+        import importlib.util
+        pkg = SCRIPT.parent / "report"
+        spec = importlib.util.spec_from_file_location(
+            "cdm_report", pkg / "__init__.py", submodule_search_locations=[str(pkg)])
+        m = importlib.util.module_from_spec(spec)
+        sys.modules["cdm_report"] = m
+        spec.loader.exec_module(m)
+    import cdm_report.drawing  # noqa: F401
+    import cdm_report.figures  # noqa: F401
+    import cdm_report.page  # noqa: F401
+    import cdm_report.sections.variables  # noqa: F401
+    return sys.modules["cdm_report"]
 
 
 def run_report(*args, module=False):

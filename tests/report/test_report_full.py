@@ -137,9 +137,8 @@ def test_reported_run_is_the_last(report):
 
 def test_before_option_and_python_api(tmp_path):
     """--before B D == B D; write_report takes dicts with numpy arrays (cdm.diagnose's)."""
-    import importlib.util
     import numpy as np
-    from conftest import SCRIPT
+    from conftest import report_package
     d = _synth.make_diag(n=5, heights=(40, 60))
     b = _synth.nominal_run(n=5, heights=(40, 60))
     pd, pb = _synth.write(tmp_path / "d.json", d), _synth.write(tmp_path / "b.json", b)
@@ -148,9 +147,7 @@ def test_before_option_and_python_api(tmp_path):
     html1 = check_page(tmp_path / "r1")
     assert "compared with the earlier b.json" in html1 and (tmp_path / "r1/comparison.png").exists()
 
-    spec = importlib.util.spec_from_file_location("cdm_report_api", SCRIPT)
-    m = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(m)
+    m = report_package()
     dn = json.loads(json.dumps(d))
     dn["positions"] = {k: np.asarray(v) for k, v in dn["positions"].items()}
     dn["explained"] = np.bool_(True)

@@ -129,20 +129,20 @@ def test_single_position(tmp_path):
 
 def test_unit_helpers():
     m = _module()
-    assert m.fmt_mm(0.78331) == "0.7833" and m.fmt_mm(None) == "n/a"
-    assert m.fmt_mm(math.nan) == "n/a" and m.fmt_mm(True) == "n/a"
+    assert m.page.fmt_mm(0.78331) == "0.7833" and m.page.fmt_mm(None) == "n/a"
+    assert m.page.fmt_mm(math.nan) == "n/a" and m.page.fmt_mm(True) == "n/a"
     import numpy as np
     c = (np.arange(25) - 12) * 5.0
     y, z = np.meshgrid(c, c)
-    g = m._regular_grid(y.ravel(), z.ravel())
+    g = m.figures._regular_grid(y.ravel(), z.ravel())
     assert g is not None and len(g[0]) == 25 and len(g[1]) == 25
     rng = np.random.default_rng(0)
-    assert m._regular_grid(rng.uniform(-60, 60, 50), rng.uniform(-60, 60, 50)) is None
-    assert m._finding_target("length_3") == ("length", 3)
-    assert m._finding_target("l2") == ("length", 2)
-    assert m._finding_target("cable_angle_4") == ("angle", 4)
-    assert m._finding_target("distance_from_centre") == ("radius", None)
-    assert m._finding_target("height") == ("height", None)
+    assert m.figures._regular_grid(rng.uniform(-60, 60, 50), rng.uniform(-60, 60, 50)) is None
+    assert m.sections.variables._finding_target("length_3") == ("length", 3)
+    assert m.sections.variables._finding_target("l2") == ("length", 2)
+    assert m.sections.variables._finding_target("cable_angle_4") == ("angle", 4)
+    assert m.sections.variables._finding_target("distance_from_centre") == ("radius", None)
+    assert m.sections.variables._finding_target("height") == ("height", None)
 
 
 def test_nominal_run_compares_with_ellipsoid(tmp_path):
@@ -154,12 +154,8 @@ def test_nominal_run_compares_with_ellipsoid(tmp_path):
 
 
 def _module():
-    import importlib.util
-    from conftest import SCRIPT
-    spec = importlib.util.spec_from_file_location("cdm_report_under_test", SCRIPT)
-    m = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(m)
-    return m
+    from conftest import report_package
+    return report_package()
 
 
 def test_findings_routed_to_their_panels():
@@ -174,7 +170,7 @@ def test_findings_routed_to_their_panels():
          {"variable": "length_4", "kind": "periodic", "axis": "l4", "period_mm": 7.0,
           "text": "ripple on cable 4"},
          {"variable": "temperature", "kind": "trend", "axis": "x", "text": "unplaceable"}]
-    pos, length, periods = m._route_findings(f)
+    pos, length, periods = m.sections.variables._route_findings(f)
     assert pos == {("length", 0): ["x vs l2"], ("angle", 2): ["z vs angle 3"],
                    ("radius", 1): ["y vs r"], ("height", 0): ["x vs h"]}
     assert length == {None: ["the cable-length residual repeats every 12.50 mm"],
@@ -195,9 +191,9 @@ def test_outlier_does_not_flatten_the_colour_scale(tmp_path):
     rng = np.random.default_rng(3)
     v = rng.normal(0, 0.05, 625)
     barrel = -np.linspace(0, 2, 625)
-    assert not m._symnorm(barrel).clipped and m._symnorm(barrel).vmax == 2.0
+    assert not m.figures._symnorm(barrel).clipped and m.figures._symnorm(barrel).vmax == 2.0
     v[7] = 50.0  # one wild position (e.g. a mis-seated pin)
-    n = m._symnorm(v)
+    n = m.figures._symnorm(v)
     assert n.clipped and n.vmax < 1.0
     d = _synth.make_diag(n=9, heights=(40, 60))
     d["positions"]["residual_mm"][7] = [50.0, -50.0, 50.0]
@@ -205,13 +201,8 @@ def test_outlier_does_not_flatten_the_colour_scale(tmp_path):
 
 
 def _imported():
-    """cdm.report imported as the package module, so that it may draw in worker processes."""
-    import sys
-    from conftest import PYROOT
-    if str(PYROOT) not in sys.path:
-        sys.path.insert(0, str(PYROOT))
-    import cdm.report
-    return cdm.report
+    """The report package as the tool imports it, so that it may draw in worker processes."""
+    return _module()
 
 
 @pytest.mark.parametrize("jobs", ["1", "2"])
@@ -220,11 +211,11 @@ def test_a_failing_figure_is_a_note(tmp_path, monkeypatch, capsys, jobs):
     place; the other figures and the page are written."""
     m = _imported()
     monkeypatch.setenv("CDM_REPORT_JOBS", jobs)
-    assert m._workers(14) == int(jobs)  # "2": really drawn in worker processes
+    assert m.drawing._workers(14) == int(jobs)  # "2": really drawn in worker processes
 
     def broken(*a, **k):
         raise RuntimeError("drawing failed on purpose")
-    monkeypatch.setattr(m, "_dots", broken)  # used by the two residual-versus-variable figures
+    monkeypatch.setattr(m.sections.variables, "_dots", broken)  # used by the two residual-versus-variable figures
     out = tmp_path / "r"
     m.write_report([_synth.make_diag(n=5, heights=(40, 60))], str(out))
     html = check_page(out)
@@ -249,7 +240,7 @@ def test_page_is_the_same_drawn_in_one_or_two_processes(tmp_path, monkeypatch):
 
 def test_redrawn_figures_are_the_figures_drawn_anew(tmp_path, monkeypatch):
     """The residual maps after the first height and the fingerprints after the first
-    are drawn into the process's last figure of their layout (report._FRAMES); they
+    are drawn into the process's last figure of their layout (figures._FRAMES); they
     must be pixel for pixel the figures drawn from nothing, whatever was marked or
     scaled in the figure before (here: failing crosses at some heights only, a
     fingerprint with an outlier so that its colour scale is clipped)."""
@@ -271,7 +262,7 @@ def test_redrawn_figures_are_the_figures_drawn_anew(tmp_path, monkeypatch):
     class Forgetful(dict):  # keeps no figure: every one drawn anew
         def __setitem__(self, key, value):
             pass
-    monkeypatch.setattr(m, "_FRAMES", Forgetful())
+    monkeypatch.setattr(m.figures, "_FRAMES", Forgetful())
     m.write_report([d], str(tmp_path / "anew"))
 
     import matplotlib.image as mpimg
@@ -288,13 +279,13 @@ def test_a_group_of_figures_is_drawn_by_few_processes():
     m = _imported()
 
     def fig(name, weight, group=None):
-        return m._Figure(name, None, "", "", weight, group, 2 if group else 0)
+        return m.page._Figure(name, None, "", "", weight, group, 2 if group else 0)
     figures = ([fig(f"map{i}", 2, "maps") for i in range(5)]
                + [fig("a", 7), fig("b", 3), fig("c", 2), fig("d", 1)])
-    two = m._tasks(figures, 2)
+    two = m.drawing._tasks(figures, 2)
     assert sorted(i for t in two for i in t) == list(range(len(figures)))
     assert [0, 1, 2, 3, 4] in two  # the maps (10 + 2 to build, of 25) in one process of two
-    four = m._tasks(figures, 4)
+    four = m.drawing._tasks(figures, 4)
     assert sorted(i for t in four for i in t) == list(range(len(figures)))
     assert [t for t in four if 0 in t][0] != [0, 1, 2, 3, 4]  # split over two of four
     assert four[0] == [0, 1, 2] and four[1] == [5]  # heaviest first

@@ -1,0 +1,105 @@
+"""The HTML page: number formatting, escaping, tables, and the Page that the
+sections fill in order (HTML parts and the places of figures still to draw)."""
+
+import html
+
+from .loading import _finite
+
+
+def fmt_mm(v):
+    """Millimetre statistics: 4 decimals as the seed's Table 1; 'n/a' if missing."""
+    return f"{v:.4f}" if _finite(v) else "n/a"
+
+
+def fmt_g(v, digits=6):
+    return f"{v:.{digits}g}" if _finite(v) else "n/a"
+
+
+def _e(s):
+    return html.escape(str(s), quote=True)
+
+
+class _Figure:
+    """One figure of the page: ``draw()`` returns a matplotlib Figure.
+
+    Sections describe their figures instead of drawing them, so that the
+    drawing (nearly all of the report's time) can be spread over processes;
+    the page keeps the figure's place, filled in once it is drawn or failed.
+    ``weight`` is a rough cost (tenths of a second, measured), to start the
+    heavy ones first. Figures of one ``group`` (the residual maps, the
+    fingerprints) redraw one figure of their layout in a process (see _FRAMES),
+    which costs ``build`` more the first time: they are drawn by as few
+    processes as keeps the load even.
+    """
+
+    def __init__(self, name, draw, alt, caption, weight=1, group=None, build=0):
+        self.name, self.draw, self.alt, self.caption = name, draw, alt, caption
+        self.weight, self.group, self.build = weight, group, build
+        self.error = None  # why it could not be drawn, or None
+
+
+class Page:
+    """Collects HTML sections and notes about what was missing."""
+
+    def __init__(self):
+        self.parts = []  # HTML strings and _Figure places, in page order
+        self.notes = []
+        self.toc = []  # section titles (already escaped HTML), in order
+        self.figures = []
+
+    def note(self, text):
+        self.notes.append(text)
+
+    def figure(self, name, draw, alt, caption, weight=1, group=None, build=0):
+        f = _Figure(name, draw, alt, caption, weight, group, build)
+        self.figures.append(f)
+        self.parts.append(f)
+
+    def add(self, s):
+        # Section headings get an anchor for the table of contents.
+        if s.startswith("<h2>") and s.endswith("</h2>"):
+            self.toc.append(s[4:-5])
+            s = f'<h2 id="s{len(self.toc)}">{s[4:-5]}</h2>'
+        self.parts.append(s)
+
+
+def _table(header, rows, cls=""):
+    h = "".join(f"<th>{_e(c)}</th>" for c in header)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
+    return f'<table class="{cls}"><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>'
+
+
+def _img(name, alt, caption):
+    return (f'<figure><img src="{_e(name)}" alt="{_e(alt)}">'
+            f"<figcaption>{caption}</figcaption></figure>")
+
+
+CSS = """
+body{font-family:system-ui,sans-serif;max-width:1200px;margin:1em auto;padding:0 1em;color:#222}
+h1{font-size:1.5em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:1.6em}
+table{border-collapse:collapse;margin:.6em 0;font-size:.88em}
+th,td{border:1px solid #ccc;padding:.25em .5em;text-align:right}
+th{background:#f2f2f2}td:first-child,th:first-child{text-align:left}
+table.facts td{text-align:left}
+figure{margin:1em 0}figure img{max-width:100%;border:1px solid #ddd}
+figcaption{font-size:.88em;color:#444;max-width:60em}
+.verdict{font-size:1.05em;background:#f7f7f2;padding:.5em .8em;border-left:4px solid #888}
+.ok{color:#176117;font-weight:bold}.bad{color:#a11;font-weight:bold}.na{color:#777}
+.notes{background:#fff7e0;border:1px solid #e0c060;padding:.4em 1em;font-size:.9em}
+"""
+
+
+def document(title, files, notes, toc, parts):
+    """The whole page: title, source files (escaped HTML), notes, contents, parts."""
+    notes_html = ""
+    if notes:
+        notes_html = ('<div class="notes"><b>Notes</b> (parts of the diagnosis that were missing '
+                      'or unusable):<ul>' + "".join(f"<li>{_e(n)}</li>" for n in notes)
+                      + "</ul></div>")
+    return (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<title>{_e(title)}</title><style>{CSS}</style></head><body>"
+            f"<h1>{_e(title)}</h1><p>From {files}.</p>{notes_html}"
+            + '<nav class="toc"><b>Contents</b><ol>'
+            + "".join(f'<li><a href="#s{i + 1}">{t}</a></li>' for i, t in enumerate(toc))
+            + "</ol></nav>"
+            + "\n".join(parts) + "</body></html>\n")

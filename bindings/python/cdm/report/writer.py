@@ -1,0 +1,115 @@
+"""The report's driver: the sections in page order, the figures drawn, the files
+moved into place; and the command line."""
+
+import argparse
+import os
+import shutil
+import sys
+import tempfile
+
+import matplotlib.pyplot as plt
+
+from . import sections
+from .drawing import _draw_all
+from .loading import DiagnosisError, Positions, _label, _run
+from .page import Page, _Figure, _e, _img, document
+
+# Every figure this package writes starts with one of these; stale ones from an
+# earlier report in the same DIR are removed when a new report is moved in.
+FIGURE_PREFIXES = ("error_summary", "residual_map_", "residual_cut", "candidates",
+                   "fingerprint_", "vs_cable_length", "vs_variables", "comparison", "search_path")
+
+
+def _render(runs, tmp):
+    """Draw everything for runs[-1] (+ comparison) into tmp; return (html, figs)."""
+    path, diag = runs[-1]
+    page = Page()
+    P = Positions(diag, page)
+    for s in sections.in_order(runs, page, P):
+        try:
+            s()
+        except Exception as e:  # a broken section must not lose the rest of the report
+            plt.close("all")
+            msg = f"A section could not be drawn ({type(e).__name__}: {e})."
+            page.note(msg)
+            page.add(f"<p class=\"bad\">{_e(msg)}</p>")
+            print(f"cdm.report: warning: {path}: {msg}", file=sys.stderr)
+    _draw_all(page.figures, tmp)
+    figs = []
+    for i, part in enumerate(page.parts):
+        if not isinstance(part, _Figure):
+            continue
+        if part.error is None:
+            figs.append(part.name)
+            page.parts[i] = _img(part.name, part.alt, part.caption)
+        else:
+            msg = f"The figure {part.name} could not be drawn ({part.error})."
+            page.note(msg)
+            page.parts[i] = f"<p class=\"bad\">{_e(msg)}</p>"
+            print(f"cdm.report: warning: {path}: {msg}", file=sys.stderr)
+    title = f"cdm calibration diagnosis: {_label(diag)}"
+    files = _e(os.path.basename(path))
+    if len(runs) > 1:
+        files += ", compared with the earlier " + ", ".join(
+            _e(os.path.basename(p)) for p, _ in runs[:-1])
+    return document(title, files, page.notes, page.toc, page.parts), figs
+
+
+def write_report(runs, out):
+    """Write the report on runs[-1], comparing it with the earlier runs[:-1].
+
+    Each run is a diagnosis JSON path or a loaded diagnosis dict. Raises
+    DiagnosisError (naming the file) before writing anything if one is unusable.
+    Returns the paths written (figures, then index.html).
+    """
+    if isinstance(runs, (str, os.PathLike, dict)):
+        runs = [runs]
+    runs = [_run(r, i) for i, r in enumerate(runs)]
+    if not runs:
+        raise DiagnosisError("no diagnosis given")
+    os.makedirs(out, exist_ok=True)
+    tmp = tempfile.mkdtemp(prefix="tmp-report-", dir=out)
+    try:
+        doc, figs = _render(runs, tmp)
+        with open(os.path.join(tmp, "index.html"), "w", encoding="utf-8") as f:
+            f.write(doc)
+        # Move into place: figures first, the page last; remove stale figures.
+        keep = set(figs)
+        for name in os.listdir(out):
+            if (name.endswith(".png") and name.startswith(FIGURE_PREFIXES)
+                    and name not in keep and os.path.isfile(os.path.join(out, name))):
+                os.remove(os.path.join(out, name))
+        for name in figs + ["index.html"]:
+            os.replace(os.path.join(tmp, name), os.path.join(out, name))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        plt.close("all")
+    return [os.path.join(out, n) for n in figs + ["index.html"]]
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(
+        prog="python3 -m cdm.report",
+        description="Figures and index.html for `cdm calib diagnose --json` output. Files are "
+                    "in chronological order: the last one is the diagnosis reported on, the "
+                    "earlier ones (and --before files) are compared with it.")
+    ap.add_argument("diagnosis", nargs="+", metavar="DIAG.json",
+                    help="diagnosis JSON files, earliest first; the last is reported on")
+    ap.add_argument("--before", action="append", default=[], metavar="EARLIER.json",
+                    help="an earlier run to compare with (repeatable; comes before the "
+                         "positional files)")
+    ap.add_argument("--out", required=True, metavar="DIR", help="report directory")
+    args = ap.parse_args(argv)
+    runs = args.before + args.diagnosis
+    try:
+        written = write_report(runs, args.out)
+    except DiagnosisError as e:
+        print(f"cdm.report: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        print(f"cdm.report: error: cannot write the report to {args.out}: {e}", file=sys.stderr)
+        return 1
+    print(f"cdm.report: report on {runs[-1]}"
+          + (f", compared with {', '.join(runs[:-1])}" if len(runs) > 1 else "")
+          + f": wrote {len(written) - 1} figures and {os.path.join(args.out, 'index.html')}")
+    return 0

@@ -17,6 +17,10 @@ CMAKE_ARGS="$launch" "$work/venv/bin/pip" wheel -q --no-deps -w "$work/dist" \
   --config-settings=build-dir="$work/cmake" "$src/bindings/python"
 whl=$(ls "$work"/dist/cdm_haptics-*.whl)
 unzip -l "$whl" | grep "cdm/libcdm.so.1$" >/dev/null
+# The report tool is a package with a subpackage: every level of it is in the wheel.
+for f in cdm/report.py cdm/report/__init__.py cdm/report/__main__.py cdm/report/sections/__init__.py; do
+  unzip -l "$whl" | grep " $f$" >/dev/null || { echo "wheel: $f is missing"; exit 1; }
+done
 if "$PY" -m auditwheel --version >/dev/null 2>&1; then
   "$PY" -m auditwheel show "$whl"
   # auditwheel >= 6.8 refuses a patchelf older than 0.14.5 (Debian 12 has
@@ -38,3 +42,5 @@ with cdm.open("sim:") as d:
 print("wheel: ok", d, here)
 PY
 test -x "$work/venv/bin/cdm-report"
+# cdm-report's module is the package (numpy and matplotlib are optional, so it is not run).
+"$work/venv/bin/python" -c 'import importlib.util as u; s = u.find_spec("cdm.report"); assert s.submodule_search_locations, s'

@@ -1,5 +1,5 @@
 // Memory and time of reading and diagnosing a jig dataset, against the
-// number of samples per position (issue 12 item 3). Writes the seed's jig
+// number of samples per position. Writes the seed's jig
 // (25x25 holes, 5 heights, an exit_pulley effect hidden) with 100 and with
 // 1,000 samples per position (312,500 and 3,125,000 rows), then measures each
 // step in a fresh process (this program re-executed, so each peak RSS is the

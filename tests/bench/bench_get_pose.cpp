@@ -44,8 +44,8 @@ BENCHMARK(BM_clock<CLOCK_MONOTONIC>)->Name("BM_clock_monotonic");
 BENCHMARK(BM_clock<CLOCK_MONOTONIC_COARSE>)->Name("BM_clock_monotonic_coarse");
 
 // The sequence lock alone (no writer): what copying through atomic words
-// costs for the pose with the raw report beside it (what the snapshot held
-// until 2026-11-23) and for the pose alone.
+// costs for the pose with the raw report beside it (a snapshot of both)
+// and for the pose alone (what cdm_get_pose reads).
 struct PoseAndRaw {
     cdm_pose pose;
     cdm_raw raw;

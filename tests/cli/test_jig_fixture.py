@@ -1,5 +1,5 @@
 """The height fixture's per-height x offsets (docs/calibration.md, "The jig as
-it is"), on an independent tester's cases: a trend over the heights that the
+it is"): a trend over the heights that the
 device's parameters can take is not the fixture's, and a real spacer error
 still is."""
 import json

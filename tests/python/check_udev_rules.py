@@ -2,7 +2,7 @@
 """Checks udev/70-cdm.rules: udev syntax (key, operator, quoted value), and the
 content the project relies on: a hidraw rule for the VID/PID of
 src/device/protocol.h with TAG+="uaccess", NO rule granting the raw USB node
-(libcdm opens only hidraw; issue 9), no world-writable MODE, and a file number
+(libcdm opens only hidraw), no world-writable MODE, and a file number
 below 73 (systemd's seat rules). Runs `udevadm verify` as well when
 this udevadm has it (systemd >= 253).
 

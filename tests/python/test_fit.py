@@ -152,8 +152,9 @@ def test_a_reference_off_its_height_is_judged_not_made_a_height(tmp_path):
     one 4 micrometres off (a value typed from a gauge): neither is a height of
     its own (each would have had its own fixture offset, absorbing the 1 mm,
     and no neighbours). The 1 mm one is set aside, as one moved in y or z is;
-    the other is listed and kept. Until 2026-11-24 the diagnosis of this file
-    said "does not explain the data" and set nothing aside."""
+    the other is listed and kept. Made heights of their own, they would leave
+    the diagnosis of this file at "does not explain the data" with nothing set
+    aside."""
     bad = heights_jig(tmp_path, raised({100: 1.0, 20: 0.004}))
     r = cdm.fit(bad, DEVICE_JSON, ["exit_pulley"])
     assert [x["point"] for x in r["outliers"]["set_aside"]] == [100], r["outliers"]

@@ -1,5 +1,5 @@
 """Paths and names handed to C: an embedded NUL is a ValueError, never a
-silently shortened path ("a\\x00b" used to open "a")."""
+silently shortened path ("a\\x00b" must not open "a")."""
 import pytest
 
 import cdm

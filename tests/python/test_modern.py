@@ -1,4 +1,4 @@
-"""The binding as a modern Python library (issue 10 item 5): exceptions that
+"""The binding as a modern Python library: exceptions that
 are also the built-ins a Python user catches, a Diagnosis that saves and
 loads its JSON, and type hints checked by mypy (the package ships py.typed)."""
 import os

@@ -545,7 +545,7 @@ void MasterTestbed::unplug() {
         // ENODEV to everything until the replug, as an fd of an unplugged
         // hidraw device does. What a reopen meets meanwhile is therefore a
         // node without sysfs device: the case the driver must check for
-        // before calling hid_open_path (issue 13 item 3).
+        // before calling hid_open_path (hidapi 0.13.1 crashes there).
         umockdev_testbed_remove_device(p_->tb, kUsbDev);
         const std::string root = umockdev_testbed_get_root_dir(p_->tb);
         for (const char *l : {"/sys/class/hidraw/hidraw0", "/sys/dev/char/243:0", "/sys/bus/hid/devices/0003:1209:CD01.0001",

@@ -30,8 +30,8 @@ struct TestbedOptions {
     double rate_hz = 250; // the device's report rate (kept low: 2 shared cores)
     NodeMode mode = NodeMode::Master;
     // hidraw0/device -> its HID parent, as the kernel makes it. False
-    // reproduces a sysfs without it (umockdev's default, and issue 13's
-    // report): hidapi's filtered enumeration then misses the master.
+    // reproduces a sysfs without it (umockdev's default, and some containers'):
+    // hidapi's filtered enumeration then misses the master.
     bool device_link = true;
     // The HID device's bus in HID_ID and its modalias (linux/input.h:
     // 0x03 USB, 0x05 Bluetooth, 0x06 virtual, as uhid devices say).

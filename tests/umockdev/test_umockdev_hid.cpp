@@ -81,8 +81,8 @@ void test_hidapi_enumerates(void **) {
     assert_int_equal(count_hid(0x1234, 0x5678), 0);
 }
 
-// Without the kernel's hidraw0/device link (umockdev's default tree, and
-// what issue 13 was first tried with) hidapi 0.13.1's filtered enumeration
+// Without the kernel's hidraw0/device link (umockdev's default tree)
+// hidapi 0.13.1's filtered enumeration
 // misses the master while the unfiltered one sees it; cdm_enumerate must
 // list it all the same.
 void test_enumerate_without_device_link(void **) {
@@ -107,8 +107,8 @@ void test_enumerate_without_device_link(void **) {
 
 // The same IDs on another bus (a Bluetooth device, or a uhid one, claiming
 // to be the master) are not listed, and a serial finds no master: the udev
-// rule grants access only to a USB master's node. Until 2026-11-24 any bus
-// was listed. (hidapi itself still sees the node: it is there.)
+// rule grants access only to a USB master's node. (hidapi itself still sees
+// the node: it is there.)
 void test_enumerate_skips_other_buses(void **) {
     TestbedOptions o;
     o.hid_bus = 0x0005; // BUS_BLUETOOTH
@@ -275,7 +275,7 @@ void say(int fd, const char *line) {
     if (write(fd, s.data(), s.size()) != ssize_t(s.size())) _exit(90);
 }
 
-// Issue 13 item 3: hidapi 0.13.1 crashes inside hid_open_path when the
+// hidapi 0.13.1 crashes inside hid_open_path when the
 // open fails or the node does not answer HIDIOCGRDESCSIZE (it frees an
 // uninitialised pointer). The hid: transport checks every path before
 // hid_open_path (device/hidraw_check.cpp): a crash here is a regression.

@@ -1,4 +1,4 @@
-// Hot-plug as an event (issue 13 item 2), on the emulated kernel device
+// Hot-plug as an event, on the emulated kernel device
 // (master_testbed.h), whose unplug and replug send the kernel's uevents:
 // cdm_watch's arrivals and departures, the hid: transport's wait for an
 // arrival (udev's monitor), and an open handle that reconnects after a

@@ -15,8 +15,8 @@
 // its start: a program that says when it is ready (a watcher's first
 // "arrived", a stream's first report) meets the unplug ready, however long
 // its runtime took to start. A Python or Mono program starting on a cold
-// or loaded machine took more than the 1.5 s a fixed delay allowed, saw
-// only the replug and failed (a CI run of 2026-11-27). TEXT not printed
+// or loaded machine can take more than a fixed delay allows, see only the
+// replug and fail. TEXT not printed
 // within 20 s, or CMD's stdout closed first: said on stderr, and the
 // re-plugs go ahead (the test then fails on what CMD saw).
 //

@@ -349,11 +349,11 @@ static void search_lands_on_hidden_effects(void **) {
 }
 
 // `cdm calib simulate --effects cable_gain,exit_pulley` (effect seed 1: gains
-// of 0.6-0.9 %, a 6.9 mm pulley) on the small jig, noise seed 1: the search
-// recommended cable_stretch beside the two, because each fit weighed the
-// data as its own start did and a stretch changes that weighting; the
-// review of the same three effects said to drop it. Every chi-square a step
-// compares is now weighed as the model it stands on: exactly the two.
+// of 0.6-0.9 %, a 6.9 mm pulley) on the small jig, noise seed 1: with each
+// fit weighing the data as its own start does, the search recommends
+// cable_stretch beside the two (a stretch changes that weighting), while the
+// review of the same three effects says to drop it. Every chi-square a step
+// compares is weighed as the model it stands on: exactly the two.
 static void realistic_gain_and_pulley_nothing_extra(void **) {
     std::vector<std::string> want;
     const Model truth = make_truth({{"exit_pulley", {{"radius_mm", 6.933110955199806}}},
@@ -372,11 +372,11 @@ static void realistic_gain_and_pulley_nothing_extra(void **) {
     assert_true(rec["explained"].get<bool>());
 }
 
-// The issue's sparse, noisy jig (3 heights, 10 mm pitch, 13 x 13 holes, 10
+// A sparse, noisy jig (3 heights, 10 mm pitch, 13 x 13 holes, 10
 // samples, pot noise 0.25 mm, the default 0.03 mm seating error): the per-
 // position noise estimate from 10 samples is poor, and a chi-square that
-// took it at face value (or its maximum with the pooled one, as before)
-// called the true model "not explained" (chi2/dof 1.13 on 1,500 dof). Clean
+// takes it at face value (or its maximum with the pooled one) calls the
+// true model "not explained" (chi2/dof 1.13 on 1,500 dof). Clean
 // data must come out explained with nothing added; two hidden effects must
 // be found (or an inseparable equivalent), explained.
 static void sparse_noisy_jig(void **) {
@@ -492,7 +492,7 @@ static void noisier_positions_keep_their_variance(void **) {
         }
         noisy_ratio /= noisy;
         // The prior by moments here is nu0 = 4 + 2 / 0.48 = 8.2, so they get
-        // (9 x 4 + 8.2 x 1.3) / 17.2 / 4 = 0.68 of it; the fixed 50 gave
+        // (9 x 4 + 8.2 x 1.3) / 17.2 / 4 = 0.68 of it; a fixed 50 gives
         // 0.43. 0.6 lies between, far beyond the mean's spread (about 0.02
         // over 240 values).
         if (noisy_ratio < 0.6) fail_msg("4x noisier positions get %g of their variance", noisy_ratio);
@@ -566,14 +566,13 @@ static void plate_is_named_as_the_jig(void **) {
 }
 
 // A fixture height off by three standard deviations of the spacers'
-// tolerance (an independent tester's plate: fixture 0.05 mm per height, one
-// height at 0.153 mm, holes 0.04 mm, seats 0.01 mm, hidden cable_gain).
-// With the bound at three (0.15 mm) the fit stopped the offset on it and the
-// judge, taking a height's mean out only within the bound, took none of it:
-// "not explained" (chi2/dof 4.7), and the search added jig_misalignment and
-// pot_drift to chase the height. The bound is now five (0.25 mm) and the
-// judge clamps a mean past it as the fit does: the search lands on the
-// truth, explained.
+// tolerance (fixture 0.05 mm per height, one height at 0.153 mm, holes
+// 0.04 mm, seats 0.01 mm, hidden cable_gain). With the bound at three
+// (0.15 mm) the fit stops the offset on it and a judge taking a height's mean
+// out only within the bound takes none of it: "not explained" (chi2/dof
+// 4.7), and the search adds jig_misalignment and pot_drift to chase the
+// height. With the bound at five (0.25 mm) and the judge clamping a mean past
+// it as the fit does, the search lands on the truth, explained.
 static void a_three_sigma_fixture_height_is_the_jigs(void **) {
     Model truth{DeviceGeometry{}};
     std::string err;
@@ -597,10 +596,10 @@ static void a_three_sigma_fixture_height_is_the_jigs(void **) {
 
 // Spacers are off by their own amounts, so their mean is off too: the
 // jig's placement along x, not the device's. On clean data with spacers
-// machined to 0.05 mm, the sum-zero offsets the fit used to have left that
-// mean to the device, and the search recommended cable_stretch or
-// exit_pulley for it on four of six noise seeds (601-606; the mean was
-// -0.032 mm on seed 602). With every offset free, the nominal model must be
+// machined to 0.05 mm, offsets summing to zero leave that mean to the
+// device, and the search then recommends cable_stretch or exit_pulley for it
+// on four of six noise seeds (601-606; the mean is -0.032 mm on seed 602).
+// With every offset free, the nominal model must be
 // recommended with nothing added. Premise: the nominal model's mean x error
 // (the spacers' mean) on these seeds is at least 0.02 mm, some 25 standard errors of a height's mean x
 // (noise 0.05 mm / sqrt(169 holes x 40 samples) ~ 0.0006 mm, with the seat
@@ -623,8 +622,8 @@ static void spacers_mean_adds_nothing(void **) {
 
 // A jig mounted 0.15 mm off along x, nothing else: within the spacers'
 // bound the fixture's offsets take it, so nothing is recommended, and the
-// words must not call it each height's own offset (an independent
-// reviewer's case): "the jig sits ... off in x at every fixture height",
+// words must not call it each height's own offset: "the jig sits ... off in
+// x at every fixture height",
 // the heights' spread about it within the noise.
 // The raw x RMS then includes it (0.185 mm against a floor of 0.111): the
 // verdict must print the RMS its tests saw beside it, within 5 % of the
@@ -654,12 +653,11 @@ static void a_jig_off_in_x_is_the_jigs(void **) {
 // dominate what is left per position (0.01 mm): the fit weighs each hole's
 // readings as one block (FitOptions::hole_sigma) and the verdict's tests
 // are widened for the holes' correlation across heights. Treated as
-// independent, a candidate that follows part of the plate's pattern gained
+// independent, a candidate that follows part of the plate's pattern gains
 // several times the chi-square independent errors would give: on these five
-// noise seeds the recommendation was cable_gain + cable_offset +
+// noise seeds the recommendation is then cable_gain + cable_offset +
 // drum_eccentricity once, and the true model "not explained" three more
-// times (an independent tester's case, docs/calibration.md). Each must now
-// recommend the true effect alone and explain the data; the hole estimate is
+// times (docs/calibration.md). Each must recommend the true effect alone and explain the data; the hole estimate is
 // within 25 % of 0.04 mm (169 holes: its sampling spread is a few percent).
 static void strong_plate_holes_add_nothing(void **) {
     Model truth{DeviceGeometry{}};
@@ -733,9 +731,8 @@ static void drift_is_named(void **) {
 // the noise floor, while residual findings left the recommended model
 // unexplained; the verdict named only the findings, so the drift the
 // candidate table showed was on no sentence. check_consistent now asks that
-// every significant candidate be named. Since the fit weighs each
-// position's four readings as one block (2026-11-26, fit_problem.h) that
-// drift is recommended (anchors or their equivalent holder points, and the
+// every significant candidate be named. With each position's four readings
+// weighed as one block (fit_problem.h) that drift is recommended (anchors or their equivalent holder points, and the
 // drift); at 0.6 of its size it is where the blind case was: significant,
 // not paid for by the BIC, and named.
 static void small_drift_beside_a_finding_is_named(void **) {
@@ -1127,10 +1124,9 @@ static void many_misplaced_positions_are_set_aside(void **) {
 // is left: 3 of those; a 7 % error in the variance fails it) and cross the
 // verdict's one-sided 1e-3 point (3.09) at most 3 times the stated rate
 // (4 expected; 12 is 4 standard deviations of a Poisson count above).
-// With Cliff and Ord's S1 and S2 halved and quartered, as they were until
-// 2026-11-25, the standard deviation was 1.41 and the 1e-3 point was
-// crossed 8 times as often: clean data read "not explained" one run in
-// twenty or so.
+// With Cliff and Ord's S1 and S2 halved and quartered the standard
+// deviation is 1.41 and the 1e-3 point is crossed 8 times as often: clean
+// data read "not explained" one run in twenty or so.
 static void structure_test_is_calibrated(void **) {
     std::vector<PreparedPos> pos;
     std::vector<double> heights{30, 40, 50, 60, 70};
@@ -1170,7 +1166,7 @@ static void structure_test_is_calibrated(void **) {
 // M = span / 8 mm - 1 chi-square(8)'s, not a chi-square(9) (it averaged 19
 // on 20 clean half jigs). Its p must say so: on 10 clean half jigs (no jig
 // errors) at most 3 may read p < 0.05 (binomial(10, 0.05) passes 3 once in
-// a thousand). Against chi-square(9), as until 2026-11-25, most did.
+// a thousand). Against chi-square(9) most do.
 static void ripple_p_counts_the_periods_searched(void **) {
     int small = 0;
     std::string ps;

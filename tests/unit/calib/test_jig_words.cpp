@@ -64,9 +64,8 @@ bool has(const std::string &s, const char *what) { return s.find(what) != std::s
 // Per-height +0.034, -0.010, +0.034, -0.010, +0.012 mm (standard error 0.01):
 // common part +0.012 (chi-square 7.2, p = 0.007: not significant alone), the
 // spread about it chi-square 19.4 on 4 dof (p = 6.7e-4): each height's own.
-// It read "the jig sits +0.012 mm off in x at every fixture height" when the
-// spread's test alone chose the words (an independent reviewer's case), with
-// two heights on the other side.
+// The spread's test alone would choose "the jig sits +0.012 mm off in x at
+// every fixture height", with two heights on the other side.
 void mixed_signs_are_the_heights_own(void **) {
     const std::string w = fixture_words({30, 40, 50, 60, 70}, {0.034, -0.010, 0.034, -0.010, 0.012});
     if (has(w, "jig sits") || !has(w, "each fixture height has its own offset"))

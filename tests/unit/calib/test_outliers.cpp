@@ -1,4 +1,4 @@
-// Two tests an independent review asked for, on residuals written by hand
+// Two tests on residuals written by hand
 // over a plate (diag::make_grid), so that the numbers are the test's own:
 //  - find_outliers sets aside references off even when one of them happens
 //    to deviate as one cable's reading would (one such position is no
@@ -69,9 +69,8 @@ size_t at(int n, int h, int y, int z) {
 
 // Two references off by 0.2 mm on a 13 x 13 x 5 plate (845 positions, so
 // 2 % is 16): one along cable 4's column (it passes the one-cable test),
-// one across every column. Both are set aside; before the review's fix a
-// single one-cable position of two (more than a quarter) kept both as "a
-// reading effect". Three along cable 4's column, at other holes, and one
+// one across every column. Both are set aside: a single one-cable position
+// of two (more than a quarter) must not keep both as "a reading effect". Three along cable 4's column, at other holes, and one
 // across: a group of three on one cable (more than a quarter of four) is a
 // reading effect, and all four are kept, as a worn spot's are.
 void references_off_are_set_aside_one_cable_or_not(void **) {

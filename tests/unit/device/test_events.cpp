@@ -116,7 +116,7 @@ void test_log_hook(void **) {
 // A callback that waits on its own device (the header allows any cdm_*
 // call but cdm_close there) would wait for a pose only its own thread can
 // publish: until the timeout, or, without one, until cdm_close. It is
-// refused at once (an independent tester's finding: it blocked 2.9 s).
+// refused at once, not left to block.
 struct OwnWait {
     std::atomic<cdm_device *> dev{nullptr};
     std::atomic<int> calls{0}, rc{0};
@@ -153,8 +153,8 @@ void test_wait_from_own_callback_refused(void **) {
 }
 
 // A failing cdm_get_pose / cdm_get_raw says why in cdm_thread_error, and a
-// succeeding one leaves it empty: never an earlier call's text (an
-// independent tester saw "cdm_get_pose: ... cannot open the calibration").
+// succeeding one leaves it empty: never an earlier call's text (e.g.
+// "cdm_get_pose: ... cannot open the calibration" from a failed load).
 void test_pose_calls_own_their_thread_error(void **) {
     cdm_device *dev = nullptr;
     assert_int_equal(cdm_open("sim:?saturate=0:1000000", &dev), CDM_OK);

@@ -189,9 +189,9 @@ void test_fault_stall_goes_stale(void **) {
 // Never fresh past the deadline: a pose whose age, read on CLOCK_MONOTONIC
 // *before* the call, already exceeds the stale deadline must come back
 // STALE. Exact, whatever the scheduling (the call's clock reads after the
-// test's). Until 2026-11-24 the stale check trusted the coarse clock to lag
-// by at most one tick; on this project's VM it lagged by up to 7 ms, and
-// such calls returned CDM_OK (an independent tester's finding).
+// test's). A check on the coarse clock fails it: the kernel does not bound
+// that clock's lag (up to 7 ms measured on a tickless VM), and such calls
+// return CDM_OK.
 void test_fault_stale_never_late(void **) {
     for (uint32_t limit_us : {5000u, 50000u}) {
         cdm_device *dev = nullptr;

@@ -408,8 +408,8 @@ void test_no_report_orientation_is_identity(void **) {
     close_dev(dev);
 }
 
-// One flipped bit of the sequence number added 4e9 to dropped; a counter
-// reset 3e8. Both are now sequence jumps, and dropped stays honest.
+// One flipped bit of the sequence number, or a counter reset, would add 4e9
+// or 3e8 to dropped as a gap. Both are sequence jumps, and dropped stays honest.
 void test_sequence_flipped_bit_not_counted_as_dropped(void **) {
     cdm_device *dev = open_ok("hid:/dev/hidraw7");
     const double at[3] = {40, 5, 5};
@@ -577,8 +577,8 @@ void test_enumerate(void **) {
 
 // Another name for the master's node (a udev rule's SYMLINK+=): the handle
 // opens that name and knows the master's serial, so it reconnects by serial
-// like a handle opened by the node's own name. Until 2026-11-24 it
-// got no serial and reconnected only by the link's path. The mock's node is
+// like a handle opened by the node's own name, not only by the link's path.
+// The mock's node is
 // a plain file here (the node check is bypassed; file identity is what the
 // library compares).
 void test_open_through_a_link(void **) {

@@ -1,4 +1,4 @@
-// hid: paths that are not a hidraw node (issue 9): /dev/null, /dev/zero, a
+// hid: paths that are not a hidraw node: /dev/null, /dev/zero, a
 // regular file, a directory, a FIFO without a writer, a missing path, and
 // $CDM_DEVICE pointing at /dev/null. Through the real hidapi (no mock): each
 // must fail with CDM_ERR_NO_DEVICE and a reason naming the path, quickly,

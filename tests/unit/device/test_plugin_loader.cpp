@@ -1,4 +1,4 @@
-// cdm_effect_load_plugin (issue 9): a bare name is refused (the dynamic
+// cdm_effect_load_plugin: a bare name is refused (the dynamic
 // linker's search path, e.g. LD_LIBRARY_PATH, must not pick the code), and a
 // plugin whose init fails is unloaded again.
 #include <dlfcn.h>

@@ -404,7 +404,7 @@ void expect_thread_error(const char *needle) {
 
 // A host time before the previous record's is refused when written, naming
 // both, and writes nothing: replay: refuses such a file whole ("host time
-// goes backwards", tester's t12), so the recording would be lost. Equal
+// goes backwards"), so the recording would be lost. Equal
 // times are fine. The recording goes on and plays, in both replayable
 // formats; the CSV keeps the same order.
 void test_recorder_refuses_time_going_back(void **) {
@@ -457,8 +457,8 @@ void test_recorder_refuses_time_going_back(void **) {
 
 // The device-info report is checked when the recorder opens, by the parser
 // replay: checks it with, so a recording replay: would refuse is never
-// started (tester's t12: 128 bytes of 0x55 made a replay-format recording);
-// the file is not created. A zero length is an empty report, not a NULL one.
+// started (e.g. 128 bytes of 0x55 as the info report); the file is not
+// created. A zero length is an empty report, not a NULL one.
 void test_recorder_refuses_a_bad_device_info(void **) {
     std::vector<uint8_t> info, rep;
     sim_reports(info, rep);

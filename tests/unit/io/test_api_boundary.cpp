@@ -211,11 +211,11 @@ static size_t rows_read_back(const std::string &p, size_t positions) {
 }
 
 // The writer refuses, when the row is added, every row load_dataset would
-// refuse (tester's t10: NaN, infinite, negative and zero lengths, a point
-// whose reference moves, were written and the file then refused whole), and
-// a refused row leaves nothing behind: the writer goes on, and the file holds
-// the accepted rows only (tester's t11: after a 1e300 the file was abandoned
-// and every later add said CDM_OK).
+// refuse (NaN, infinite, negative and zero lengths, a point whose reference
+// moves: written, they would make the reader refuse the file whole), and a
+// refused row leaves nothing behind: the writer goes on, and the file holds
+// the accepted rows only (a 1e300 must not abandon the file while later adds
+// say CDM_OK).
 static void test_dataset_writer_refuses_what_the_reader_refuses(void **) {
     const std::string p = g_dir + "/refused_rows.csv";
     cdm_dataset_writer *w = nullptr;
@@ -263,9 +263,8 @@ static void test_dataset_writer_refuses_what_the_reader_refuses(void **) {
 }
 
 // After commit the file is complete: more rows would be lost, so they are
-// refused, and so is a second commit (tester's t11: about a thousand adds
-// said CDM_OK into a buffer nobody would write; the second commit was an
-// "internal" error).
+// refused, and so is a second commit (neither may say CDM_OK into a buffer
+// nobody will write, nor be an "internal" error).
 static void test_dataset_writer_refuses_rows_after_commit(void **) {
     const std::string p = g_dir + "/committed.csv";
     cdm_dataset_writer *w = nullptr;

@@ -138,7 +138,7 @@ static void test_write_symlink_target_replaces_link_not_victim(void **) {
 }
 
 static void test_write_ignores_planted_fixed_tmp_link(void **) {
-    // The old writer used the fixed name X.tmp and followed a link planted there.
+    // A link planted at X.tmp (a fixed temporary name) must not be followed.
     const std::string d = tmpdir(), victim = d + "/victim", out = d + "/out";
     put(victim, "precious");
     assert_int_equal(symlink(victim.c_str(), (out + ".tmp").c_str()), 0);

@@ -290,7 +290,7 @@ static void fit_jacobian_full_model(void **) {
 // raw residuals and Jacobian come from the fit with no jig term at all,
 // whose whitening is then 1/sqrt(var_mean) = 100 on every reading. dP's
 // step, 1e-3 mm, leaves a truncation error near 1e-7 of dP: agreement to
-// 1e-5. Each reading weighed alone (as until 2026-11-26) must differ.
+// 1e-5. Each reading weighed alone (the diagonal only) must differ.
 static void fit_weighting_is_dense_gls(void **) {
     Model m{DeviceGeometry{}};
     std::string err;

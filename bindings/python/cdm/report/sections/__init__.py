@@ -1,6 +1,7 @@
 """The page's sections, each a function that adds its HTML and describes its
 figures to the Page (drawn later, see drawing.py)."""
 
+from .beyond import section_beyond
 from .candidates import section_candidates, section_search
 from .comparison import section_comparison
 from .fingerprints import section_fingerprints
@@ -9,7 +10,7 @@ from .summary import section_summary
 from .variables import section_variables
 
 __all__ = ["section_summary", "section_maps", "section_cut", "section_candidates",
-           "section_search", "section_fingerprints", "section_variables", "section_comparison",
+           "section_search", "section_fingerprints", "section_variables", "section_beyond", "section_comparison",
            "in_order"]
 
 
@@ -21,7 +22,8 @@ def in_order(runs, page, P):
                 lambda: section_candidates(diag, page),
                 lambda: section_search(diag, page),
                 lambda: section_fingerprints(diag, page, P),
-                lambda: section_variables(diag, page, P)]
+                lambda: section_variables(diag, page, P),
+                lambda: section_beyond(diag, page)]
     if len(runs) > 1:
         sections.append(lambda: section_comparison(runs, page))
     return sections

@@ -16,7 +16,10 @@ struct ExitPulley : EffectBase {
                      "of radius r starting at the anchor and runs straight to the holder: length = r*beta + free "
                      "length. One radius for the four guides, mm. Typical: 3-10 mm.",
                      kStage, -1, {}};
-        d.params.push_back(param("radius_mm", "mm", 3.0, 0.0, 40.0, 0.0, 3.0, 10.0, false));
+        // A guide that fits the frame's corner: a few mm to a few cm.
+        d.params.push_back(param("radius_mm", "mm", 3.0, 0.0, 40.0, 0.0, 3.0, 10.0, false)
+                               .plausible(0.5, 25, "a guide of under 0.5 mm: no guide, or a stand-in",
+                                          "a guide over 25 mm across its corner: larger than the frame's pulleys"));
         return d;
     }
     static constexpr int kCableParams = 1;

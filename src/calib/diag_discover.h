@@ -39,6 +39,10 @@ struct Discovery {
     Eval E;                 // base + terms after one joint Gauss-Newton step, on the data
     nlohmann::json json = nullptr;
     std::string words;      // the verdict's sentence ("" when nothing was found)
+    // Worth a reader's time: no model to compare with, or the terms' model
+    // within the alternatives' margin (10) of it or better. A term that
+    // loses to the catalogue's model by more is in the JSON only.
+    bool competitive() const { return found && !(bic_vs_other > 10.0); }
 };
 
 // base: a fitted model (base_rep its fit) whose readings' residual is

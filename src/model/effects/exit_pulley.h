@@ -24,6 +24,11 @@ struct ExitPulley : EffectBase {
     }
     static constexpr int kCableParams = 1;
     static void cable_params(int, int *idx) { idx[0] = 0; }
+    // The path round the guide replaces the straight length (it is computed
+    // from the anchor-holder vector, not from the length on entry): the
+    // kernel's order check puts it first among the Path-stage effects, so
+    // no effect's change to the length can be overwritten by it.
+    static constexpr bool kReplacesLength = true;
     // In the plane of u and the holder (s along u, t along n, the unit vector
     // from the axis toward the holder) the guide's centre is (0, r) and H is
     // (hs, ht); the cable goes round from the angle -pi/2 to the tangent

@@ -8,6 +8,10 @@ SUDO=""
 [ "$(id -u)" -eq 0 ] || SUDO="sudo"
 
 DEB_PKGS=(build-essential cmake ninja-build pkg-config git
+  # ccache: a rebuild after a small change, and CI's second and third
+  # configurations of the library (scripts/release_check.sh), compile only
+  # what differs
+  ccache
   libhidapi-dev libudev-dev libeigen3-dev libnlopt-dev libnlopt-cxx-dev libcmocka-dev
   nlohmann-json3-dev libboost-math-dev libcli11-dev libfmt-dev libbenchmark-dev
   mono-mcs mono-runtime python3 python3-pip

@@ -22,12 +22,8 @@ namespace {
 
 const char *kAxis[3] = {"x", "y", "z"};
 
-// Weighted per-height mean residual and its standard error, per axis.
-struct HeightMean {
-    double sw = 0, swr = 0;
-    double mean() const { return sw > 0 ? swr / sw : 0.0; }
-    double se() const { return sw > 0 ? 1.0 / std::sqrt(sw) : INFINITY; }
-};
+} // namespace
+
 std::map<std::pair<int, int>, HeightMean> height_means(const Eval &E, const Grid &G, const V3 &jig) {
     std::map<std::pair<int, int>, HeightMean> hm;
     for (size_t j = 0; j < E.res.size(); ++j)
@@ -40,8 +36,6 @@ std::map<std::pair<int, int>, HeightMean> height_means(const Eval &E, const Grid
             }
     return hm;
 }
-
-} // namespace
 
 FixtureOffsets fixture_offsets(const Eval &E, const Grid &G, const V3 &jig) {
     FixtureOffsets f;

@@ -38,6 +38,15 @@ namespace diag {
 // 0.151 mm none of it, made the judge disagree with the fit it judged).
 // Empty for a layout without fixture heights.
 using FixtureOffsets = std::map<std::pair<int, int>, double>;
+
+// Weighted per-height mean residual and its standard error, per axis:
+// (height index, axis) -> mean, weights 1 / (the mean's noise + jig^2).
+struct HeightMean {
+    double sw = 0, swr = 0;
+    double mean() const { return sw > 0 ? swr / sw : 0.0; }
+    double se() const { return sw > 0 ? 1.0 / std::sqrt(sw) : INFINITY; }
+};
+std::map<std::pair<int, int>, HeightMean> height_means(const Eval &E, const Grid &G, const V3 &jig);
 FixtureOffsets fixture_offsets(const Eval &E, const Grid &G, const V3 &jig);
 
 // E with the fixture's offsets subtracted from its residuals.

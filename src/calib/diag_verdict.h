@@ -17,6 +17,7 @@
 
 #include "calib/dataset.h"
 #include "calib/diag_candidates.h"
+#include "calib/diag_standins.h"
 
 namespace cdm {
 namespace diag {
@@ -24,6 +25,10 @@ namespace diag {
 struct Judgement {
     bool explained = false;     // every test passes
     bool negligible_only = false; // fails only on things below a tenth of the noise floor
+    // The tests pass, but with effects whose fitted values their physics
+    // does not allow (diag_standins.h): "fits to the noise floor with
+    // stand-ins", neither explained nor negligible_only.
+    bool with_stand_ins = false;
     std::string words;          // "explains the data; x RMS ..." or "does not explain the data: ..."
     nlohmann::json significant = nlohmann::json::array(); // what is left: candidates and findings
 };
@@ -33,9 +38,11 @@ struct Judgement {
 // residual findings (nullptr: not analysed); noise: the noise floor per
 // axis (mm); x_rms_jig_out: E's x RMS with the fixture's per-height offsets
 // out (x_rms_without_fixture; NaN: no fixture heights), printed beside the
-// raw one when they differ, since the tests judge that one.
+// raw one when they differ, since the tests judge that one. stand_ins: the
+// model's stand-ins (null or empty: none).
 Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candidate> *cands,
-                      const nlohmann::json *findings, const V3 &noise, double x_rms_jig_out = NAN);
+                      const nlohmann::json *findings, const V3 &noise, double x_rms_jig_out = NAN,
+                      const std::vector<StandIn> *stand_ins = nullptr);
 
 // The samples the dataset's glitch screen set aside (calib/dataset_glitches.h)
 // as a sentence for the verdict ("" when none); their JSON is

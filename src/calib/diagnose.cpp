@@ -14,6 +14,7 @@
 #include <functional>
 #include <future>
 
+#include "calib/diag_beyond.h"
 #include "calib/diag_candidates.h"
 #include "calib/diag_context.h"
 #include "calib/diag_findings.h"
@@ -230,6 +231,15 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     json findings = residual_findings(pos, shifted(lv, ja.offset), bJ, bjig, lv);
     if (opt.outliers) outliers = find_outliers(bJ, cf.grid, bjig, already, read, &declined);
     if (!jig_report["finding"].is_null()) findings.push_back(jig_report["finding"]);
+    // Stand-ins, the term the catalogue lacks, the jig's errors in doubt.
+    Beyond bey;
+    {
+        const FitReport &brep = search ? sr.rep : use_top ? cands[0].rep : rep;
+        const Verdict vb = judge(bE, cf.grid, bjig, brep.n_free, search ? sctx.fo.hole_sigma : cf.fit_options.hole_sigma);
+        if (!beyond_catalogue(search ? sctx : ctx, model, rep, basis, brep, bE, vb.explained && findings.empty(),
+                              jig_report, noise_floor(bE, bjig), bey, err))
+            return false;
+    }
 
     // --- what needs every sample: the maxima of the reported evaluations and
     // the seed's ellipsoid applied to each sample, in one pass over the rows
@@ -261,13 +271,13 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     const bool findings_on_model = !search ? !use_top : sr.effects == reading_effects(model);
     const Judgement jm = judge_model(vcur, cur, opt.candidates ? &cands : nullptr,
                                      findings_on_model ? &findings : nullptr, noise,
-                                     x_rms_without_fixture(cur, cf.grid, jig, pos));
+                                     x_rms_without_fixture(cur, cf.grid, jig, pos), &bey.user);
     std::string verdict, unexplained_summary;
     json recommended = nullptr;
     if (search) {
         const Verdict vr = judge(sr.E, cf.grid, sctx.jig, sr.rep.n_free, sctx.fo.hole_sigma);
         const Judgement jr = judge_model(vr, sr.E, &sr.cands, &findings, noise_floor(sr.E, sctx.jig),
-                                         x_rms_without_fixture(sr.E, cf.grid, sctx.jig, pos));
+                                         x_rms_without_fixture(sr.E, cf.grid, sctx.jig, pos), &bey.recommended);
         json path = json::array(), alternatives = json::array();
         for (auto &st : sr.path) {
             json s = {{"step", st.step}, {"bic_change", st.bic_change}, {"x_rms_mm", st.x_rms_mm}};
@@ -283,6 +293,8 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
                        {"error_mm", stats3(sr.E.err)},
                        {"explained", jr.explained},
                        {"negligible_only", jr.negligible_only},
+                       {"fits_with_stand_ins", jr.with_stand_ins},
+                       {"stand_ins", stand_ins_json(bey.recommended)},
                        {"chi2_per_dof", vr.chi2 / vr.dof},
                        {"noise_floor_mm", vec3(noise_floor(sr.E, sctx.jig))},
                        {"jig_tolerance_mm", vec3(sctx.jig)},
@@ -321,6 +333,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
         if (sr.effects != reading_effects(model)) verdict += " Your model, " + modelname + ": " + jm.words + ".";
         unexplained_summary = jr.explained ? "nothing left to explain"
                               : jr.negligible_only ? "only effects under a tenth of the noise floor are left"
+                              : jr.with_stand_ins ? "the recommended model reaches the noise floor only with stand-ins"
                                                    : "the recommended model leaves significant structure";
     } else {
         const Candidate *top = cands.empty() ? nullptr : &cands[0];
@@ -358,6 +371,8 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
             verdict += " " + sentence + ".";
         }
     }
+    if (bey.discovery.competitive()) verdict += " Beyond the catalogue: " + bey.discovery.words + ".";
+    if (!bey.attribution.words.empty()) verdict += " The jig's errors in doubt: " + bey.attribution.words + ".";
     // What the screen set aside as it read the file (dataset_glitches.h).
     if (!data.glitches.empty()) verdict += " " + glitches_words(data);
     if (!findings.empty()) {
@@ -394,7 +409,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     out["params"] = params;
     out["fit"] = {{"algorithm", rep.algorithm}, {"evaluations", rep.evals}, {"seconds", rep.seconds},
                   {"converged", rep.converged}, {"free_parameters", rep.n_free}, {"message", rep.message},
-                  {"fixture_x_mm", rep.fixture_mm}};
+                  {"fixture_x_mm", rep.fixture_mm}, {"restarted_from", cf.restarted_from}};
     out["error_mm"] = stats3(cur.err);
     out["nominal_error_mm"] = stats3(nom.err);
     out["ellipsoid_error_mm"] = stats3(ellE.err);
@@ -468,6 +483,9 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
                                    "max over axes, Bonferroni p"}};
     out["explained"] = jm.explained;
     out["negligible_only"] = jm.negligible_only;
+    out["fits_with_stand_ins"] = jm.with_stand_ins;
+    out["stand_ins"] = stand_ins_json(bey.user);
+    out["discovered"] = bey.discovery.json;
     out["significant_left"] = jm.significant;
     out["verdict"] = verdict;
     out["recommended"] = recommended;
@@ -485,6 +503,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     out["validation"] = validation;
     jig_report["fixture_fitted_x_mm"] = search ? sr.rep.fixture_mm : rep.fixture_mm;
     jig_report["residual_of"] = out["unexplained_structure"]["residual_of"];
+    jig_report["attribution"] = bey.attribution.report;
     out["jig"] = jig_report;
     if (opt.per_position) {
         json pj;

@@ -187,6 +187,15 @@ double model_chi2(const Model &m, const std::vector<PreparedPos> &pos, const Fit
 bool fit_residual_jacobian(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt,
                            Eigen::VectorXd &res, Eigen::MatrixXd &J, std::string &err);
 
+// fit_residual_jacobian's residuals and Jacobian, and beside them `extra`
+// (per position: a 4 x k block, what k terms added to the model's readings
+// would add, raw mm) whitened and decorrelated as the fit treats the
+// readings, so that X's rows match res's: regressing res on [J X] is the
+// model refitted, linearised, with the k terms beside it.
+bool fit_residual_jacobian_with(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt,
+                                const std::vector<Eigen::Matrix<double, 4, Eigen::Dynamic>> &extra,
+                                Eigen::VectorXd &res, Eigen::MatrixXd &J, Eigen::MatrixXd &X, std::string &err);
+
 // The seed's ellipsoid (eq. 4-5): fitted to per-position x errors over the
 // estimated (y, z), least squares weighted by sample count. Returns L, M, N.
 struct Ellipsoid {

@@ -4,11 +4,79 @@
 #include <algorithm>
 #include <cmath>
 #include <future>
+#include <optional>
 #include <system_error>
+
+#include "calib/diag_context.h"
+#include "model/effect.h"
 
 namespace cdm {
 
 using diag::V3;
+
+namespace {
+
+// A model of several effects contains each of its sub-models (the other
+// effects at their identity), so its best fit is no worse than any of
+// theirs; a joint fit from the start that ends above a sub-model fitted
+// alone has stopped in a worse local minimum. Each effect alone and, with
+// three or more, the model without each one are fitted from their start,
+// weighed as the joint fit was (the model at its start); the joint fit is
+// run again from the best of them that ends lower (the others at their
+// start), and kept when it ends lower than the first. A model of one
+// effect has no sub-model but the nominal, which its start is.
+bool fit_not_worse_than_nested(Model &model, const std::vector<PreparedPos> &pos, const FitOptions &f,
+                               FitReport &rep, std::vector<std::string> &restarted_from) {
+    const Model start = model;
+    if (!fit_model(model, pos, f, rep)) return false;
+    const std::vector<std::string> names = diag::reading_effects(model);
+    if (names.size() < 2 || !rep.converged) return true;
+    std::vector<std::vector<std::string>> subs;
+    for (auto &n : names) subs.push_back({n});
+    if (names.size() >= 3)
+        for (auto &n : names) {
+            subs.emplace_back();
+            for (auto &o : names)
+                if (o != n) subs.back().push_back(o);
+        }
+    FitOptions fw = f;
+    fw.weigh_with = &start;
+    fw.weights = nullptr;
+    const double tol = 1e-6 * std::max(1.0, rep.chi2); // the fits' own convergence, not a difference
+    double best = rep.chi2 - tol;
+    std::optional<Model> best_sub;
+    for (auto &s : subs) {
+        Model sub = diag::model_with(start, s, "");
+        FitReport r;
+        if (!fit_model(sub, pos, fw, r)) return false;
+        if (r.converged && r.chi2 < best) best = r.chi2, best_sub = sub;
+    }
+    if (!best_sub) return true;
+    Model again(model.geometry());
+    std::string err;
+    for (size_t e = 0; e < start.effect_count(); ++e) {
+        const std::string &n = start.effect_name(e);
+        const auto sub_effects = diag::reading_effects(*best_sub);
+        ParamValues pv;
+        const bool in_sub = std::find(sub_effects.begin(), sub_effects.end(), n) != sub_effects.end();
+        const Model &from = in_sub ? *best_sub : start;
+        for (size_t k = 0; k < from.effect_count(); ++k)
+            if (from.effect_name(k) == n)
+                for (size_t q = 0; q < from.effect_desc(k).params.size(); ++q)
+                    pv.push_back({from.effect_desc(k).params[q].name, from.effect_params(k)[q]});
+        if (!again.add_effect(n, pv, err)) return true; // (cannot happen: the same effects)
+    }
+    FitReport r2;
+    if (!fit_model(again, pos, fw, r2)) return false;
+    if (r2.chi2 < rep.chi2) {
+        model = std::move(again);
+        rep = r2;
+        restarted_from = diag::reading_effects(*best_sub);
+    }
+    return true;
+}
+
+} // namespace
 
 bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCalibrationOptions &opt,
                      CalibrationFit &out, std::string &err) {
@@ -73,7 +141,7 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
     auto fit = [&]() {
         FitOptions f = out.fit_options;
         f.progress = [&](double fr) { return progress("fitting the model", fr); };
-        return fit_model(model, pos, f, out.report);
+        return fit_not_worse_than_nested(model, pos, f, out.report, out.restarted_from);
     };
     if (!fit()) {
         err = out.report.message.empty() ? "fit cancelled" : out.report.message;

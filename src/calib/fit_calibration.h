@@ -61,6 +61,10 @@ struct CalibrationFit {
     std::vector<PreparedPos> pos;
     diag::Grid grid;
     diag::Eval nominal, fitted;     // the nominal triangulation and the fitted model
+    // The nested sub-model the joint fit was run again from, when its first
+    // fit ended above that sub-model fitted alone (fit_not_worse_than_nested):
+    // its effects; empty when the first fit stood.
+    std::vector<std::string> restarted_from;
 };
 
 // False + err (naming what is wrong) on too few positions, an unknown

@@ -185,6 +185,10 @@ struct Problem {
                     wh[size_t(b.start + i)] * dPs[size_t(b.start + i)] * opt.hole_sigma.asDiagonal();
             // U = Q S V': the eigenvectors V of U'U (3 x 3), Q = U V / s.
             Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(U.transpose() * U);
+            // (A solver that did not converge leaves its eigenvalues unset:
+            // such a block, non-finite sensitivities, is weighed as its
+            // positions' own.)
+            if (es.info() != Eigen::Success) continue;
             std::vector<int> keep;
             for (int k = 0; k < 3; ++k)
                 if (es.eigenvalues()(k) > 1e-12 * std::max(1.0, es.eigenvalues().maxCoeff())) keep.push_back(k);

@@ -80,6 +80,27 @@ bool fit_residual_jacobian(const Model &m, const std::vector<PreparedPos> &pos, 
     return true;
 }
 
+bool fit_residual_jacobian_with(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt,
+                                const std::vector<Eigen::Matrix<double, 4, Eigen::Dynamic>> &extra,
+                                Eigen::VectorXd &res, Eigen::MatrixXd &J, Eigen::MatrixXd &X, std::string &err) {
+    Model copy = m;
+    Problem pb(copy, pos, opt);
+    if (!pb.residuals(res, &J)) {
+        err = pb.failure;
+        return false;
+    }
+    J = -J;
+    const long k = extra.empty() ? 0 : extra[0].cols();
+    X.resize(res.size(), k);
+    for (size_t r = 0; r < pb.rows.size(); ++r) {
+        const auto &e = extra[size_t(pb.rows[r])];
+        X.block(4 * long(r), 0, 4, k) = pb.wh[r].triangularView<Eigen::Lower>() * e;
+    }
+    Eigen::VectorXd zero = Eigen::VectorXd::Zero(res.size());
+    pb.decorrelate(zero, &X);
+    return true;
+}
+
 std::shared_ptr<const FitWeights> fit_weights(const Model &weigh, const std::vector<PreparedPos> &pos,
                                               const FitOptions &opt) {
     Model wm = weigh;

@@ -21,9 +21,6 @@ namespace cdm::cli {
 
 namespace {
 
-volatile std::sig_atomic_t g_stop = 0;
-void on_stop_signal(int) { g_stop = 1; }
-
 struct BridgeArgs {
     std::string uri, calib, prefix = "cdm", frame_id = "cdm";
     bool dds = false;
@@ -32,6 +29,9 @@ struct BridgeArgs {
 };
 
 #ifdef CDM_HAVE_DDS
+volatile std::sig_atomic_t g_stop = 0;
+void on_stop_signal(int) { g_stop = 1; }
+
 // ROS time is the system clock; libcdm stamps receipt with CLOCK_MONOTONIC.
 // The offset between them is read at every conversion (two vDSO reads), so
 // a clock step (NTP) shows up in the next stamp, not never.

@@ -4,6 +4,7 @@
 // user registers at run time (C callback, plugin, Python).
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -31,6 +32,31 @@ struct ParamDesc {
     double init;        // value when the effect is switched on
     double rand_lo, rand_hi; // |value| drawn in [lo, hi] with a random sign (simulator)
     bool signed_random = true;
+    // The physically plausible range of the fitted value (the effect's own
+    // physics, wider than the typical magnitude): a fit that needs a value
+    // outside it is using the effect as a stand-in for something else. The
+    // words say what such a value would mean ("something lengthens the
+    // reading as the cable lengthens"). Default: the fit's bounds, no claim.
+    double plausible_lo = -INFINITY, plausible_hi = INFINITY;
+    std::string below_means = std::string(), above_means = std::string();
+    ParamDesc plausible(double lo, double hi, std::string below = "", std::string above = "") const {
+        ParamDesc p = *this;
+        p.plausible_lo = lo;
+        p.plausible_hi = hi;
+        p.below_means = std::move(below);
+        p.above_means = std::move(above);
+        return p;
+    }
+};
+
+// A geometric effect whose parameters are one 3-D displacement (x, y, z)
+// per cable's point (an anchor, a holder attachment): a machining error
+// moves each point on its own; a pattern shared by the four points (a
+// common x shift, all points radially in or out) is a deformation, or the
+// effect standing in for a smooth effect it is not (calib's stand-in test).
+struct PointDisplacements {
+    bool present = false;
+    bool anchors = false; // the anchors (true) or the holder's points (false)
 };
 
 // The most parameters a user effect may have (cdm_effect_register refuses
@@ -43,6 +69,7 @@ struct EffectDesc {
     Stage stage;
     int builtin_id;        // index in CDM_BUILTIN_EFFECTS (effects/list.h), or -1 for a user effect
     std::vector<ParamDesc> params;
+    PointDisplacements points = PointDisplacements(); // the parameters are 4 points' displacements
     // user effects only: at least one of apply and apply_batch (cdm.h says
     // which is called when)
     cdm_effect_apply_fn apply = nullptr;

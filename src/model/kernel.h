@@ -48,6 +48,30 @@ constexpr bool stages_in_order() {
 }
 static_assert(stages_in_order(), "effects/list.h: the list is the order of application; stages must not decrease");
 
+// A Path-stage effect that replaces the length (kReplacesLength) would
+// undo every Path-stage effect listed before it: only the first may.
+constexpr bool paths_compose() {
+    const bool path[] = {
+#define CDM_EFFECT_PATH(E) E::kStage == Stage::Path,
+        CDM_BUILTIN_EFFECTS(CDM_EFFECT_PATH)
+#undef CDM_EFFECT_PATH
+    };
+    const bool replaces[] = {
+#define CDM_EFFECT_REPLACES(E) E::kReplacesLength,
+        CDM_BUILTIN_EFFECTS(CDM_EFFECT_REPLACES)
+#undef CDM_EFFECT_REPLACES
+    };
+    bool seen = false;
+    for (size_t k = 0; k < sizeof path / sizeof path[0]; ++k) {
+        if (!path[k]) continue;
+        if (replaces[k] && seen) return false;
+        seen = true;
+    }
+    return true;
+}
+static_assert(paths_compose(), "effects/list.h: a Path-stage effect that replaces the length (kReplacesLength) must "
+                               "come before every other Path-stage effect");
+
 // Where each active reading-stage built-in's cable parameters sit in a
 // cable's parameter block: slot[id] is the first, -1 when the effect is off.
 // The same for the four cables (kCableParams is per effect).

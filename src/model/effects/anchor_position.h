@@ -16,7 +16,12 @@ struct AnchorPosition : EffectBase {
                      kStage, -1, {}};
         for (int i = 1; i <= 4; ++i)
             for (const char *c : {"x", "y", "z"})
-                d.params.push_back(param("a" + std::to_string(i) + "_" + c, "mm", 0.5, -10, 10, 0.0, 0.2, 1.0));
+                // A frame's assembly puts an exit point within a few mm of
+                // its drawing; more is another frame, or a stand-in.
+                d.params.push_back(param("a" + std::to_string(i) + "_" + c, "mm", 0.5, -10, 10, 0.0, 0.2, 1.0)
+                                       .plausible(-3, 3, "an exit point more than 3 mm from its drawing",
+                                                  "an exit point more than 3 mm from its drawing"));
+        d.points = {true, true};
         return d;
     }
     static constexpr int kCableParams = 3;

@@ -90,6 +90,11 @@ struct GaugeContext {
 
 struct EffectBase {
     static constexpr int kCableParams = 0;
+    // A Path-stage hook composes by adding to the length it is given; one
+    // that sets it from the geometry instead declares it here, and the
+    // kernel requires it to come before every other Path-stage effect
+    // (model/kernel.h: paths_compose), so it cannot cancel one silently.
+    static constexpr bool kReplacesLength = false;
     static void cable_params(int, int *) {}
     // basis: columns span the parameter combinations the fit may move
     // (full = start + basis * free); false: every parameter is free.

@@ -10,7 +10,10 @@ struct CableGain : EffectBase {
         EffectDesc d{"cable_gain",
                      "Scale error of each pot: reading = (1 + g_i) * length, dimensionless. Typical: 0.2-1 %.",
                      kStage, -1, {}};
-        for (int i = 1; i <= 4; ++i) d.params.push_back(param("g" + std::to_string(i), "1", 5e-3, -0.2, 0.2, 0.0, 2e-3, 1e-2));
+        for (int i = 1; i <= 4; ++i) d.params.push_back(
+            param("g" + std::to_string(i), "1", 5e-3, -0.2, 0.2, 0.0, 2e-3, 1e-2)
+                .plausible(-0.03, 0.03, "a pot scale 3 % low: beyond a pot's and its reference's tolerance",
+                           "a pot scale 3 % high: beyond a pot's and its reference's tolerance"));
         return d;
     }
     static constexpr int kCableParams = 1;

@@ -9,7 +9,10 @@ struct CableOffset : EffectBase {
     static EffectDesc describe() {
         EffectDesc d{"cable_offset", "Zero offset of each pot: reading = length + o_i, mm. Typical: 0.2-1 mm.",
                      kStage, -1, {}};
-        for (int i = 1; i <= 4; ++i) d.params.push_back(param("o" + std::to_string(i), "mm", 0.5, -20, 20, 0.0, 0.2, 1.0));
+        for (int i = 1; i <= 4; ++i)
+            d.params.push_back(param("o" + std::to_string(i), "mm", 0.5, -20, 20, 0.0, 0.2, 1.0)
+                                   .plausible(-10, 10, "a zero 10 mm off: another pot, or a stand-in",
+                                              "a zero 10 mm off: another pot, or a stand-in"));
         return d;
     }
     static constexpr int kCableParams = 1;

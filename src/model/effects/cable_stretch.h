@@ -17,8 +17,16 @@ struct CableStretch : EffectBase {
                      "s1 1e-6..5e-6 /mm. s0 is the common part of cable_gain and s1 that of pot_nonlinearity: with "
                      "those on, the shared parameter is fixed (gauge).",
                      kStage, -1, {}};
-        d.params.push_back(param("s0", "1", 1e-3, -0.05, 0.05, 0.0, 2e-4, 2e-3, false));
-        d.params.push_back(param("s1_per_mm", "1/mm", 3e-6, -1e-3, 1e-3, 0.0, 1e-6, 5e-6, false));
+        // A tensioned cable only lengthens (s0 >= 0), and a drum spring's
+        // tension rises as cable is paid out (s1 >= 0); a strain above 1 %
+        // is not a cable's elastic range.
+        d.params.push_back(param("s0", "1", 1e-3, -0.05, 0.05, 0.0, 2e-4, 2e-3, false)
+                               .plausible(0, 1e-2, "a compression: something lengthens the reading as the cable lengthens",
+                                          "a strain over 1 %: a scale of the readings larger than a cable's stretch"));
+        d.params.push_back(param("s1_per_mm", "1/mm", 3e-6, -1e-3, 1e-3, 0.0, 1e-6, 5e-6, false)
+                               .plausible(0, 3e-5, "a tension falling as cable is paid out: something lengthens the "
+                                                   "reading faster than the length grows",
+                                          "a strain growing faster than a drum spring's tension can make it"));
         return d;
     }
     static constexpr int kCableParams = 2;

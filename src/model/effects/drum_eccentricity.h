@@ -22,10 +22,16 @@ struct DrumEccentricity : EffectBase {
                      "the four pots, amplitude and phase per cable, mm. Typical: period 60-130 mm, amplitude "
                      "0.05-0.2 mm.",
                      kStage, -1, {}};
-        d.params.push_back(param("period", "mm", 10.0, 5.0, 400.0, 100.0, 60.0, 130.0, false));
+        // One turn of a string pot's drum is a few cm to a few dm; an
+        // eccentricity or track ripple of a mm would be seen by eye.
+        d.params.push_back(param("period", "mm", 10.0, 5.0, 400.0, 100.0, 60.0, 130.0, false)
+                               .plausible(20, 300, "a period shorter than any drum's turn",
+                                          "a period longer than any drum's turn: a smooth trend in length"));
         for (int i = 1; i <= 4; ++i) {
-            d.params.push_back(param("a" + std::to_string(i), "mm", 0.1, -5, 5, 0.0, 0.05, 0.2));
-            d.params.push_back(param("b" + std::to_string(i), "mm", 0.1, -5, 5, 0.0, 0.05, 0.2));
+            d.params.push_back(param("a" + std::to_string(i), "mm", 0.1, -5, 5, 0.0, 0.05, 0.2)
+                                   .plausible(-1, 1, "a ripple over 1 mm", "a ripple over 1 mm"));
+            d.params.push_back(param("b" + std::to_string(i), "mm", 0.1, -5, 5, 0.0, 0.05, 0.2)
+                                   .plausible(-1, 1, "a ripple over 1 mm", "a ripple over 1 mm"));
         }
         return d;
     }

@@ -16,11 +16,19 @@ struct ExitPulley : EffectBase {
                      "of radius r starting at the anchor and runs straight to the holder: length = r*beta + free "
                      "length. One radius for the four guides, mm. Typical: 3-10 mm.",
                      kStage, -1, {}};
-        d.params.push_back(param("radius_mm", "mm", 3.0, 0.0, 40.0, 0.0, 3.0, 10.0, false));
+        // A guide that fits the frame's corner: a few mm to a few cm.
+        d.params.push_back(param("radius_mm", "mm", 3.0, 0.0, 40.0, 0.0, 3.0, 10.0, false)
+                               .plausible(0.5, 25, "a guide of under 0.5 mm: no guide, or a stand-in",
+                                          "a guide over 25 mm across its corner: larger than the frame's pulleys"));
         return d;
     }
     static constexpr int kCableParams = 1;
     static void cable_params(int, int *idx) { idx[0] = 0; }
+    // The path round the guide replaces the straight length (it is computed
+    // from the anchor-holder vector, not from the length on entry): the
+    // kernel's order check puts it first among the Path-stage effects, so
+    // no effect's change to the length can be overwritten by it.
+    static constexpr bool kReplacesLength = true;
     // In the plane of u and the holder (s along u, t along n, the unit vector
     // from the axis toward the holder) the guide's centre is (0, r) and H is
     // (hs, ht); the cable goes round from the angle -pi/2 to the tangent

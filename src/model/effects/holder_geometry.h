@@ -14,7 +14,12 @@ struct HolderGeometry : EffectBase {
                      kStage, -1, {}};
         for (int i = 1; i <= 4; ++i)
             for (const char *c : {"x", "y", "z"})
-                d.params.push_back(param("h" + std::to_string(i) + "_" + c, "mm", 0.3, -5, 5, 0.0, 0.1, 0.5));
+                // A cable tied by hand to a machined holder sits within a
+                // millimetre or so of its corner.
+                d.params.push_back(param("h" + std::to_string(i) + "_" + c, "mm", 0.3, -5, 5, 0.0, 0.1, 0.5)
+                                       .plausible(-1.5, 1.5, "an attachment point more than 1.5 mm from its corner",
+                                                  "an attachment point more than 1.5 mm from its corner"));
+        d.points = {true, false};
         return d;
     }
     static constexpr int kCableParams = 3;

@@ -18,8 +18,14 @@ struct PotDrift : EffectBase {
                      "cable, mm/h; c common, mm/h^2. Live poses use t = 0. Typical: 0.1-0.5 mm over the first hour "
                      "after a cold start.",
                      kStage, -1, {}};
-        for (int i = 1; i <= 4; ++i) d.params.push_back(param("r" + std::to_string(i), "mm/h", 0.2, -50, 50, 0.0, 0.1, 0.5));
-        d.params.push_back(param("c", "mm/h^2", 0.2, -50, 50, 0.0, 0.0, 0.0));
+        // A warming pot drifts by tenths of a mm per hour; several mm per
+        // hour is a loose part or a stand-in.
+        for (int i = 1; i <= 4; ++i)
+            d.params.push_back(param("r" + std::to_string(i), "mm/h", 0.2, -50, 50, 0.0, 0.1, 0.5)
+                                   .plausible(-5, 5, "a drift over 5 mm/h", "a drift over 5 mm/h"));
+        d.params.push_back(param("c", "mm/h^2", 0.2, -50, 50, 0.0, 0.0, 0.0)
+                               .plausible(-5, 5, "a drift accelerating by over 5 mm/h^2",
+                                          "a drift accelerating by over 5 mm/h^2"));
         return d;
     }
     static constexpr int kCableParams = 2;

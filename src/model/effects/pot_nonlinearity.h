@@ -14,7 +14,9 @@ struct PotNonlinearity : EffectBase {
                      "(length = the pulled-out cable, from the pot's zero). Typical: |k| 0.5-2e-5 /mm.",
                      kStage, -1, {}};
         for (int i = 1; i <= 4; ++i)
-            d.params.push_back(param("k" + std::to_string(i), "1/mm", 1e-5, -1e-3, 1e-3, 0.0, 5e-6, 2e-5));
+            d.params.push_back(param("k" + std::to_string(i), "1/mm", 1e-5, -1e-3, 1e-3, 0.0, 5e-6, 2e-5)
+                                   .plausible(-1e-4, 1e-4, "a curvature ten times a pot's linearity tolerance",
+                                              "a curvature ten times a pot's linearity tolerance"));
         return d;
     }
     static constexpr int kCableParams = 1;

@@ -1,4 +1,5 @@
 // Triangulation (eq. 1-3) and the effect model's forward kinematics.
+#include <algorithm>
 #include <cmath>
 #include <cstdarg>
 #include <cstddef>
@@ -110,6 +111,38 @@ static void forward_kinematics_inverts_each_effect(void **) {
                         for (int k = 0; k < 3; ++k) assert_true(std::fabs(q[k] - p[k]) < 1e-6);
                     }
         }
+    }
+}
+
+// Every reading-stage built-in, switched on inside the model that holds all
+// the others at random realistic values, changes the readings: an effect
+// whose place in the list let another overwrite its work (a Path-stage hook
+// that replaces the length after one that added to it) would leave them
+// as they were. The threshold, 1e-6 mm, is a thousand times the round-off
+// of a 300 mm reading and a thousandth of what each effect's smallest
+// random magnitude moves a reading by somewhere on these positions.
+static void every_effect_acts_inside_the_full_model(void **) {
+    std::vector<std::string> names;
+    for (auto &e : all_effects())
+        if (e->builtin_id >= 0 && e->stage != Stage::Position && e->stage != Stage::Jig) names.push_back(e->name);
+    for (size_t k = 0; k < names.size(); ++k) {
+        Model with{DeviceGeometry{}}, without{DeviceGeometry{}};
+        std::string err;
+        for (size_t q = 0; q < names.size(); ++q) {
+            assert_true(with.add_effect_random(names[q], 10 + q, err));
+            if (q != k) assert_true(without.add_effect_random(names[q], 10 + q, err));
+        }
+        double most = 0;
+        for (double x : {30.0, 70.0})
+            for (double y : {-60.0, 0.0, 45.0})
+                for (double z : {-60.0, 20.0, 60.0}) {
+                    const double p[3] = {x, y, z};
+                    double a[4], b[4];
+                    assert_int_equal(with.readings(p, 1800.0, a), 0);
+                    assert_int_equal(without.readings(p, 1800.0, b), 0);
+                    for (int c = 0; c < 4; ++c) most = std::max(most, std::fabs(a[c] - b[c]));
+                }
+        if (!(most > 1e-6)) fail_msg("%s changes no reading inside the full model (%g mm)", names[k].c_str(), most);
     }
 }
 
@@ -593,6 +626,7 @@ int main(void) {
         cmocka_unit_test(triangulation_other_geometry),
         cmocka_unit_test(triangulation_rejects_impossible),
         cmocka_unit_test(forward_kinematics_inverts_each_effect),
+        cmocka_unit_test(every_effect_acts_inside_the_full_model),
         cmocka_unit_test(pulley_limits),
         cmocka_unit_test(json_round_trip_and_errors),
         cmocka_unit_test(apply_failure_is_reported),

@@ -219,6 +219,52 @@ std::string fmt_g(double v) {
     return b;
 }
 
+// The discovery's JSON and the verdict's sentence, from the selection s
+// with its coefficients c (standard errors se) and out's numbers.
+void describe(const DiagContext &ctx, const std::vector<Term> &lib, const Selection &s, const Eigen::VectorXd &c,
+              const Eigen::VectorXd &se, const Model &base, Discovery &out) {
+    const long k = long(s.terms.size());
+    const double xr_raw = out.E.err[0].n > 0 ? std::sqrt(out.E.err[0].ss / out.E.err[0].n) : NAN;
+    const double xr_fix = x_rms_without_fixture(out.E, ctx.G, ctx.jig, ctx.pos);
+    const double xr = std::isfinite(xr_fix) ? xr_fix : xr_raw;
+    json terms = json::array();
+    std::string what;
+    for (long q = 0; q < k; ++q) {
+        const Term &t = lib[size_t(s.terms[size_t(q)])];
+        out.terms.push_back(t.name);
+        out.coef.push_back(c(q));
+        out.se.push_back(se(q));
+        terms.push_back({{"term", t.name}, {"variable", t.variable}, {"coefficient", c(q)}, {"std", se(q)},
+                         {"delta_chi2", s.gain[size_t(q)]}, {"p_value", s.p[size_t(q)]}, {"shape", t.shape}});
+        what += std::string(q ? " plus " : "") + fmt_g(c(q)) + " * " + t.name;
+    }
+    const Term &lead = lib[size_t(s.terms[0])];
+    out.json = {{"terms", terms},
+                {"per_cable", "one coefficient common to the four cables, added to each cable's reading (mm); L the "
+                              "cable's mean reading in m, u its unit direction anchor to holder in the device frame, "
+                              "t hours since the first position, height the fixture height in m, approach the sign of "
+                              "the cable's length change from the position measured before"},
+                {"delta_chi2", out.dchi2},
+                {"bic_change", out.bic_vs_base},
+                {"bic_change_vs_stand_ins", std::isfinite(out.bic_vs_other) ? json(out.bic_vs_other) : json(nullptr)},
+                {"x_rms_mm", xr_raw},
+                {"x_rms_fixture_out_mm", std::isfinite(xr_fix) ? json(xr_fix) : json(nullptr)},
+                {"error_mm", stats3(out.E.err)},
+                {"of", reading_effects(base)},
+                {"method", "forward stepwise sparse regression of the whitened reading residual over " +
+                               std::to_string(lib.size()) + " per-cable terms, each fitted jointly with the model "
+                               "(its Jacobian and the fixture's offsets projected out); a term kept when its likelihood "
+                               "ratio passes 1e-3 after Bonferroni over the library and it lowers the BIC; the error "
+                               "after one joint Gauss-Newton step"},
+                {"hypothesis", true}};
+    out.words = "a term " + what + " per cable (mm, L in m; " + fmt_p(s.p[0]) + ") brings x to " + fmt_num(xr, 3) +
+                " mm" + (std::isfinite(xr_fix) ? " with the fixture's per-height offsets out" : "") +
+                (std::isfinite(out.bic_vs_other) ? " (BIC " + fmt_num(out.bic_vs_other, 0, true) + " against the stand-ins)"
+                                                 : " (BIC " + fmt_num(out.bic_vs_base, 0, true) + ")") +
+                ": " + lead.shape + ". A hypothesis for the physics to confirm: write it as a user effect (docs/effects.md) "
+                "and diagnose again";
+}
+
 } // namespace
 
 bool discover_terms(const DiagContext &ctx, const Model &base, const FitReport &base_rep, const Model *other,
@@ -285,45 +331,7 @@ bool discover_terms(const DiagContext &ctx, const Model &base, const FitReport &
         out.bic_vs_other = (s.chi2_after + double(base_rep.n_free + int(k)) * ln_n) -
                            (chi2_other + double(other_rep->n_free) * ln_n);
     }
-    const double xr_raw = out.E.err[0].n > 0 ? std::sqrt(out.E.err[0].ss / out.E.err[0].n) : NAN;
-    const double xr_fix = x_rms_without_fixture(out.E, ctx.G, ctx.jig, ctx.pos);
-    const double xr = std::isfinite(xr_fix) ? xr_fix : xr_raw;
-    json terms = json::array();
-    std::string what;
-    for (long q = 0; q < k; ++q) {
-        const Term &t = lib[size_t(s.terms[size_t(q)])];
-        out.terms.push_back(t.name);
-        out.coef.push_back(c(q));
-        out.se.push_back(se(q));
-        terms.push_back({{"term", t.name}, {"variable", t.variable}, {"coefficient", c(q)}, {"std", se(q)},
-                         {"delta_chi2", s.gain[size_t(q)]}, {"p_value", s.p[size_t(q)]}, {"shape", t.shape}});
-        what += std::string(q ? " plus " : "") + fmt_g(c(q)) + " * " + t.name;
-    }
-    const Term &lead = lib[size_t(s.terms[0])];
-    out.json = {{"terms", terms},
-                {"per_cable", "one coefficient common to the four cables, added to each cable's reading (mm); L the "
-                              "cable's mean reading in m, u its unit direction anchor to holder in the device frame, "
-                              "t hours since the first position, height the fixture height in m, approach the sign of "
-                              "the cable's length change from the position measured before"},
-                {"delta_chi2", out.dchi2},
-                {"bic_change", out.bic_vs_base},
-                {"bic_change_vs_stand_ins", std::isfinite(out.bic_vs_other) ? json(out.bic_vs_other) : json(nullptr)},
-                {"x_rms_mm", xr_raw},
-                {"x_rms_fixture_out_mm", std::isfinite(xr_fix) ? json(xr_fix) : json(nullptr)},
-                {"error_mm", stats3(out.E.err)},
-                {"of", reading_effects(base)},
-                {"method", "forward stepwise sparse regression of the whitened reading residual over " +
-                               std::to_string(lib.size()) + " per-cable terms, each fitted jointly with the model "
-                               "(its Jacobian and the fixture's offsets projected out); a term kept when its likelihood "
-                               "ratio passes 1e-3 after Bonferroni over the library and it lowers the BIC; the error "
-                               "after one joint Gauss-Newton step"},
-                {"hypothesis", true}};
-    out.words = "a term " + what + " per cable (mm, L in m; " + fmt_p(s.p[0]) + ") brings x to " + fmt_num(xr, 3) +
-                " mm" + (std::isfinite(xr_fix) ? " with the fixture's per-height offsets out" : "") +
-                (std::isfinite(out.bic_vs_other) ? " (BIC " + fmt_num(out.bic_vs_other, 0, true) + " against the stand-ins)"
-                                                 : " (BIC " + fmt_num(out.bic_vs_base, 0, true) + ")") +
-                ": " + lead.shape + ". A hypothesis for the physics to confirm: write it as a user effect (docs/effects.md) "
-                "and diagnose again";
+    describe(ctx, lib, s, c, se, base, out);
     return true;
 }
 

@@ -13,6 +13,30 @@ namespace diag {
 
 using nlohmann::json;
 
+namespace {
+
+// A model with stand-ins. Where its tests pass, the numbers stand and the
+// word "explains" does not: "fits to the noise floor with stand-ins".
+// Where they fail, the stand-ins are named after the reasons, since its
+// fitted values are then not the effects' physics either.
+void apply_stand_ins(Judgement &J, const std::vector<StandIn> &si, const std::string &rms, const std::string &tests,
+                     const std::vector<std::string> &negligible, double small) {
+    if (!J.explained && !J.negligible_only) {
+        J.words += ". Its fitted values include stand-ins: " + stand_ins_words(si);
+        return;
+    }
+    J.with_stand_ins = true;
+    J.explained = J.negligible_only = false;
+    J.words = "fits to the noise floor with stand-ins, so it does not explain the data; " + rms + " (" + tests +
+              "). Stand-ins: " + stand_ins_words(si);
+    if (!negligible.empty()) {
+        J.words += ". Also significant, but under a tenth of the noise floor (" + fmt_num(small, 4) + " mm): ";
+        for (size_t k = 0; k < negligible.size() && k < 3; ++k) J.words += (k ? "; " : "") + negligible[k];
+    }
+}
+
+} // namespace
+
 Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candidate> *cands, const json *findings,
                       const V3 &noise, double x_rms_jig_out, const std::vector<StandIn> *stand_ins) {
     Judgement J;
@@ -64,18 +88,7 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
                                        : "");
     J.explained = v.explained && material.empty() && negligible.empty();
     J.negligible_only = v.explained && material.empty() && !negligible.empty();
-    if ((J.explained || J.negligible_only) && stand_ins && !stand_ins->empty()) {
-        // The tests pass, but not with the physics the effects claim: the
-        // numbers stand, the word "explains" does not.
-        J.with_stand_ins = true;
-        J.explained = J.negligible_only = false;
-        J.words = "fits to the noise floor with stand-ins, so it does not explain the data; " + rms + " (" + tests +
-                  "). Stand-ins: " + stand_ins_words(*stand_ins);
-        if (!negligible.empty()) {
-            J.words += ". Also significant, but under a tenth of the noise floor (" + fmt_num(small, 4) + " mm): ";
-            for (size_t k = 0; k < negligible.size() && k < 3; ++k) J.words += (k ? "; " : "") + negligible[k];
-        }
-    } else if (J.explained) {
+    if (J.explained) {
         J.words = "explains the data; " + rms + " (" + tests + (cands ? "; no candidate significant" : "") +
                   (findings ? "; no residual finding" : "") + ")";
     } else if (J.negligible_only) {
@@ -115,10 +128,7 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
             if (negligible.size() > 3) J.words += "; and " + std::to_string(negligible.size() - 3) + " more";
         }
     }
-    // A model that does not explain the data may still lean on stand-ins:
-    // named too, since its numbers are then not the effects' physics.
-    if (!J.with_stand_ins && stand_ins && !stand_ins->empty())
-        J.words += ". Its fitted values include stand-ins: " + stand_ins_words(*stand_ins);
+    if (stand_ins && !stand_ins->empty()) apply_stand_ins(J, *stand_ins, rms, tests, negligible, small);
     return J;
 }
 

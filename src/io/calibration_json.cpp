@@ -18,10 +18,13 @@ std::string shown_origin(const std::string &o) {
 // What to do to have a user effect registered, from the origin a
 // calibration recorded for it.
 std::string load_hint(const std::string &origin) {
-    const std::string py = "python:";
+    const std::string py = "python:", cs = "csharp:";
     if (origin.compare(0, py.size(), py) == 0)
         return "register it from Python first (import the module " + shown_origin(origin.substr(py.size())) +
                " in the process that loads the calibration, e.g. before cdm.open(uri, calibration=...))";
+    if (origin.compare(0, cs.size(), cs) == 0)
+        return "register it from C# first (Cdm.Effects.Register, in " + shown_origin(origin.substr(cs.size())) +
+               ", in the process that loads the calibration)";
     return "load its plugin " + shown_origin(origin) +
            " first (--plugin with the cdm command, cdm_effect_load_plugin, cdm.load_plugin)";
 }

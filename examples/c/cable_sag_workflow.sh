@@ -47,6 +47,16 @@ print("c = %.4g +- %.2g /mm^2 (truth %g); explained, chi2/dof %.3f" % (p["value"
                                                                       r["chi2_per_dof"]))
 PY
 
+# The search, the plugin loaded, finds the sag as what is missing after the
+# offsets alone.
+"$CDM" calib diagnose "$T/jig.csv" --device "$DEVICE" --plugin "$PLUGIN" --effects cable_offset \
+  --json "$T/d0.json" --quiet > /dev/null
+python3 - "$T/d0.json" <<'PY'
+import json, sys
+rec = json.load(open(sys.argv[1]))["recommended"]
+assert "cable_sag" in rec["effects"] and rec["explained"], rec["effects"]
+PY
+
 # 2. The calibration without the plugin: refused, naming the effect and the
 #    plugin to load; with a changed fingerprint: refused, saying so.
 if "$CDM" stream sim: --calibration "$T/cal.json" --seconds 0.2 2> "$T/err.txt"; then

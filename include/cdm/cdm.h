@@ -521,7 +521,7 @@ typedef struct cdm_effect_def {
      *  by the diagnosis from the cable-length periodogram instead. */
     const double *initial;
     /** since 1.1: the effect on all positions at once, or NULL. At least one
-     *  of apply and apply_batch is given. Evaluations over many positions
+     *  of apply, apply_batch and (since 1.2) apply_geom is given. Evaluations over many positions
      *  (the fit and its chi-squares, the diagnosis' candidate fits, the
      *  position solves behind their error statistics) call apply_batch, once
      *  per central-difference step (a position solve: once per iteration,

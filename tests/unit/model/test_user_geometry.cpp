@@ -6,15 +6,16 @@
 //
 // Tolerance of the Jacobian checks: test_gradients.cpp's (truncation from a
 // third difference + rounding of the two evaluations), plus, where the
-// evaluator's derivative is itself a central difference through the user
-// effect, that difference's own truncation and rounding: the sag is cubic in
-// the chord, so at the evaluator's steps (1e-5 mm on a length, 1e-4 mm on
-// the position) its truncation is ~h^2 * 6 c L / 6 < 1e-15 mm, and the
-// rounding of (f(+h) - f(-h)) / 2h on lengths of ~300 mm is 2 * 32 eps *
-// 300 / 2e-5 ~ 2e-8 (per unit of position derivative; 2e-9 on a
-// length step). The documented omission (the frames are not stepped with
-// the Geometry-stage parameters) is bounded separately: see
-// geometry_parameters_leave_out_the_frames.
+// evaluator's derivative is itself a central difference through a user
+// effect, that difference's own truncation and rounding. The effects here
+// are at most cubic in the chord and smooth in the position, so at the
+// evaluator's steps (1e-5 mm on a value, 1e-4 mm on the position) the
+// truncation is ~h^2 c L < 1e-15 of the derivative; the rounding of
+// (f(+h) - f(-h)) / 2h on values below 400 mm is at most 32 eps x 400 / h
+// (2.8e-7 per step of 1e-5 mm, 2.8e-8 per step of 1e-4 mm), once per user
+// effect. The documented omission (the frames are not stepped with the
+// Geometry-stage parameters) is bounded separately, in
+// path_effect_jacobian_matches_central_differences.
 #include <cmath>
 #include <cstdio>
 #include <functional>
@@ -128,7 +129,7 @@ int near(const std::string &what, double a, double b, double tol) {
 // Central difference of the model's readings along t (f(t) -> 4 readings)
 // with test_gradients.cpp's truncation and rounding bound.
 int check4(const std::string &what, const std::function<bool(double, double *)> &f, double h, const double *ad,
-           double extra) {
+           double extra, double rel = 0) {
     double p[4], m[4], a[4], b[4], c[4], d[4];
     const double H = 10 * h;
     if (!f(h, p) || !f(-h, m) || !f(2 * H, a) || !f(H, b) || !f(-H, c) || !f(-2 * H, d)) {
@@ -140,7 +141,7 @@ int check4(const std::string &what, const std::function<bool(double, double *)> 
         const double cd = (p[i] - m[i]) / (2 * h);
         const double f3 = std::fabs(a[i] - 2 * b[i] + 2 * c[i] - d[i]) / (2 * H * H * H);
         const double tol = h * h * f3 / 6 + kRound * std::fmax(std::fabs(p[i]), std::fabs(m[i])) / h +
-                           kRound * std::fabs(ad[i]) + extra;
+                           (kRound + rel) * std::fabs(ad[i]) + extra;
         bad += near(what + " [" + std::to_string(i) + "]", ad[i], cd, tol);
     }
     return bad;
@@ -254,9 +255,9 @@ static void context_is_the_models_geometry(void **) {
 // the chord, 2 c L^2 through the direction, |d u / d a| <= 1/L), for the
 // pickup |k| + 0.01 |amp| per mm; elsewhere it is exact but for rounding.
 // The evaluator's own central differences through the two user effects
-// round by at most 2 x 32 eps x 400 mm / h on each entry (h = 1e-5 mm on a
-// length or reading, 1e-4 mm on the position), 5.7e-7 times the entry's
-// size: `extra` below.
+// round by at most 2 x 32 eps x 400 mm / h (h = 1e-5 mm on a length or
+// reading: 5.7e-7 times the entry carried through them) and, for their own
+// parameters, 32 eps x 400 mm / their step.
 static void path_effect_jacobian_matches_central_differences(void **) {
     register_effects();
     Model m = geom_model();
@@ -295,8 +296,10 @@ static void path_effect_jacobian_matches_central_differences(void **) {
                 double ad[4];
                 for (int i = 0; i < 4; ++i) ad[i] = J(i, ev.offset(e) + int(k));
                 const double omitted = geo ? 1.1 * (5 * c * Lm * Lm + std::fabs(kp) + 0.01 * std::fabs(amp)) : 0;
-                const double extra = 5.7e-7 * std::fmax(1.0, std::fabs(ad[0]) + std::fabs(ad[3])) + omitted;
-                bad += check4(d.name + "." + d.params[k].name, f, 1e-3 * d.params[k].scale, ad, extra);
+                // A user effect's own parameter: the difference over its step
+                // (1e-6 of max(1, 1e3 scale)) rounds by 32 eps x 400 mm / step.
+                const double own = d.is_user() ? kRound * 400 / (1e-6 * std::fmax(1.0, d.params[k].scale * 1e3)) : 0;
+                bad += check4(d.name + "." + d.params[k].name, f, 1e-3 * d.params[k].scale, ad, omitted + own, 5.7e-7);
             }
         }
         for (int k = 0; k < 3; ++k) {
@@ -306,7 +309,11 @@ static void path_effect_jacobian_matches_central_differences(void **) {
                 return m.readings(Q, t, out) == 0;
             };
             const double ad[4] = {dP(0, k), dP(1, k), dP(2, k), dP(3, k)};
-            bad += check4("d/dP" + std::to_string(k), f, 1e-3, ad, 5.7e-7 * 4);
+            // The evaluator's position derivative: the incoming one (|d reading
+            // / d P| <= 1 + the gain, 1.1) through each effect's value
+            // difference (5.7e-7 relative, above) plus each effect's own
+            // position difference (32 eps x 400 mm / 1e-4 mm, 2.8e-8, twice).
+            bad += check4("d/dP" + std::to_string(k), f, 1e-3, ad, 5.7e-7 * 1.1 + 5.7e-8);
         }
     }
     std::printf("%d parameter columns checked\n", cols);

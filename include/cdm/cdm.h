@@ -435,7 +435,7 @@ CDM_API int cdm_device_calibration_write(cdm_device *dev, const char *data, size
  * (src/api/libcdm.map), so a program built against another experimental
  * version fails to load instead of calling a changed function.
  */
-#define CDM_EXPERIMENTAL_VERSION 1
+#define CDM_EXPERIMENTAL_VERSION 2
 
 /**
  * A user-defined physical effect, acting on the cable readings. The model
@@ -456,6 +456,53 @@ typedef int (*cdm_effect_apply_fn)(void *user, const double *params, const doubl
 typedef int (*cdm_effect_apply_batch_fn)(void *user, const double *params, size_t n, const double *positions_mm,
                                          double *readings_mm);
 
+/**
+ * since 1.2: where a user effect acts (cdm_effect_def.stage).
+ *  READING: on the readings, after the pot's transfer (ripple, drift,
+ *    electronics): `values` are the readings the built-ins predict (mm).
+ *  PATH: on the cable's length before the pot's transfer (sag, guides,
+ *    pulleys): after the built-in Path stage (exit_pulley), before the
+ *    built-in Transfer stage, so cable_stretch, cable_gain and the rest
+ *    act on the length it returns: `values` are the four cables' lengths
+ *    from anchor to holder (mm). Needs apply_geom.
+ */
+typedef enum cdm_effect_stage {
+    CDM_EFFECT_STAGE_READING = 0,
+    CDM_EFFECT_STAGE_PATH = 1
+} cdm_effect_stage;
+
+/**
+ * since 1.2: what a geometry-aware user effect (cdm_effect_def.apply_geom)
+ * sees of n positions. Every array is row-major, owned by the library and
+ * valid during the call only; all in the device frame (cable plane y-z, x
+ * out of the plane), mm. Cable c of position i is at [i][c]. The anchors and
+ * holder points are those of the model being evaluated, after its geometry
+ * effects (anchor_position, holder_geometry) at the current parameter
+ * values (the fit moves them); without those effects, the drawing's.
+ * struct_size is the library's: read only the fields your header has.
+ */
+typedef struct cdm_effect_context {
+    uint32_t struct_size;
+    uint32_t stage;              /**< cdm_effect_stage: what `values` holds */
+    size_t n;                    /**< positions (rows) */
+    const double *positions_mm;  /**< n x 3: the holder centre */
+    const double *t_s;           /**< n: acquisition time, s since the session's start (0 for live poses) */
+    const double *anchors_mm;    /**< n x 4 x 3: each cable's anchor (exit point) */
+    const double *holders_mm;    /**< n x 4 x 3: each cable's attachment point on the holder */
+    const double *unit;          /**< n x 4 x 3: unit vector from anchor to holder point */
+    const double *chord_mm;      /**< n x 4: straight distance from anchor to holder point */
+} cdm_effect_context;
+
+/**
+ * since 1.2: the effect on n positions with their geometry (ctx, whose n is
+ * this n). values is n x 4, row-major, changed in place: the cable lengths
+ * (PATH stage) or the readings (READING stage) so far. Row i must come out
+ * the same whatever the other rows (they are independent); the rows come in
+ * no promised order. Non-zero fails the evaluation, as from apply.
+ */
+typedef int (*cdm_effect_apply_geom_fn)(void *user, const double *params, size_t n, const cdm_effect_context *ctx,
+                                        double *values);
+
 typedef struct cdm_effect_def {
     uint32_t struct_size;
     uint32_t n_params;
@@ -474,7 +521,7 @@ typedef struct cdm_effect_def {
      *  by the diagnosis from the cable-length periodogram instead. */
     const double *initial;
     /** since 1.1: the effect on all positions at once, or NULL. At least one
-     *  of apply and apply_batch is given. Evaluations over many positions
+     *  of apply, apply_batch and (since 1.2) apply_geom is given. Evaluations over many positions
      *  (the fit and its chi-squares, the diagnosis' candidate fits, the
      *  position solves behind their error statistics) call apply_batch, once
      *  per central-difference step (a position solve: once per iteration,
@@ -485,12 +532,37 @@ typedef struct cdm_effect_def {
      *  apply_batch with n = 1 when only it is given. For an effect written
      *  in an interpreted language the batch form saves a call per position. */
     cdm_effect_apply_batch_fn apply_batch;
+    /** since 1.2: each parameter's unit ("mm", "1/mm^2", "1" for a ratio),
+     *  or NULL (no units). Copied; part of the effect's fingerprint. */
+    const char *const *param_units;
+    /** since 1.2: the geometry-aware form, or NULL. When given it is the
+     *  only callback called (apply and apply_batch may be NULL), at every
+     *  evaluation: over many positions at once where the fit and the
+     *  diagnosis evaluate many, with n = 1 at one position (cdm_get_pose on
+     *  the reader thread, cdm_calibration_lengths), where the library
+     *  allocates nothing around the call. */
+    cdm_effect_apply_geom_fn apply_geom;
+    /** since 1.2: where the effect comes from, written with it into a
+     *  calibration (so that loading one without the effect can say what to
+     *  load): NULL, or e.g. "python:module". cdm_effect_load_plugin sets it
+     *  to the plugin's absolute path for the effects its init registers. */
+    const char *origin;
+    /** since 1.2: cdm_effect_stage; 0 (READING) is the 1.1 behaviour.
+     *  PATH needs apply_geom. */
+    uint32_t stage;
 } cdm_effect_def;
 
 /**
  * Registers a user effect under def->name (in-process, for every later fit,
  * diagnosis and calibration load). CDM_ERR_INVALID_ARG names a clash with a
  * built-in. Any thread (the registry has its own lock); not from inside apply.
+ * A struct_size of the 1.2 struct also checks the parameter names (each
+ * non-empty, [A-Za-z_][A-Za-z0-9_]*, no two alike) and units (printable,
+ * no '"' or '\\'), and a parameter whose lower bound is >= 0 is drawn
+ * positive by the simulator's hidden effects (1.1 structs: a random sign,
+ * clamped into the bounds). A calibration written with a user effect
+ * records its origin and fingerprint (cdm_effect_fingerprint); loading it
+ * needs the effect registered with the same fingerprint.
  */
 CDM_API int cdm_effect_register(const cdm_effect_def *def);
 CDM_API int cdm_effect_unregister(const char *name);
@@ -505,6 +577,15 @@ CDM_API int cdm_effect_load_plugin(const char *path);
 /** Number of effects known (built-in first, then user), and the name of effect i. */
 CDM_API size_t cdm_effect_count(void);
 CDM_API const char *cdm_effect_name(size_t i);
+
+/**
+ * since 1.2: effect i's fingerprint: 16 lowercase hex digits of the 64-bit
+ * FNV-1a hash of its stage and its parameters' names and units (what a
+ * calibration's values mean), NUL-terminated into buf (at least 17 bytes),
+ * and its origin (cdm_effect_def.origin; "" for a built-in or none; lives
+ * as long as the registration). NULL out-pointers are skipped. Any thread.
+ */
+CDM_API int cdm_effect_fingerprint(size_t i, char *buf, size_t len, const char **origin);
 
 /** Progress of a long fit: stage text and fraction done. Return non-zero to cancel. */
 typedef int (*cdm_progress_fn)(void *user, const char *stage, double fraction);

@@ -163,7 +163,14 @@ int cdm_effect_load_plugin(const char *path) {
         return v;
     };
     const std::vector<std::string> before = effect_names();
+    // The effects the init registers come from this file: their origin is
+    // its absolute path (what a calibration written with them names).
+    char *abs = realpath(path, nullptr);
+    const std::string origin = abs ? abs : path;
+    std::free(abs);
+    cdm::set_registering_origin(origin.c_str());
     const int rc = init(cdm_effect_register);
+    cdm::set_registering_origin(nullptr);
     if (rc != CDM_OK) {
         const std::string why = cdm_thread_error();
         // Effects a failed init registered point into the library: remove
@@ -196,6 +203,25 @@ const char *cdm_effect_name(size_t i) {
     } catch (...) {
         return nullptr;
     }
+}
+
+int cdm_effect_fingerprint(size_t i, char *buf, size_t len, const char **origin) {
+    return cdm::guarded("cdm_effect_fingerprint", [&]() -> int {
+        auto v = cdm::all_effects();
+        if (i >= v.size())
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_effect_fingerprint: no effect " + std::to_string(i) + " of " +
+                                                      std::to_string(v.size()));
+        const std::string fp = v[i]->is_user() ? v[i]->fingerprint : cdm::effect_fingerprint(*v[i]);
+        if (buf) {
+            if (len < fp.size() + 1)
+                return cdm::fail(CDM_ERR_NO_MEM, "cdm_effect_fingerprint: buf needs " + std::to_string(fp.size() + 1) +
+                                                     " bytes, got " + std::to_string(len));
+            std::memcpy(buf, fp.c_str(), fp.size() + 1);
+        }
+        // Kept alive by the registry, as cdm_effect_name's.
+        if (origin) *origin = v[i]->origin.c_str();
+        return CDM_OK;
+    });
 }
 
 int cdm_diagnose(const char *data_csv_path, const char *device_json_path, const char *options_json,

@@ -203,7 +203,14 @@ void add_bridge_command(CLI::App &app) {
     b->add_option("--calibration", a.calib, "apply this calibration (CALIB.json from `cdm calib fit`)");
     b->add_option("--seconds", a.seconds, "stop after this many seconds (0: until Ctrl-C, SIGTERM or the end)")
         ->check(range(0, 1e9));
-    b->callback([] { select_command([] { return cmd_bridge(a); }); });
+    static std::vector<std::string> plugins;
+    add_plugin_option(b, plugins);
+    b->callback([] {
+        select_command([] {
+            if (int rc = load_plugins(plugins); rc != kExitOk) return rc;
+            return cmd_bridge(a);
+        });
+    });
 }
 
 } // namespace cdm::cli

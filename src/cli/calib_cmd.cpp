@@ -177,8 +177,8 @@ int nominal_device(NominalDevice &nd) {
 }
 
 struct DiagArgs {
-    std::string data, device, effects, json_out, report, calib_out, plugin;
-    std::vector<std::string> before;
+    std::string data, device, effects, json_out, report, calib_out;
+    std::vector<std::string> before, plugins;
     double jig = -1;
     bool quiet = false, no_candidates = false, no_search = false, keep_outliers = false;
 };
@@ -206,8 +206,7 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     if (fit_only && effects.empty())
         throw UsageError("calib fit: --effects is required (a comma-separated list, e.g. cable_offset,cable_gain; "
                          "`cdm calib effects` lists them): without effects the calibration would correct nothing");
-    if (!a.plugin.empty() && cdm_effect_load_plugin(a.plugin.c_str()) != CDM_OK)
-        return report_error("--plugin " + a.plugin, CDM_ERR_INVALID_ARG);
+    if (int rc = load_plugins(a.plugins); rc != kExitOk) return rc;
     NominalDevice nd;
     std::string device = a.device;
     if (device.empty()) {
@@ -262,7 +261,8 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
 }
 
 struct SimArgs {
-    std::string out, effects, truth, device, plugin, heights, truth_out;
+    std::string out, effects, truth, device, heights, truth_out;
+    std::vector<std::string> plugins;
     int holes = 0, samples = 0;
     double pitch_mm = 0, noise_mm = 0, quant_mm = 0, jig_tolerance_mm = 0, jig_hole_mm = 0, jig_fixture_mm = 0;
     uint64_t seed = 0, effect_seed = 0;
@@ -296,8 +296,7 @@ int cmd_simulate(const SimArgs &a) {
     if (!a.device.empty()) o["device"] = a.device;
     if (!a.truth.empty()) o["truth"] = a.truth;
     if (!a.truth_out.empty()) o["truth_out"] = a.truth_out;
-    if (!a.plugin.empty() && cdm_effect_load_plugin(a.plugin.c_str()) != CDM_OK)
-        return report_error("--plugin " + a.plugin, CDM_ERR_INVALID_ARG);
+    if (int rc = load_plugins(a.plugins); rc != kExitOk) return rc;
     if (int rc = cdm_simulate_jig_dataset(a.out.c_str(), o.dump().c_str()); rc != CDM_OK)
         return report_error("calib simulate", rc);
     const size_t n_heights = o.contains("heights_mm") ? o["heights_mm"].size() : 5;
@@ -322,6 +321,15 @@ int cmd_effects(bool json) {
                             num(upper).c_str());
         }
         if (!json) std::printf("\n");
+        // A user effect's origin (a plugin's path) and fingerprint, which a
+        // calibration written with it records.
+        char fp[17];
+        const char *origin = nullptr;
+        if (cdm_effect_fingerprint(i, fp, sizeof fp, &origin) == CDM_OK && origin && *origin) {
+            e["origin"] = origin;
+            e["fingerprint"] = fp;
+            if (!json) std::printf("    from %s, fingerprint %s\n", origin, fp);
+        }
         all.push_back(e);
     }
     if (json) std::printf("%s\n", all.dump(1).c_str());
@@ -334,7 +342,7 @@ void add_diagnose_options(CLI::App *c, DiagArgs &d) {
                   "Device description JSON {\"a_mm\":..,\"b_mm\":..,\"m_mm\":..} (default: the nominal a=b=150, "
                   "m=30 mm)");
     c->add_option("--jig-tolerance-mm", d.jig, "Std of the jig's own position error (-1: estimated from the data)");
-    c->add_option("--plugin", d.plugin, "Load a user-effect plugin (.so) first");
+    add_plugin_option(c, d.plugins);
     c->add_flag("--quiet", d.quiet, "No progress output");
 }
 
@@ -349,7 +357,7 @@ void add_simulate(CLI::App *calib) {
                     "magnitudes (default: none)");
     sim->add_option("--effect-seed", s.effect_seed, "Seed of the hidden effects' magnitudes");
     sim->add_option("--truth", s.truth, "Calibration JSON to use as the true model (default: the nominal model)");
-    sim->add_option("--plugin", s.plugin, "Load a user-effect plugin (.so) first (its effects can be in --truth)");
+    add_plugin_option(sim, s.plugins);
     sim->add_option("--truth-out", s.truth_out, "Write the true model (with the hidden magnitudes) here");
     sim->add_option("--seed", s.seed, "Noise seed");
     sim->add_option("--noise-mm", s.noise_mm, "Per-sample pot noise std (mm)")->check(range(0, 100));
@@ -414,8 +422,15 @@ void add_calib_commands(CLI::App &app) {
 
     auto *eff = calib->add_subcommand("effects", "List the effect catalogue with each effect's physics");
     static bool e_json = false;
+    static std::vector<std::string> e_plugins;
     eff->add_flag("--json", e_json, "print a JSON array of {name, doc, parameters[{name, unit, scale, lower, upper}]}");
-    eff->callback([] { select_command([] { return cmd_effects(e_json); }); });
+    add_plugin_option(eff, e_plugins);
+    eff->callback([] {
+        select_command([] {
+            if (int rc = load_plugins(e_plugins); rc != kExitOk) return rc;
+            return cmd_effects(e_json);
+        });
+    });
 }
 
 } // namespace cdm::cli

@@ -51,4 +51,13 @@ std::vector<std::string> split_list(const std::string &s);
 // "cdm: WHAT: <cdm_strerror>: <detail>" on stderr; returns kExitFailure.
 int report_error(const std::string &what, int rc);
 
+// --plugin PATH, repeatable, on a command that evaluates a model (a
+// calibration, a sim: URI's effects= or truth=, --effects): the user-effect
+// plugins (.so) to load before it runs. load_plugins loads them in order:
+// kExitOk, or kExitFailure naming the one that failed; a path ending in
+// ".py" is a usage error saying how Python effects are used (the command
+// does not embed Python).
+void add_plugin_option(CLI::App *app, std::vector<std::string> &plugins);
+int load_plugins(const std::vector<std::string> &plugins);
+
 } // namespace cdm::cli

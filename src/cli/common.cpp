@@ -84,4 +84,24 @@ int report_error(const std::string &what, int rc) {
     return kExitFailure;
 }
 
+void add_plugin_option(CLI::App *app, std::vector<std::string> &plugins) {
+    app->add_option("--plugin", plugins,
+                    "Load a user-effect plugin (.so) first; repeatable (its effects can then be in a calibration, "
+                    "a sim: URI's effects= or truth=, --effects)")
+        ->expected(1) // one path per --plugin: `--plugin a.so sim:` keeps sim: the URI
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+}
+
+int load_plugins(const std::vector<std::string> &plugins) {
+    for (const auto &p : plugins) {
+        if (p.size() >= 3 && p.compare(p.size() - 3, 3, ".py") == 0)
+            throw UsageError("--plugin " + p + ": a Python effect is used from Python, not from the cdm command "
+                             "(which does not embed Python): register it there (cdm.register_effect) and open the "
+                             "device with cdm.open(uri, calibration=...) in that process (docs/effects.md, "
+                             "\"User effects\")");
+        if (cdm_effect_load_plugin(p.c_str()) != CDM_OK) return report_error("--plugin " + p, CDM_ERR_INVALID_ARG);
+    }
+    return kExitOk;
+}
+
 } // namespace cdm::cli

@@ -207,6 +207,10 @@ struct Accum {
 struct StreamCtx {
     std::atomic<cdm_device *> dev{nullptr};
     bool truth = false;
+    // --calibration: the truth error counts only the poses computed with it
+    // (CDM_POSE_COMPENSATED), not the few the reader published between the
+    // open and cdm_set_calibration with the nominal model.
+    bool compensated_only = false;
     std::mutex mu;
     uint64_t reports = 0;
     // Host delay: host receipt time minus the device clock. Their offset is
@@ -227,7 +231,7 @@ void stream_sample(void *user, const cdm_sample *s) {
     const int64_t delay = int64_t(s->pose->host_time_ns) - int64_t(s->pose->device_time_us) * 1000;
     double e[3];
     bool have_truth = false;
-    if (c->truth) {
+    if (c->truth && (!c->compensated_only || (s->pose->flags & CDM_POSE_COMPENSATED))) {
         if (cdm_device *d = c->dev.load()) {
             double p[3];
             if (cdm_sim_truth(d, s->pose->sequence, p) == CDM_OK) {
@@ -361,6 +365,7 @@ int open_stream(const StreamArgs &a, StreamCtx &ctx, cdm_device *&dev, cdm_devic
 int cmd_stream(const StreamArgs &a) {
     StreamCtx ctx;
     ctx.truth = a.truth;
+    ctx.compensated_only = !a.calib.empty();
     cdm_device *dev = nullptr;
     cdm_device_info info{};
     if (int rc = open_stream(a, ctx, dev, info); rc != kExitOk) return rc;
@@ -450,9 +455,16 @@ void add_device_commands(CLI::App &app) {
     auto *info = app.add_subcommand("info", "Show what a device says about itself (feature report 0x02)");
     static std::string info_uri;
     static bool i_json = false;
+    static std::vector<std::string> i_plugins;
     info->add_option("URI", info_uri, kUriHelp)->required();
     info->add_flag("--json", i_json, "print one JSON object");
-    info->callback([] { select_command([] { return cmd_info(info_uri, i_json); }); });
+    add_plugin_option(info, i_plugins);
+    info->callback([] {
+        select_command([] {
+            if (int rc = load_plugins(i_plugins); rc != kExitOk) return rc;
+            return cmd_info(info_uri, i_json);
+        });
+    });
 
     auto *stream = app.add_subcommand("stream", "Print the live pose, report rate, latency and drops");
     static StreamArgs s;
@@ -462,9 +474,17 @@ void add_device_commands(CLI::App &app) {
     stream->add_option("--rate", s.rate, "display refresh rate in Hz")->check(range(0.5, 1000));
     stream->add_option("--calibration", s.calib, "apply this calibration (CALIB.json from `cdm calib fit`)");
     stream->add_flag("--truth", s.truth,
-                     "sim: only: also show the error against the simulator's true position, and a summary");
+                     "sim: only: also show the error against the simulator's true position, and a summary (with "
+                     "--calibration: over the poses computed with it)");
     stream->add_flag("--json", s.json, "one JSON object per line per refresh, then a summary object");
-    stream->callback([] { select_command([] { return cmd_stream(s); }); });
+    static std::vector<std::string> s_plugins;
+    add_plugin_option(stream, s_plugins);
+    stream->callback([] {
+        select_command([] {
+            if (int rc = load_plugins(s_plugins); rc != kExitOk) return rc;
+            return cmd_stream(s);
+        });
+    });
 }
 
 } // namespace cdm::cli

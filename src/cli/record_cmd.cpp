@@ -394,7 +394,14 @@ void add_record_command(CLI::App &app) {
                        "comma-separated fixture heights in mm (default 30,40,50,60,70, or the sim: URI's)");
     record->add_option("--jig-samples", ja.samples, "samples kept per position (0: 100, or the sim: URI's)")
         ->check(range(0, 1000000));
-    record->callback([] { select_command([] { return cmd_record(r_uri, r_file, r_seconds, ja); }); });
+    static std::vector<std::string> r_plugins;
+    add_plugin_option(record, r_plugins);
+    record->callback([] {
+        select_command([] {
+            if (int rc = load_plugins(r_plugins); rc != kExitOk) return rc;
+            return cmd_record(r_uri, r_file, r_seconds, ja);
+        });
+    });
 
     auto *exp = app.add_subcommand(
         "export", "Convert a recording (replay format or MCAP) to MCAP, CSV or the replay format, by OUT's "

@@ -38,6 +38,11 @@ int spawn_wait(const std::vector<std::string> &args, const std::vector<std::stri
     }
     for (const auto &x : extra) envp.push_back(const_cast<char *>(x.c_str()));
     envp.push_back(nullptr);
+    // What this process printed so far goes out before the child's output
+    // (a pipe or a file buffers stdout: without this the child's lines come
+    // first and ours after it exits).
+    std::fflush(stdout);
+    std::fflush(stderr);
     pid_t pid = 0;
     const int rc = posix_spawnp(&pid, argv[0], nullptr, nullptr, argv.data(), envp.data());
     if (rc != 0) {

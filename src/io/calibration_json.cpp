@@ -8,6 +8,50 @@
 namespace cdm::io {
 
 namespace {
+// An origin as the calibration gives it: a path the user must read whole
+// (quote_field's 40 characters would cut it), capped against a hostile file.
+std::string shown_origin(const std::string &o) {
+    constexpr size_t kShown = 1024;
+    return o.size() <= kShown ? o : o.substr(0, kShown) + "... (" + std::to_string(o.size() - kShown) + " more)";
+}
+
+// What to do to have a user effect registered, from the origin a
+// calibration recorded for it.
+std::string load_hint(const std::string &origin) {
+    const std::string py = "python:", cs = "csharp:";
+    if (origin.compare(0, py.size(), py) == 0)
+        return "register it from Python first (import the module " + shown_origin(origin.substr(py.size())) +
+               " in the process that loads the calibration, e.g. before cdm.open(uri, calibration=...))";
+    if (origin.compare(0, cs.size(), cs) == 0)
+        return "register it from C# first (Cdm.Effects.Register, in " + shown_origin(origin.substr(cs.size())) +
+               ", in the process that loads the calibration)";
+    return "load its plugin " + shown_origin(origin) +
+           " first (--plugin with the cdm command, cdm_effect_load_plugin, cdm.load_plugin)";
+}
+
+// A user effect's entry may carry the fingerprint of the parameters it was
+// fitted with (written since 1.2); the effect registered now must have the
+// same, or its values would be read as other quantities.
+bool fingerprint_matches(const JsonValue &e, const std::string &at, const std::string &source, const EffectDesc &d,
+                         std::string &err) {
+    const JsonValue *fp = e.find("fingerprint");
+    if (!fp) return true;
+    if (fp->type != JsonValue::String) {
+        err = where(source, *fp) + at + " (\"" + d.name + "\"): \"fingerprint\" must be a string";
+        return false;
+    }
+    const std::string now = d.is_user() ? d.fingerprint : effect_fingerprint(d);
+    if (fp->str == now) return true;
+    const JsonValue *origin = e.find("origin");
+    const std::string was = origin && origin->type == JsonValue::String ? origin->str : "";
+    err = where(source, *fp) + at + ": effect \"" + d.name + "\" was fitted with the parameter list whose " +
+          "fingerprint is " + quote_field(fp->str) + (was.empty() ? "" : " (from " + shown_origin(was) + ")") +
+          ", the registered one's is " + now + (d.origin.empty() ? "" : " (from " + d.origin + ")") +
+          ": its parameter names, units or stage differ; load the version of the effect it was fitted with, "
+          "or fit again";
+    return false;
+}
+
 bool effect_from_json(const JsonValue &e, size_t k, const std::string &source, Model &m, std::string &err) {
     const std::string at = "effects[" + std::to_string(k) + "]";
     const JsonValue *name = e.find("name");
@@ -16,12 +60,19 @@ bool effect_from_json(const JsonValue &e, size_t k, const std::string &source, M
         return false;
     }
     const EffectDescPtr d = find_effect(name->str);
+    const JsonValue *origin = e.find("origin");
+    if (!d && origin && origin->type == JsonValue::String && !origin->str.empty()) {
+        err = where(source, *name) + at + ": user effect \"" + quote_field(name->str) + "\" is not registered: " +
+              load_hint(origin->str) + " before loading this calibration";
+        return false;
+    }
     if (!d) {
         std::string known;
         for (auto &x : all_effects()) known += (known.empty() ? "" : ", ") + x->name;
         err = where(source, *name) + at + ": unknown effect \"" + quote_field(name->str) + "\" (known: " + known + ")";
         return false;
     }
+    if (!fingerprint_matches(e, at, source, *d, err)) return false;
     const JsonValue *ps = e.find("params");
     if (!ps || ps->type != JsonValue::Object) {
         err = where(source, ps ? *ps : e) + at + " (\"" + d->name +
@@ -103,7 +154,15 @@ nlohmann::json model_to_json(const Model &m) {
         const auto &p = m.effect_params(i);
         nlohmann::json ps = nlohmann::json::object();
         for (size_t k = 0; k < p.size(); ++k) ps[d.params[k].name] = p[k];
-        j["effects"].push_back({{"name", d.name}, {"params", ps}});
+        nlohmann::json ej = {{"name", d.name}, {"params", ps}};
+        // A user effect: where it comes from and what its values mean, so
+        // that loading the calibration without it, or with another version
+        // of it, says so (effect_from_json).
+        if (d.is_user()) {
+            if (!d.origin.empty()) ej["origin"] = d.origin;
+            ej["fingerprint"] = d.fingerprint;
+        }
+        j["effects"].push_back(ej);
     }
     return j;
 }

@@ -2,7 +2,10 @@
 // {"format":"cdm-calibration","version":1,"device":{...},
 //  "effects":[{"name":..,"params":{..every parameter..}}], ...}
 // Every effect must give every one of its parameters, each finite and within
-// the effect's declared bounds (ParamDesc lower/upper).
+// the effect's declared bounds (ParamDesc lower/upper). A user effect's entry
+// also carries "origin" (a plugin's path, "python:MODULE"; when known) and
+// "fingerprint" (effect_fingerprint): loading names the origin when the
+// effect is not registered and refuses another fingerprint.
 #pragma once
 
 #include <string>

@@ -70,11 +70,20 @@ struct EffectDesc {
     int builtin_id;        // index in CDM_BUILTIN_EFFECTS (effects/list.h), or -1 for a user effect
     std::vector<ParamDesc> params;
     PointDisplacements points = PointDisplacements(); // the parameters are 4 points' displacements
-    // user effects only: at least one of apply and apply_batch (cdm.h says
-    // which is called when)
+    // user effects only: at least one of apply, apply_batch and apply_geom
+    // (cdm.h says which is called when)
     cdm_effect_apply_fn apply = nullptr;
     cdm_effect_apply_batch_fn apply_batch = nullptr;
+    cdm_effect_apply_geom_fn apply_geom = nullptr; // since 1.2: the only one called when given
     void *user = nullptr;
+    // since 1.2: a user effect on the cable's length before the pot's
+    // transfer (CDM_EFFECT_STAGE_PATH) rather than on the readings. Its
+    // Stage stays User (it is a user effect to the fit and the diagnosis);
+    // the kernel's callers apply it between the Path and Transfer stages.
+    bool on_path = false;
+    std::string origin = "";      // where it comes from (a plugin's path, "python:module"), or ""
+    std::string fingerprint = ""; // effect_fingerprint(*this), set at registration
+    bool is_user() const { return builtin_id < 0; }
     // At one position: apply, or apply_batch on one row when the effect has
     // only that (no allocation either way: the haptic path calls this).
     int apply_one(const double *params, const double position_mm[3], double readings_mm[4]) const {
@@ -93,6 +102,13 @@ std::vector<EffectDescPtr> all_effects();
 // ellipsoid) plus every user effect.
 std::vector<EffectDescPtr> candidate_effects();
 int register_user_effect(const cdm_effect_def *def, std::string &err);
+// The origin given to the effects registered on this thread until it is
+// reset with nullptr (cdm_effect_load_plugin: the plugin's path, whatever
+// the definition says).
+void set_registering_origin(const char *origin);
+// 16 hex digits of the FNV-1a 64-bit hash of what a calibration's values of
+// the effect mean: its stage, then each parameter's name and unit.
+std::string effect_fingerprint(const EffectDesc &d);
 int unregister_user_effect(const std::string &name, std::string &err);
 
 // The catalogue as a Markdown table (docs/calibration.md carries a copy that

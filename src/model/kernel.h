@@ -117,10 +117,24 @@ template <class E, class T> void position_step(const EffectParams<T> &p, T x[3])
 }
 } // namespace detail
 
-// Cable i's reading from the built-in effects (user effects act after).
-// q: the cable's parameter block laid out by `lay`.
+// A scalar's value: the number itself, or an AutoDiffScalar's value.
+inline double value_of(double v) { return v; }
+template <class D> double value_of(const Eigen::AutoDiffScalar<D> &v) { return v.value(); }
+
+// What a geometry-aware user effect sees of cable i (values only, device
+// frame, mm): the anchor and the holder attachment point after the Geometry
+// stage, the unit vector from one to the other and their distance.
+struct CablePoints {
+    double anchor[3], holder[3], unit[3], chord;
+};
+
+// Cable i through the Geometry and Path stages: the length the Transfer
+// stage receives. q: the cable's parameter block laid out by `lay`. pts,
+// when given, receives the cable's points (values only; the length and its
+// derivatives do not depend on whether it is given).
 template <class T>
-T cable_reading(const DeviceGeometry &g, int i, const Sample<T> &s, const CableLayout &lay, const T *q) {
+T cable_path(const DeviceGeometry &g, int i, const Sample<T> &s, const CableLayout &lay, const T *q,
+             CablePoints *pts = nullptr) {
     using std::sqrt;
     const auto A0 = g.anchor(i);
     const auto h0 = g.holder(i);
@@ -142,15 +156,35 @@ T cable_reading(const DeviceGeometry &g, int i, const Sample<T> &s, const CableL
         if (dA) d[k] -= dA[k];
     }
     T len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    if (pts) {
+        pts->chord = value_of(len);
+        for (int k = 0; k < 3; ++k) {
+            pts->anchor[k] = A0[k] + (dA ? value_of(dA[k]) : 0.0);
+            pts->holder[k] = value_of(s.P[k]) + h0[k] + (dh ? value_of(dh[k]) : 0.0);
+            pts->unit[k] = value_of(d[k]) / pts->chord;
+        }
+    }
     const PathIn<T> in{g.exit_axis[i].data(), d};
 #define CDM_STEP(E) detail::path_step<E, T>(lay, q, i, s, in, len);
     CDM_BUILTIN_EFFECTS(CDM_STEP)
 #undef CDM_STEP
+    return len;
+}
+
+// Cable i's reading from the length the Transfer stage receives.
+template <class T> T cable_transfer(int i, const Sample<T> &s, const CableLayout &lay, const T *q, const T &len) {
     TransferState<T> st{len, len};
 #define CDM_STEP(E) detail::transfer_step<E, T>(lay, q, i, s, st);
     CDM_BUILTIN_EFFECTS(CDM_STEP)
 #undef CDM_STEP
     return st.reading;
+}
+
+// Cable i's reading from the built-in effects (user effects act between
+// the two halves, on the path, or after, on the reading).
+template <class T>
+T cable_reading(const DeviceGeometry &g, int i, const Sample<T> &s, const CableLayout &lay, const T *q) {
+    return cable_transfer<T>(i, s, lay, q, cable_path<T>(g, i, s, lay, q));
 }
 
 // Jig reference position -> device frame (Jig-stage effects, in order).

@@ -24,7 +24,11 @@ ModelLayout build_layout(const std::vector<const EffectDesc *> &descs) {
     for (size_t k = 0; k < descs.size(); ++k) {
         const EffectDesc &d = *descs[k];
         if (d.builtin_id >= 0) L.idx[size_t(d.builtin_id)] = int(k);
-        if (d.stage == Stage::User) L.has_user = true;
+        if (d.stage == Stage::User) {
+            L.has_user = true;
+            L.has_geom = L.has_geom || d.apply_geom;
+            L.has_path_user = L.has_path_user || d.on_path;
+        }
         if (d.stage != Stage::Jig && d.stage != Stage::Position) L.reading_effects = true;
     }
     // Slots in list order (the order of application).

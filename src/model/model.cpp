@@ -41,6 +41,45 @@ int Model::Impl::apply_user(const double p[3], double readings[4], std::string *
     return 0;
 }
 
+void Model::Impl::path_frame(const Sample<double> &s, double len[4], CableFrame &f) const {
+    double q[kMaxCableSlots > 0 ? kMaxCableSlots : 1];
+    CablePoints pts;
+    for (int i = 0; i < 4; ++i) {
+        gather(i, q);
+        len[i] = cable_path<double>(g, i, s, lay.cable, q, &pts);
+        f.set(i, pts);
+    }
+}
+
+void Model::Impl::transfer_of(const Sample<double> &s, const double len[4], double out[4]) const {
+    double q[kMaxCableSlots > 0 ? kMaxCableSlots : 1];
+    for (int i = 0; i < 4; ++i) {
+        gather(i, q);
+        out[i] = cable_transfer<double>(i, s, lay.cable, q, len[i]);
+    }
+}
+
+int Model::Impl::readings_geom(const Sample<double> &s, double out[4], std::string *who) const {
+    double len[4];
+    CableFrame f;
+    path_frame(s, len, f);
+    const UserRows rows{1, s.P, &s.t_s, &f};
+    // The user effects of one stage in the model's order, on v (n = 1: no
+    // scratch, no allocation).
+    auto stage = [&](bool on_path, double *v) {
+        for (const auto &e : effects)
+            if (e.desc->stage == Stage::User && e.desc->on_path == on_path &&
+                call_user_effect(*e.desc, e.p.data(), rows, v) != 0) {
+                if (who) *who = e.desc->name;
+                return false;
+            }
+        return true;
+    };
+    if (!stage(true, len)) return -1;
+    transfer_of(s, len, out);
+    return stage(false, out) ? 0 : -1;
+}
+
 Model::Model(const DeviceGeometry &g) : impl_(new Impl) {
     impl_->g = g;
     impl_->refresh();
@@ -145,6 +184,7 @@ int Model::readings(const double p[3], double t_s, double out[4]) const {
     Sample<double> s;
     for (int k = 0; k < 3; ++k) s.P[k] = p[k];
     s.t_s = t_s;
+    if (impl_->lay.has_geom) return impl_->readings_geom(s, out, nullptr);
     impl_->builtin_readings(s, out);
     return impl_->apply_user(p, out, nullptr);
 }

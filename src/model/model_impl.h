@@ -11,6 +11,7 @@
 #include "model/effect.h"
 #include "model/kernel.h"
 #include "model/model.h"
+#include "model/user_effect.h"
 
 namespace cdm {
 
@@ -27,6 +28,8 @@ struct ModelLayout {
     std::array<std::array<int, kMaxCableSlots>, 4> slot_effect{}; // model effect index of each slot
     std::array<std::array<int, kMaxCableSlots>, 4> slot_param{};  // parameter index of each slot
     bool has_user = false;
+    bool has_geom = false;        // a user effect with apply_geom (since 1.2)
+    bool has_path_user = false;   // a user effect on the path (CDM_EFFECT_STAGE_PATH)
     bool reading_effects = false; // anything besides Jig and Position stages
 
 };
@@ -56,6 +59,14 @@ struct Model::Impl {
     // user effect's apply fails (its name in *who).
     int builtin_readings(const Sample<double> &s, double out[4]) const;
     int apply_user(const double p[3], double readings[4], std::string *who) const;
+    // With a geometry-aware user effect (lay.has_geom): the four cables'
+    // lengths after the Path stage and their frames at s; the Transfer
+    // stage on given lengths; and the readings through every stage, the
+    // user effects at theirs (0, or -1 naming the failing effect in *who).
+    // No allocation: the driver's forward kinematics calls these.
+    void path_frame(const Sample<double> &s, double len[4], CableFrame &f) const;
+    void transfer_of(const Sample<double> &s, const double len[4], double out[4]) const;
+    int readings_geom(const Sample<double> &s, double out[4], std::string *who) const;
 };
 
 // The forward kinematics' pieces (model_position.cpp), shared by the

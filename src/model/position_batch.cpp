@@ -26,12 +26,39 @@ struct Stencil {
     std::vector<double> P, T, Y; // rows x 3, rows, rows x 4
 };
 
+// readings_rows with a geometry-aware user effect in the model: the Path
+// stage row by row, the path's user effects over every row, the Transfer
+// stage row by row, the readings' user effects over every row.
+bool readings_rows_geom(const Model::Impl &I, size_t rows, const double *P, const double *T, double *Y) {
+    std::vector<double> len(4 * rows), scratch(user_scratch_size(rows));
+    std::vector<CableFrame> F(rows);
+    auto sample = [&](size_t r) {
+        Sample<double> s;
+        for (int k = 0; k < 3; ++k) s.P[k] = P[3 * r + size_t(k)];
+        s.t_s = T[r];
+        return s;
+    };
+    for (size_t r = 0; r < rows; ++r) I.path_frame(sample(r), &len[4 * r], F[r]);
+    const UserRows ur{rows, P, T, F.data()};
+    auto stage = [&](bool on_path, double *v) {
+        for (const auto &e : I.effects)
+            if (e.desc->stage == Stage::User && e.desc->on_path == on_path &&
+                call_user_effect(*e.desc, e.p.data(), ur, v, scratch.data()) != 0)
+                return false;
+        return true;
+    };
+    if (!stage(true, len.data())) return false;
+    for (size_t r = 0; r < rows; ++r) I.transfer_of(sample(r), &len[4 * r], &Y[4 * r]);
+    return stage(false, Y);
+}
+
 // The readings at `rows` points (P: rows x 3, T: rows) into Y (rows x 4):
 // the built-in stages row by row, then each user effect in the model's order
 // over every row in one apply_batch call (apply per row for one without it),
 // as Model::readings applies them one point at a time. False when a user
 // effect returns non-zero (on which row is not known).
 bool readings_rows(const Model::Impl &I, size_t rows, const double *P, const double *T, double *Y) {
+    if (I.lay.has_geom) return rows == 0 || readings_rows_geom(I, rows, P, T, Y);
     for (size_t r = 0; r < rows; ++r) {
         Sample<double> s;
         for (int k = 0; k < 3; ++k) s.P[k] = P[3 * r + size_t(k)];
@@ -102,7 +129,7 @@ void point(const Stencil &S, size_t a, Eigen::Matrix<double, 4, 1> &y, Eigen::Ma
 
 bool Model::has_batch_user() const {
     for (const auto &e : impl_->effects)
-        if (e.desc->stage == Stage::User && e.desc->apply_batch) return true;
+        if (e.desc->stage == Stage::User && (e.desc->apply_batch || e.desc->apply_geom)) return true;
     return false;
 }
 

@@ -50,6 +50,7 @@ static class CdmTests
                 case "watch": Run("watch_replug", WatchReplug); break; // under with_master --replug (tests/umockdev)
                 case "calibration":
                     Run("calibration_errors", CalibrationErrors);
+                    Run("geometry_effect", GeometryEffect);
                     Run("frames", FramesCarryRotations);
                     break;
                 default: Console.Error.WriteLine("unknown group " + group); return 100;
@@ -308,6 +309,65 @@ static class CdmTests
         Expect(after >= 5, "callback ran " + after + " times");
         Expect(n == after, "callback ran after Dispose");
         Expect(outOfOrder == 0, outOfOrder + " samples out of order");
+    }
+
+    // since 1.2: a geometry-aware effect on the cable's path registered from C#
+    // (Cdm.Effects, its delegate kept alive by the binding): the calibration's
+    // lengths are the nominal chords plus the sag the delegate computes from the
+    // geometry it is given, checked against the same physics from the drawing
+    // (a = b = 150, m = 30: anchors (0, +-a, +-b), holder corners (0, +-m/2, +-m/2)).
+    static void GeometryEffect()
+    {
+        const double c = 4e-8;
+        int calls = 0;
+        Effects.Register("cs_sag", new[] { "c_per_mm2" }, new[] { 1e-8 }, (prm, g, v) =>
+        {
+            calls++;
+            for (int i = 0; i < g.Count; i++)
+                for (int k = 0; k < 4; k++)
+                {
+                    double uz = g.Unit[(4 * i + k) * 3 + 2], L = g.Chord[4 * i + k];
+                    v[4 * i + k] += prm[0] * L * L * L * (1 - uz * uz);
+                }
+        }, EffectStage.Path, new[] { "1/mm^2" }, new[] { 0.0 }, new[] { 1e-6 });
+        Expect(Array.IndexOf(Effects.Names, "cs_sag") >= 0, "cs_sag registered");
+        Expect(Regex.IsMatch(Effects.Fingerprint("cs_sag"), "^[0-9a-f]{16}$"), "fingerprint " + Effects.Fingerprint("cs_sag"));
+        var json = "{\"format\": \"cdm-calibration\", \"version\": 1, \"device\": {\"a_mm\": 150, \"b_mm\": 150, " +
+                   "\"m_mm\": 30}, \"effects\": [{\"name\": \"cs_sag\", \"params\": {\"c_per_mm2\": 4e-8}}]}";
+        using (var cal = Calibration.Parse(json))
+        {
+            var p = new Vector3d(50, 10, -20);
+            var l = cal.Lengths(p);
+            double[] sy = { 1, 1, -1, -1 }, sz = { -1, 1, -1, 1 };
+            for (int k = 0; k < 4; k++)
+            {
+                double dx = p.X, dy = p.Y + 15 * sy[k] - 150 * sy[k], dz = p.Z + 15 * sz[k] - 150 * sz[k];
+                double L = Math.Sqrt(dx * dx + dy * dy + dz * dz), uz = dz / L;
+                double want = L + c * L * L * L * (1 - uz * uz);
+                // A few roundings of ~200 mm numbers.
+                Expect(Math.Abs(l[k] - want) < 1e-9, "cable " + k + ": " + l[k] + " vs " + want);
+            }
+        }
+        Expect(calls > 0, "the delegate was called");
+        Effects.Unregister("cs_sag");
+        // A delegate that throws fails the evaluation with a code, not a crash.
+        Effects.Register("cs_throws", new string[0], new double[0], (prm, g, v) => { throw new InvalidOperationException("boom"); },
+                         EffectStage.Reading);
+        var bad = "{\"format\": \"cdm-calibration\", \"version\": 1, \"device\": {\"a_mm\": 150, \"b_mm\": 150, " +
+                  "\"m_mm\": 30}, \"effects\": [{\"name\": \"cs_throws\", \"params\": {}}]}";
+        using (var cal = Calibration.Parse(bad))
+        {
+            try { cal.Lengths(new Vector3d(50, 0, 0)); Expect(false, "a throwing delegate gave lengths"); }
+            catch (CdmException) { }
+        }
+        Expect(Effects.LastError("cs_throws") is InvalidOperationException, "the exception is kept");
+        Effects.Unregister("cs_throws");
+        try
+        {
+            Effects.Register("cs_dup", new[] { "a", "a" }, new[] { 1.0, 1.0 }, (prm, g, v) => { });
+            Expect(false, "duplicate parameter names accepted");
+        }
+        catch (ArgumentException e) { Expect(e.Message.Contains("given twice"), e.Message); }
     }
 
     static void CalibrationErrors()

@@ -126,7 +126,22 @@ namespace Cdm
         public IntPtr text;
     }
 
-    /// <summary>cdm_effect_def (CDM_EXPERIMENTAL). Mirrored for the layout test; this binding does not register effects.</summary>
+    /// <summary>cdm_effect_context (CDM_EXPERIMENTAL, since 1.2): what a geometry-aware effect sees.</summary>
+    [CStruct("cdm_effect_context"), StructLayout(LayoutKind.Sequential)]
+    internal struct NativeEffectContext
+    {
+        public uint struct_size;
+        public uint stage;
+        public UIntPtr n;
+        public IntPtr positions_mm;
+        public IntPtr t_s;
+        public IntPtr anchors_mm;
+        public IntPtr holders_mm;
+        public IntPtr unit;
+        public IntPtr chord_mm;
+    }
+
+    /// <summary>cdm_effect_def (CDM_EXPERIMENTAL): Cdm.Effects registers geometry-aware effects with it.</summary>
     [CStruct("cdm_effect_def"), StructLayout(LayoutKind.Sequential)]
     internal struct NativeEffectDef
     {
@@ -142,6 +157,10 @@ namespace Cdm
         public IntPtr user;
         public IntPtr initial; // since 1.1
         public IntPtr apply_batch; // since 1.1
+        public IntPtr param_units; // since 1.2
+        public IntPtr apply_geom; // since 1.2: Marshal.GetFunctionPointerForDelegate(EffectGeomFn), kept alive by Cdm.Effects
+        public IntPtr origin; // since 1.2
+        public uint stage; // since 1.2
     }
 
     /// <summary>cdm_watch_event (CDM_EXPERIMENTAL, since 1.1).</summary>
@@ -165,6 +184,9 @@ namespace Cdm
 
     [UnmanagedFunctionPointer(CallingConvention.Cdecl)]
     internal delegate void LogFn(IntPtr user, int level, IntPtr message);
+
+    [UnmanagedFunctionPointer(CallingConvention.Cdecl)]
+    internal delegate int EffectGeomFn(IntPtr user, IntPtr parameters, UIntPtr n, IntPtr ctx, IntPtr values);
 
     internal static class NativeMethods
     {
@@ -212,6 +234,14 @@ namespace Cdm
         internal static extern int cdm_set_calibration_nominal(DeviceHandle dev, IntPtr nullCal);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_device_calibration_read(DeviceHandle dev, [Out] byte[] buf, UIntPtr cap, out UIntPtr len);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_device_calibration_write(DeviceHandle dev, byte[] data, UIntPtr len);
+
+        // CDM_EXPERIMENTAL: user effects
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_effect_register(ref NativeEffectDef def);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_effect_unregister(byte[] name);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_effect_load_plugin(byte[] path);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern UIntPtr cdm_effect_count();
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern IntPtr cdm_effect_name(UIntPtr i);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_effect_fingerprint(UIntPtr i, [Out] byte[] buf, UIntPtr len, out IntPtr origin);
 
         // CDM_EXPERIMENTAL: hot-plug (since 1.1)
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_watch(uint flags, WatchFn fn, IntPtr user, out WatcherHandle watcher);

@@ -18,7 +18,7 @@ from .constants import *  # noqa: F401,F403 - the header's constants
 from .constants import Button, Error, PoseFlag
 from .device import Device, DeviceInfo, Pose, Raw, Sample, Stats, enumerate_devices, open  # noqa: A004
 from .diagnosis import Diagnosis, diagnose, fit, load_diagnosis
-from .effects import effect_names, load_plugin, register_effect, unregister_effect
+from .effects import EffectGeometry, effect_names, load_plugin, register_effect, unregister_effect
 from . import frames
 from . import log
 from .watch import Watcher, watch
@@ -28,7 +28,7 @@ from . import constants as _constants
 
 __all__ = ["open", "enumerate", "enumerate_devices", "Device", "DeviceInfo", "Pose", "Raw", "Sample", "Stats",
            "Calibration", "Diagnosis", "diagnose", "fit", "load_diagnosis",
-           "effect_names", "load_plugin", "register_effect", "unregister_effect",
+           "effect_names", "load_plugin", "register_effect", "unregister_effect", "EffectGeometry",
            "CdmError", "InvalidArgumentError", "ParseError", "NoDeviceError", "CdmIOError", "CdmFileNotFoundError",
            "CdmTimeoutError", "DisconnectedError", "CdmMemoryError", "LibraryNotFoundError",
            "Watcher", "watch", "frames", "log", "version", "version_number", "library_path"] + list(_constants.__all__)

@@ -137,6 +137,24 @@ cdm_effect_apply_batch_fn = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, c_do
                                              c_double_p)
 
 
+class cdm_effect_context(_Sized):  # CDM_EXPERIMENTAL, since 1.2
+    _fields_ = [
+        ("struct_size", ctypes.c_uint32),
+        ("stage", ctypes.c_uint32),
+        ("n", ctypes.c_size_t),
+        ("positions_mm", c_double_p),
+        ("t_s", c_double_p),
+        ("anchors_mm", c_double_p),
+        ("holders_mm", c_double_p),
+        ("unit", c_double_p),
+        ("chord_mm", c_double_p),
+    ]
+
+
+cdm_effect_apply_geom_fn = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, c_double_p, ctypes.c_size_t,
+                                            ctypes.POINTER(cdm_effect_context), c_double_p)
+
+
 class cdm_effect_def(_Sized):
     _fields_ = [
         ("struct_size", ctypes.c_uint32),
@@ -151,6 +169,10 @@ class cdm_effect_def(_Sized):
         ("user", ctypes.c_void_p),
         ("initial", c_double_p),  # since 1.1
         ("apply_batch", cdm_effect_apply_batch_fn),  # since 1.1
+        ("param_units", ctypes.POINTER(ctypes.c_char_p)),  # since 1.2
+        ("apply_geom", cdm_effect_apply_geom_fn),  # since 1.2
+        ("origin", ctypes.c_char_p),  # since 1.2
+        ("stage", ctypes.c_uint32),  # since 1.2
     ]
 
 
@@ -168,8 +190,8 @@ class cdm_watch_event(_Sized):  # CDM_EXPERIMENTAL, since 1.1
 cdm_watch_fn = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(cdm_watch_event))
 
 STRUCTS = {cls.__name__: cls for cls in
-           (cdm_pose, cdm_raw, cdm_device_info, cdm_stats, cdm_sample, cdm_open_options, cdm_effect_def, cdm_event,
-            cdm_watch_event)}
+           (cdm_pose, cdm_raw, cdm_device_info, cdm_stats, cdm_sample, cdm_open_options, cdm_effect_context,
+            cdm_effect_def, cdm_event, cdm_watch_event)}
 
 # Opaque handles travel as void pointers.
 _handle = ctypes.c_void_p
@@ -214,6 +236,7 @@ PROTOTYPES = {
     "cdm_effect_load_plugin": (_int, [_str]),
     "cdm_effect_count": (_size, []),
     "cdm_effect_name": (_str, [_size]),
+    "cdm_effect_fingerprint": (_int, [_size, ctypes.c_char_p, _size, ctypes.POINTER(ctypes.c_char_p)]),
     # result_json is a char** the library allocates: received as a void pointer
     # so that ctypes does not copy it away before cdm_free_string gets it.
     "cdm_diagnose": (_int, [_str, _str, _str, cdm_progress_fn, ctypes.c_void_p, _handle_p]),

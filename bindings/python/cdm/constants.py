@@ -81,10 +81,17 @@ class WatchFlag(enum.IntFlag):
     CDM_WATCH_ENUMERATE = 1 << 0
 
 
-_ENUMS = (Error, PoseFlag, Button, EventKind, LogLevel, WatchKind, WatchFlag)
+class EffectStage(enum.IntEnum):
+    """cdm_effect_stage (experimental, since 1.2): where a user effect acts."""
+    CDM_EFFECT_STAGE_READING = 0
+    CDM_EFFECT_STAGE_PATH = 1
+
+
+_ENUMS = (Error, PoseFlag, Button, EventKind, LogLevel, WatchKind, WatchFlag, EffectStage)
 
 # The header's names, flat, as module attributes (cdm.CDM_ERR_NO_DEVICE, ...).
 globals().update({str(m.name): int(m) for e in _ENUMS for m in e})
 
-__all__ = ["Error", "PoseFlag", "Button", "EventKind", "LogLevel", "WatchKind", "WatchFlag", "CDM_ERROR_COUNT", "CDM_VERSION_MAJOR",
+__all__ = ["Error", "PoseFlag", "Button", "EventKind", "LogLevel", "WatchKind", "WatchFlag", "EffectStage",
+           "CDM_ERROR_COUNT", "CDM_VERSION_MAJOR",
            "CDM_VERSION_MINOR", "CDM_VERSION_PATCH", "CDM_VERSION_NUMBER"] + [str(m.name) for e in _ENUMS for m in e]

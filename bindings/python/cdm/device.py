@@ -348,7 +348,7 @@ def _make_event_callback(fn):
     return _native.cdm_event_fn(trampoline)
 
 
-def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None):  # noqa: A001 - cdm.open mirrors cdm_open
+def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None, calibration=None):  # noqa: A001
     """Opens a master (cdm_open_ex). uri: None or "" ($CDM_DEVICE, else the
     first device), "sim:?...", "replay:FILE", "hid:/dev/hidrawN", "serial:SN".
 
@@ -356,8 +356,17 @@ def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None):  # noqa: 
     reader thread for every report; it must return quickly.
     on_event (since 1.1), if given, is called as on_event(kind, text) on the
     reader thread when the device's state changes; kind is "disconnected",
-    "reconnected", "stale", "fresh" or "end_of_stream"."""
+    "reconnected", "stale", "fresh" or "end_of_stream".
+    calibration (since 1.2), if given: a cdm.Calibration or the path of a
+    calibration JSON, applied from the first pose on (set_calibration). A
+    calibration with a user effect needs it registered in this process
+    first (cdm.register_effect, cdm.load_plugin); so does a sim: URI that
+    hides one (effects=, truth=)."""
     L = _native.lib()
+    cal = None
+    if calibration is not None:
+        from .calibration import Calibration
+        cal = calibration if isinstance(calibration, Calibration) else Calibration.load(calibration)
     opts = _native.cdm_open_options()
     if not 0 <= int(stale_timeout_us) < 2**32:
         raise ValueError("open: stale_timeout_us %r is outside 0..2^32-1" % (stale_timeout_us,))
@@ -386,7 +395,17 @@ def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None):  # noqa: 
         raise _native.fail(rc, "cdm_open")
     if not h.value:
         raise CdmError(Error.CDM_ERR_INTERNAL, "cdm_open returned CDM_OK and no handle", function="cdm_open")
-    return Device(h, uri, callback)
+    dev = Device(h, uri, callback)
+    if cal is not None:
+        try:
+            dev.set_calibration(cal)
+        except BaseException:
+            dev.close()
+            raise
+        finally:
+            if cal is not calibration:
+                cal.close()
+    return dev
 
 
 def enumerate_devices():

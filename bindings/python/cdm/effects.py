@@ -6,7 +6,7 @@ import re
 import threading
 
 from . import _native
-from .constants import Error
+from .constants import EffectStage, Error
 
 try:
     import numpy as _np
@@ -77,9 +77,112 @@ class _Registration:
                 raise ValueError("effect %r: apply returned shape %r, expected (%d, 4)" % (self.name, out.shape, n))
             readings[...] = out
 
+    def geom_trampoline(self, _user, params_p, n, ctx_p, values_p):
+        # geometry=True (since 1.2): the positions with the cables' geometry.
+        return self._guarded(self._geom, params_p, n, ctx_p, values_p)
+
+    def _geom(self, params_p, n, ctx_p, values_p):
+        if n == 0:
+            return
+        c = ctx_p.contents
+        params = _np.ctypeslib.as_array(params_p, shape=(self.n,)).copy() if self.n else _np.zeros(0)
+
+        def arr(p, shape):
+            return _np.ctypeslib.as_array(p, shape=shape).copy()
+        geom = EffectGeometry(
+            stage="path" if c.stage == int(EffectStage.CDM_EFFECT_STAGE_PATH) else "reading",
+            positions=arr(c.positions_mm, (n, 3)), t_s=arr(c.t_s, (n,)), anchors=arr(c.anchors_mm, (n, 4, 3)),
+            holders=arr(c.holders_mm, (n, 4, 3)), unit=arr(c.unit, (n, 4, 3)), chord=arr(c.chord_mm, (n, 4)))
+        values = _np.ctypeslib.as_array(values_p, shape=(n, 4))  # a view: changed in place
+        out = self.apply(params, geom, values)
+        if out is not None and out is not values:
+            out = _np.asarray(out, dtype=float)
+            if out.shape != (n, 4):
+                raise ValueError("effect %r: apply returned shape %r, expected (%d, 4)" % (self.name, out.shape, n))
+            values[...] = out
+
     def _record(self, e):
         self.errors.append((self.name, e))
         del self.errors[:-10]
+
+
+class EffectGeometry:
+    """What a geometry-aware effect (register_effect(..., geometry=True))
+    gets besides its parameters and values, for n positions (copies; device
+    frame, mm):
+
+    stage      "path" (values are the cables' lengths before the pot's
+               transfer) or "reading" (values are the readings)
+    positions  (n, 3) the holder centre
+    t_s        (n,) acquisition time, s since the session's start (0 live)
+    anchors    (n, 4, 3) each cable's anchor (exit point), after the
+               model's geometry effects at their current values
+    holders    (n, 4, 3) each cable's attachment point on the holder
+    unit       (n, 4, 3) unit vector from anchor to holder point
+    chord      (n, 4) straight distance from anchor to holder point
+    """
+    __slots__ = ("stage", "positions", "t_s", "anchors", "holders", "unit", "chord")
+
+    def __init__(self, stage, positions, t_s, anchors, holders, unit, chord):
+        self.stage, self.positions, self.t_s = stage, positions, t_s
+        self.anchors, self.holders, self.unit, self.chord = anchors, holders, unit, chord
+
+    def __repr__(self):
+        return "EffectGeometry(stage=%r, n=%d)" % (self.stage, len(self.t_s))
+
+
+def _param_names(param_names, name):
+    # Each name is a key of the calibration JSON and a column of the report:
+    # an ASCII identifier, given once.
+    if isinstance(param_names, (str, bytes)):
+        raise TypeError("register_effect(%r): param_names must be a list of names, got the string %r"
+                        % (name, param_names))
+    names = list(param_names)
+    for k, p in enumerate(names):
+        if not isinstance(p, str):
+            raise TypeError("register_effect(%r): parameter %d's name must be a str, got %r" % (name, k, p))
+        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", p):
+            raise ValueError("register_effect(%r): parameter %d's name %r is not an identifier "
+                             "([A-Za-z_][A-Za-z0-9_]*, non-empty, ASCII)" % (name, k, p))
+    seen = set()
+    for p in names:
+        if p in seen:
+            raise ValueError("register_effect(%r): parameter name %r is given twice" % (name, p))
+        seen.add(p)
+    return names
+
+
+def _units(units, n, name):
+    if units is None:
+        return None
+    if isinstance(units, (str, bytes)):
+        raise TypeError("register_effect(%r): units must be a list of one unit per parameter, got %r" % (name, units))
+    units = list(units)
+    if len(units) != n:
+        raise ValueError("register_effect(%r): units has %d values for %d parameters" % (name, len(units), n))
+    out = []
+    for k, u in enumerate(units):
+        if not isinstance(u, str):
+            raise TypeError("register_effect(%r): unit %d must be a str, got %r" % (name, k, u))
+        try:
+            raw = u.encode("utf-8")
+        except UnicodeEncodeError as e:
+            raise ValueError("register_effect(%r): unit %d (%r) is not valid UTF-8 text: %s" % (name, k, u, e)) from e
+        if any(ch in u for ch in '"\\\x7f') or any(ord(ch) < 0x20 for ch in u):
+            raise ValueError("register_effect(%r): unit %d (%r) has a control character, a quote or a backslash"
+                             % (name, k, u))
+        out.append(raw)
+    return out
+
+
+def _origin(apply):
+    # Where the effect comes from, for a calibration written with it: the
+    # module that defines apply (a script run as __main__: its file).
+    mod = getattr(apply, "__module__", None) or ""
+    if mod == "__main__":
+        import sys
+        mod = getattr(sys.modules.get("__main__"), "__file__", None) or mod
+    return "python:" + mod if mod else None
 
 
 def _doubles(values, n, what, name):
@@ -94,7 +197,7 @@ def _doubles(values, n, what, name):
 
 
 def register_effect(name, param_names, param_scale, apply, doc="", lower=None, upper=None, initial=None,
-                    vectorized=False):
+                    vectorized=False, units=None, stage="reading", geometry=False, origin=None):
     """Registers apply(params, position, readings) as the effect `name`.
 
     The model calls apply with the readings (4 values, mm) predicted by the
@@ -117,15 +220,46 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
     lower, upper: bounds per parameter; initial: where each parameter starts
     when the effect is added to a model (since 1.1; default 0 clamped into the
     bounds), so that a parameter entering non-linearly (a period, a centre)
-    is fitted from a sensible value."""
+    is fitted from a sensible value.
+
+    Since 1.2 (needs numpy for geometry=True):
+    units: one unit per parameter ("mm", "1/mm^2", "1"), shown by
+    `cdm calib effects` and part of the effect's fingerprint.
+    geometry=True: apply(params, geom, values) gets the cables' geometry,
+    geom a cdm.EffectGeometry of n positions (positions (n, 3), t_s (n,),
+    anchors, holders, unit (n, 4, 3), chord (n, 4)), and values (n, 4) to
+    change in place or return: the cable lengths at stage "path", the
+    readings at stage "reading". Called over every position at once where
+    the fit evaluates many, with n = 1 for one position.
+    stage: "reading" (default: after the pot's transfer, as without it) or
+    "path" (the cable's length before the pot's transfer: sag, guides;
+    cable_gain and the rest then act on the length it returns); "path"
+    needs geometry=True.
+    origin: where the effect comes from, recorded in a calibration written
+    with it so that loading one without it names what to import (default
+    "python:" and apply's module).
+    Parameter names must be identifiers ([A-Za-z_][A-Za-z0-9_]*), each
+    given once."""
     if not isinstance(name, str) or not re.fullmatch(r"[a-z0-9_]+", name):
         raise ValueError("register_effect: name must match [a-z0-9_]+, got %r" % (name,))
     if not callable(apply):
         raise TypeError("register_effect(%r): apply must be callable" % name)
-    if vectorized and _np is None:
-        raise ImportError("register_effect(%r, vectorized=True) needs numpy (pip install numpy)" % name)
-    param_names = [str(p) for p in param_names]
+    if (vectorized or geometry) and _np is None:
+        raise ImportError("register_effect(%r, %s=True) needs numpy (pip install numpy)"
+                          % (name, "geometry" if geometry else "vectorized"))
+    stages = {"reading": EffectStage.CDM_EFFECT_STAGE_READING, "path": EffectStage.CDM_EFFECT_STAGE_PATH}
+    if stage not in stages:
+        raise ValueError("register_effect(%r): stage must be \"reading\" or \"path\", got %r" % (name, stage))
+    if stage == "path" and not geometry:
+        raise ValueError("register_effect(%r): stage=\"path\" needs geometry=True (the callback gets the cables' "
+                         "lengths with their geometry)" % name)
+    if geometry and vectorized:
+        raise ValueError("register_effect(%r): geometry=True is always called on arrays; drop vectorized=True" % name)
+    param_names = _param_names(param_names, name)
     n = len(param_names)
+    units_raw = _units(units, n, name)
+    if origin is None:
+        origin = _origin(apply)
     reg = _Registration(name, n, apply)
     scale = _doubles(param_scale, n, "param_scale", name)
     if scale is not None and any(s <= 0 for s in scale):
@@ -136,7 +270,9 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
     names_c = (ctypes.c_char_p * max(n, 1))(*[p.encode("utf-8") for p in param_names])
     # One function, registered as apply or as apply_batch: the library calls
     # apply_batch with n = 1 where it needs one position.
-    if vectorized:
+    if geometry:
+        fn = _native.cdm_effect_apply_geom_fn(reg.geom_trampoline)
+    elif vectorized:
         fn = _native.cdm_effect_apply_batch_fn(reg.batch_trampoline)
     else:
         fn = _native.cdm_effect_apply_fn(reg.trampoline)
@@ -148,13 +284,21 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
     d.param_scale = scale if scale is not None else (ctypes.c_double * max(n, 1))(*([1.0] * n))
     d.lower = lo
     d.upper = hi
-    if vectorized:
+    if geometry:
+        d.apply_geom = fn
+    elif vectorized:
         d.apply_batch = fn
     else:
         d.apply = fn
     d.user = None
     d.initial = init
-    reg.keep = [fn, names_c, d.param_scale, lo, hi, init, d]
+    units_c = None
+    if units_raw is not None:
+        units_c = (ctypes.c_char_p * max(n, 1))(*units_raw)
+        d.param_units = units_c
+    d.stage = int(stages[stage])
+    d.origin = origin.encode("utf-8") if origin else None
+    reg.keep = [fn, names_c, d.param_scale, lo, hi, init, units_c, d]
     with _registry_lock:
         if name in _registry:
             raise ValueError("register_effect: %r is already registered from Python; unregister it first" % name)

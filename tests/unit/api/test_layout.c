@@ -46,7 +46,7 @@ static void test_table_covers_public_structs(void **state) {
     (void)state;
     static const char *const public_structs[] = {"cdm_pose",         "cdm_raw",    "cdm_device_info",
                                                  "cdm_stats",        "cdm_sample", "cdm_open_options",
-                                                 "cdm_effect_def"};
+                                                 "cdm_effect_def",   "cdm_effect_context"};
     size_t n_sizes = 0;
     for (size_t i = 0; i < sizeof rows / sizeof rows[0]; i++)
         if (strcmp(rows[i].field, "(size)") == 0) n_sizes++;

@@ -249,6 +249,60 @@ void test_streaming_second_on_sim(void **) {
     assert_int_equal(s.all - s.mine, 0);
 }
 
+// A user effect on the cable's path that reads the geometry (apply_geom,
+// since 1.2), in the simulator's truth and in the calibration the reader
+// thread solves the forward kinematics with: every evaluation at one
+// position (the simulator's readings, each Gauss-Newton step's central
+// differences) calls it with n = 1, and nothing around the call allocates.
+// The callback itself allocates nothing either (the cable-sag physics).
+int sag_geom(void *, const double *p, size_t n, const cdm_effect_context *c, double *v) {
+    for (size_t i = 0; i < n; ++i)
+        for (size_t k = 0; k < 4; ++k) {
+            const double uz = c->unit[3 * (4 * i + k) + 2], L = c->chord_mm[4 * i + k];
+            v[4 * i + k] += p[0] * L * L * L * (1 - uz * uz);
+        }
+    return 0;
+}
+
+void test_streaming_second_with_geometry_effect(void **) {
+    skip_if_not_counting();
+    static const char *const names[] = {"c"}, *const units[] = {"1/mm^2"};
+    static const double scale[] = {1e-8}, lower[] = {0}, upper[] = {1e-6};
+    cdm_effect_def d{};
+    d.struct_size = sizeof d;
+    d.n_params = 1;
+    d.name = "noalloc_sag";
+    d.param_names = names;
+    d.param_units = units;
+    d.param_scale = scale;
+    d.lower = lower;
+    d.upper = upper;
+    d.apply_geom = sag_geom;
+    d.stage = CDM_EFFECT_STAGE_PATH;
+    assert_int_equal(cdm_effect_register(&d), CDM_OK);
+    static const char json[] = "{\"format\": \"cdm-calibration\", \"version\": 1, "
+                               "\"device\": {\"a_mm\": 150, \"b_mm\": 150, \"m_mm\": 30}, "
+                               "\"effects\": [{\"name\": \"cable_gain\", \"params\": {\"g1\": 0.001, "
+                               "\"g2\": 0, \"g3\": 0, \"g4\": 0}}, "
+                               "{\"name\": \"noalloc_sag\", \"params\": {\"c\": 4e-8}}]}";
+    cdm_calibration *cal = nullptr;
+    assert_int_equal(cdm_calibration_parse(json, sizeof json - 1, &cal), CDM_OK);
+    cdm_device *dev = nullptr;
+    assert_int_equal(cdm_open("sim:?motion=random&rate=1000&effects=noalloc_sag", &dev), CDM_OK);
+    assert_int_equal(cdm_set_calibration(dev, cal), CDM_OK);
+    cdm_calibration_free(cal);
+    const Streamed s = stream_one_second(dev);
+    cdm_close(dev);
+    std::printf("sim: with a path-stage geometry effect: %llu new poses; allocation calls: caller %llu, reader "
+                "thread %llu\n",
+                (unsigned long long)s.poses, (unsigned long long)s.mine, (unsigned long long)(s.all - s.mine));
+    assert_int_equal(s.bad_rc, 0);
+    assert_true(s.poses > 0);
+    assert_int_equal(s.mine, 0);
+    assert_int_equal(s.all - s.mine, 0);
+    assert_int_equal(cdm_effect_unregister("noalloc_sag"), CDM_OK);
+}
+
 // A control thread's very first cdm_* call is cdm_get_pose (or
 // cdm_get_raw): nothing on that thread allocates, including the first use
 // of the thread error it sets (an initial-exec TLS pointer: a std::string
@@ -290,6 +344,7 @@ int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_counter_counts),
         cmocka_unit_test(test_streaming_second_on_sim),
+        cmocka_unit_test(test_streaming_second_with_geometry_effect),
         cmocka_unit_test(test_first_call_on_a_new_thread),
     };
     return cmocka_run_group_tests(tests, nullptr, nullptr);

@@ -47,11 +47,11 @@ extern "C" {
 #define CDM_VERSION_MAJOR 1
 /* CMakeLists.txt's project(VERSION) is the one source; the configure step
  * fails when these differ from it, and tests/cli/test_abi_version.py checks the bindings' copies. */
-#define CDM_VERSION_MINOR 1
+#define CDM_VERSION_MINOR 2
 #define CDM_VERSION_PATCH 0
 #define CDM_VERSION_NUMBER (CDM_VERSION_MAJOR * 10000 + CDM_VERSION_MINOR * 100 + CDM_VERSION_PATCH)
 
-/** "1.1.0": the version of the library actually loaded. Static text. Any thread. */
+/** "1.2.0": the version of the library actually loaded. Static text. Any thread. */
 CDM_API const char *cdm_version(void);
 /** CDM_VERSION_NUMBER of the library actually loaded. Any thread. */
 CDM_API int cdm_version_number(void);

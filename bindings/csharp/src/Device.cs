@@ -18,7 +18,7 @@ namespace Cdm
 
         Device(DeviceHandle h, string uri) { _h = h; Uri = uri; }
 
-        /// <summary>"1.1.0": the version of the libcdm actually loaded.</summary>
+        /// <summary>"1.2.0": the version of the libcdm actually loaded.</summary>
         public static string LibraryVersion { get { return NativeMethods.Utf8(NativeMethods.cdm_version()); } }
         public static int LibraryVersionNumber { get { return NativeMethods.cdm_version_number(); } }
 

@@ -58,7 +58,7 @@ enumerate = enumerate_devices  # noqa: A001
 
 
 def version() -> str:
-    """Version text of the libcdm actually loaded ("1.1.0")."""
+    """Version text of the libcdm actually loaded ("1.2.0")."""
     return _native.lib().cdm_version().decode("ascii")
 
 

@@ -183,13 +183,20 @@ Selection select_terms(Eigen::VectorXd e, const Eigen::MatrixXd &F, const Eigen:
     return s;
 }
 
-// The linearised refit's chi-square of m under fo: its residual with its
-// own Jacobian (and the fixture's offsets) projected out.
-bool projected_chi2(const Model &m, const DiagContext &ctx, const FitOptions &fo, double &chi2, std::string &err) {
+// The other model against the terms: its linearised refit's chi-square
+// (its residual with its own Jacobian and the fixture's offsets projected
+// out), and the share of the terms' whitened columns its Jacobian cannot
+// make (0: the terms are a special case of the other model's effects).
+bool against_other(const Model &m, const DiagContext &ctx, const FitOptions &fo,
+                   const std::vector<Eigen::Matrix<double, 4, Eigen::Dynamic>> &terms, double &chi2, double &outside,
+                   std::string &err) {
     Eigen::VectorXd r;
-    Eigen::MatrixXd J;
-    if (!fit_residual_jacobian(m, ctx.pos, fo, r, J, err)) return false;
-    chi2 = project_out(span_basis(J), r).squaredNorm();
+    Eigen::MatrixXd J, X;
+    if (!fit_residual_jacobian_with(m, ctx.pos, fo, terms, r, J, X, err)) return false;
+    const Eigen::MatrixXd Q = span_basis(J);
+    chi2 = project_out(Q, r).squaredNorm();
+    const double all = X.squaredNorm();
+    outside = all > 0 ? (X - Q * (Q.transpose() * X)).squaredNorm() / all : 0.0;
     return true;
 }
 
@@ -246,10 +253,17 @@ void describe(const DiagContext &ctx, const std::vector<Term> &lib, const Select
                               "the cable's length change from the position measured before"},
                 {"delta_chi2", out.dchi2},
                 {"bic_change", out.bic_vs_base},
-                {"bic_change_vs_stand_ins", std::isfinite(out.bic_vs_other) ? json(out.bic_vs_other) : json(nullptr)},
-                {"x_rms_mm", xr_raw},
+                {"bic_change_vs_compared", std::isfinite(out.bic_vs_other) ? json(out.bic_vs_other) : json(nullptr)},
+                {"compared_with", out.other_name.empty() ? json(nullptr) : json(out.other_name)},
+                {"share_outside_compared", std::isfinite(out.outside_other) ? json(out.outside_other) : json(nullptr)},
+                {"x_rms_mm", std::isfinite(xr_raw) ? json(xr_raw) : json(nullptr)},
                 {"x_rms_fixture_out_mm", std::isfinite(xr_fix) ? json(xr_fix) : json(nullptr)},
-                {"error_mm", stats3(out.E.err)},
+                {"error_mm", [&]() -> json { // the maxima need every sample: not computed for a hypothesis
+                     if (!(out.E.err[0].n > 0)) return nullptr; // no position solved with the step
+                     json e = stats3(out.E.err);
+                     for (auto &a : e) a["max"] = nullptr;
+                     return e;
+                 }()},
                 {"of", reading_effects(base)},
                 {"method", "forward stepwise sparse regression of the whitened reading residual over " +
                                std::to_string(lib.size()) + " per-cable terms, each fitted jointly with the model "
@@ -257,9 +271,11 @@ void describe(const DiagContext &ctx, const std::vector<Term> &lib, const Select
                                "ratio passes 1e-3 after Bonferroni over the library and it lowers the BIC; the error "
                                "after one joint Gauss-Newton step"},
                 {"hypothesis", true}};
-    out.words = "a term " + what + " per cable (mm, L in m; " + fmt_p(s.p[0]) + ") brings x to " + fmt_num(xr, 3) +
-                " mm" + (std::isfinite(xr_fix) ? " with the fixture's per-height offsets out" : "") +
-                (std::isfinite(out.bic_vs_other) ? " (BIC " + fmt_num(out.bic_vs_other, 0, true) + " against the stand-ins)"
+    const std::string reaches = std::isfinite(xr) ? "brings x to " + fmt_num(xr, 3) + " mm" +
+                                                         (std::isfinite(xr_fix) ? " with the fixture's per-height offsets out" : "")
+                                                   : "leaves no position solvable after one step (its error is not known)";
+    out.words = "a term " + what + " per cable (mm, L in m; " + fmt_p(s.p[0]) + ") " + reaches +
+                (std::isfinite(out.bic_vs_other) ? " (BIC " + fmt_num(out.bic_vs_other, 0, true) + " against " + out.other_name + ")"
                                                  : " (BIC " + fmt_num(out.bic_vs_base, 0, true) + ")") +
                 ": " + lead.shape + ". A hypothesis for the physics to confirm: write it as a user effect (docs/effects.md) "
                 "and diagnose again";
@@ -268,8 +284,9 @@ void describe(const DiagContext &ctx, const std::vector<Term> &lib, const Select
 } // namespace
 
 bool discover_terms(const DiagContext &ctx, const Model &base, const FitReport &base_rep, const Model *other,
-                    const FitReport *other_rep, Discovery &out, std::string &err) {
+                    const FitReport *other_rep, const std::string &other_name, Discovery &out, std::string &err) {
     out = Discovery{};
+    out.other_name = other_name;
     const size_t P = ctx.pos.size();
     if (P < 20) return true;
     const LengthView lv = length_view(base, ctx.pos);
@@ -306,6 +323,7 @@ bool discover_terms(const DiagContext &ctx, const Model &base, const FitReport &
     const double dof = n - double(Qa.cols()) - double(k);
     const double s2 = dof > 0 ? std::max(1.0, s.chi2_after / dof) : 1.0;
     const Eigen::VectorXd se = (G.inverse().diagonal() * s2).cwiseMax(0).cwiseSqrt();
+    if (!c.allFinite() || !se.allFinite()) return true; // terms the data cannot separate: nothing proposed
     // The model's part of the joint step, without the fixture's offsets
     // (its last columns): the evaluation below keeps the fixture in the
     // residual, as every other evaluation does.
@@ -327,7 +345,7 @@ bool discover_terms(const DiagContext &ctx, const Model &base, const FitReport &
     out.bic_vs_base = -out.dchi2 + double(k) * ln_n;
     if (other && other_rep) {
         double chi2_other = 0;
-        if (!projected_chi2(*other, ctx, fo, chi2_other, err)) return false;
+        if (!against_other(*other, ctx, fo, sel, chi2_other, out.outside_other, err)) return false;
         out.bic_vs_other = (s.chi2_after + double(base_rep.n_free + int(k)) * ln_n) -
                            (chi2_other + double(other_rep->n_free) * ln_n);
     }

@@ -8,7 +8,7 @@ import enum
 # Version of the header this binding was written against. The library actually
 # loaded reports its own with cdm.version() / cdm.version_number().
 CDM_VERSION_MAJOR = 1
-CDM_VERSION_MINOR = 1
+CDM_VERSION_MINOR = 2
 CDM_VERSION_PATCH = 0
 CDM_VERSION_NUMBER = CDM_VERSION_MAJOR * 10000 + CDM_VERSION_MINOR * 100 + CDM_VERSION_PATCH
 

@@ -42,6 +42,26 @@ static Dataset half_jig(const Model &truth, uint64_t seed) {
     return d;
 }
 
+// The first path (a/b/3/c) at which two JSON documents differ, for the
+// failure message ("" when equal).
+static std::string first_difference(const nlohmann::json &a, const nlohmann::json &b, const std::string &at = "") {
+    if (a.type() != b.type() || (!a.is_object() && !a.is_array())) return a == b ? "" : (at.empty() ? "/" : at);
+    if (a.is_array()) {
+        if (a.size() != b.size()) return at + " (length)";
+        for (size_t k = 0; k < a.size(); ++k) {
+            const std::string d = first_difference(a[k], b[k], at + "/" + std::to_string(k));
+            if (!d.empty()) return d;
+        }
+        return "";
+    }
+    for (auto it = a.begin(); it != a.end(); ++it) {
+        if (!b.contains(it.key())) return at + "/" + it.key() + " (missing)";
+        const std::string d = first_difference(it.value(), b[it.key()], at + "/" + it.key());
+        if (!d.empty()) return d;
+    }
+    return a.size() == b.size() ? "" : at + " (keys)";
+}
+
 static void same_result_on_any_thread_count(void **) {
     const std::vector<std::vector<std::string>> hidden{{"cable_gain", "exit_pulley"}, {"drum_eccentricity"}};
     uint64_t seed = 40;
@@ -56,8 +76,9 @@ static void same_result_on_any_thread_count(void **) {
         for (int t : {2, 3}) {
             const auto many = diagnose_with(d, t);
             if (many != one)
-                fail_msg("hidden %s: %d threads give another diagnosis than 1 (recommended %s vs %s)",
-                         effects[0].c_str(), t, many["recommended"]["effects"].dump().c_str(),
+                fail_msg("hidden %s: %d threads give another diagnosis than 1, first at %s (recommended %s vs %s)",
+                         effects[0].c_str(), t, first_difference(one, many).c_str(),
+                         many["recommended"]["effects"].dump().c_str(),
                          one["recommended"]["effects"].dump().c_str());
         }
     }

@@ -39,11 +39,12 @@ def section_beyond(diag, page):
                               f"{fmt_g(t.get('coefficient'), 4)} ± {fmt_g(t.get('std'), 2)}",
                               fmt_g(t.get("delta_chi2"), 5), fmt_g(t.get("p_value"), 2), _e(str(t.get("shape", "")))])
         xr = _num(disc.get("x_rms_fixture_out_mm"))
-        bic = _num(disc.get("bic_change_vs_stand_ins"))
+        bic = _num(disc.get("bic_change_vs_compared"))
+        against = disc.get("compared_with") if isinstance(disc.get("compared_with"), str) else "the model compared"
         page.add("<p>A term the catalogue lacks, proposed by a sparse regression of the reading residual over "
                  "physical variables (a hypothesis for the physics to confirm, never the recommended model): "
                  f"x RMS {fmt_g(xr, 4)} mm with it (the fixture's per-height offsets out)"
-                 + (f", BIC {fmt_g(bic, 6)} against the stand-ins" if bic == bic else "") + ".</p>")
+                 + (f", BIC {fmt_g(bic, 6)} against {_e(against)}" if bic == bic else "") + ".</p>")
         page.add(_table(["term", "variable", "coefficient (mm, L in m)", "Δχ²", "p", "shape"], terms, "stats"))
     if att.get("text"):
         page.add(f"<p>The jig's errors in doubt: {_e(str(att['text']))}.</p>")

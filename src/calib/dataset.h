@@ -25,7 +25,7 @@ struct JigHole {
     int n = 0;               // samples
     double mean[4] = {0, 0, 0, 0};
     double cov[4][4] = {};   // sample covariance of the readings (n-1; 0 when n = 1)
-    // Acquisition order, for drift over the session (issue 8 item 5). Rows
+    // Acquisition order, for drift over the session. Rows
     // of a jig CSV are in acquisition order; without a time column the time
     // is the mean row index times kDatasetNominalRowPeriodS (a nominal
     // figure, so a drift rate from it is per nominal second).

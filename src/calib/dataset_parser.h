@@ -29,9 +29,9 @@ public:
         last_ = v;
         // A position's samples repeat a few values: one seen lately (a
         // small table by the value's bits; it is in sorted_ or pending_
-        // already) is not sorted in again. The flushes still come every
-        // 4096 values, as when each was kept, so the set kept once full is
-        // the same.
+        // already) is not sorted in again. The flushes come every 4096
+        // values counted, those not sorted in included, so the set kept once
+        // full is the same as if each were sorted in.
         uint64_t bits;
         std::memcpy(&bits, &v, sizeof bits);
         double &seen = recent_[size_t((bits * 0x9E3779B97F4A7C15ull) >> 54)];

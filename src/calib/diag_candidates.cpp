@@ -140,10 +140,11 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
     }
     if (!fit_all(ctx, jobs, err)) return false;
     // A candidate contains the model it extends (its effect at the neutral
-    // start), so its chi-square cannot honestly end above base_chi2. (Rows
-    // did, down to delta chi2 -629485, while the fixture offsets' profile
-    // clamped them off their sum-zero gauge and so put base_chi2 below any
-    // fit's reach: fit_problem.h, profile_fixture.) A fit that still ends
+    // start), so its chi-square cannot honestly end above base_chi2. (A
+    // profile of the fixture offsets that leaves the fit's own constraints
+    // on them puts base_chi2 below any fit's reach, and rows then read down
+    // to delta chi2 -629485: fit_problem.h, profile_fixture, keeps to them.)
+    // A fit that still ends
     // above its base, in another basin, is fitted again from that very
     // start, the fixture offsets profiled as base_chi2's are, and the
     // better of the two is kept. Below one unit of chi-square the

@@ -94,8 +94,10 @@ struct DiagContext {
 // fit (period free) is run from the best of them by chi-square; m and rep
 // are that fit's, rep.evals and rep.seconds count the held fits and the
 // joint fits this order needed (not those a second thread tried ahead and
-// were not needed: diag_batch.cpp). (Three joint fits, one per start, took
-// half of a diagnosis's evaluation work: docs/performance.md.) A joint fit
+// were not needed: diag_batch.cpp). (Three joint fits, one per start, would
+// be half of a diagnosis's evaluation work, evaluations times parameters,
+// with exit_pulley hidden; docs/performance.md, "The whole diagnosis", "A
+// seeded period", says what runs instead.) A joint fit
 // whose period is not shown in the data (period_shown; one given up past
 // twice the span ends there, FitReport::abandoned) is followed by one from
 // the next-best start; when none is shown, m and rep are the first's, and

@@ -227,12 +227,14 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
     // offsets are named together. Both at the findings' level, x alone (no
     // Bonferroni over the axes: these choose the words, the joint test
     // above decided that there is something to word). (A tenth of the
-    // noise floor as the rule, as first written, let the noise decide: a
-    // pure 0.15 mm shift on a 7 x 7 jig of 10 samples read "each fixture
-    // height has its own offset" at a spread of 2.3 standard errors; the
-    // spread's test alone then read "the jig sits +0.012 mm off at every
-    // height" for per-height offsets of +0.034 and -0.010 mm, a common part
-    // 2.7 standard errors from zero: an independent reviewer's cases.)
+    // noise floor as the rule would let the noise decide: a pure 0.15 mm
+    // shift on a 7 x 7 jig of 10 samples reads "each fixture height has its
+    // own offset" at a spread of 2.3 standard errors; the spread's test
+    // alone reads "the jig sits +0.012 mm off at every height" for
+    // per-height offsets of +0.034 and -0.010 mm, a common part 2.7
+    // standard errors from zero: test_diagnose.cpp,
+    // a_jig_off_in_x_is_the_jigs, and test_jig_words.cpp,
+    // mixed_signs_are_the_heights_own, hold them.)
     const double x_spread_p = chi2_sf(x_spread_chi2, K - 1);
     const double x_common_p = chi2_sf(x_common_chi2, 1);
     const bool x_apart = x_spread_p < kFindingLevel;

@@ -34,8 +34,8 @@ namespace diag {
 
 // (height index, axis) -> the fixture's offset (mm): the weighted per-height
 // mean residual, clamped to +-kFixtureMaxMm (the fit's bound on its
-// offsets: a cliff at the bound, where 0.149 mm was all the jig's and
-// 0.151 mm none of it, made the judge disagree with the fit it judged).
+// offsets: a cliff at the bound, where 0.149 mm would be all the jig's and
+// 0.151 mm none of it, would make the judge disagree with the fit it judges).
 // Empty for a layout without fixture heights.
 using FixtureOffsets = std::map<std::pair<int, int>, double>;
 
@@ -96,8 +96,8 @@ JigAnalysis jig_analysis(const Eval &E, const Grid &G, const std::vector<Prepare
 // False only when a fit was cancelled or failed (err).
 // A device effect that can mimic a trend over the heights (a scale against
 // cable_stretch or holder_geometry) takes the offsets' place without them:
-// the per-height means alone called such a trend the fixture's (p 7e-54 on
-// data with none: an independent tester's case, docs/calibration.md).
+// the per-height means alone call such a trend the fixture's (p 7e-54 on
+// data with none: docs/calibration.md, "The jig as it is").
 bool fixture_lr(const Model &m, const std::vector<PreparedPos> &pos, const FitOptions &fo, FixtureLR &out,
                 std::string &err);
 

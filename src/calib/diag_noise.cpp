@@ -57,10 +57,10 @@ namespace {
 // over all lines, and its standard error. Rows share no difference with
 // one another, nor columns, so each kind's spread over its lines is an
 // honest standard error of its own mean; but a row and a column cross at
-// positions they share, so the two means correlate (an independent review:
-// the spread over all the lines as one sample left z = estimate / se with
-// a standard deviation of 1.15-1.26 on white noise, 1.6 on one 7 x 7
-// height). Their correlation is at most one, so the standard error of the
+// positions they share, so the two means correlate (the spread over all
+// the lines as one sample leaves z = estimate / se with a standard
+// deviation of 1.15-1.26 on white noise, 1.6 on one 7 x 7 height). Their
+// correlation is at most one, so the standard error of the
 // mean over all lines is at most the lines-weighted sum of the two kinds'
 // (Cauchy-Schwarz): that bound is the one used. With fewer than two lines
 // of a kind, the other kind alone. ok: at least 8 lines used.

@@ -126,19 +126,19 @@ std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, 
     // cable's reading error would, counting only cables that two or more
     // of them do so on: a reading effect local in cable length (a worn
     // track), which the positions where that cable passes the spot show and
-    // their neighbours do not, is no mis-seated probe (a worn spot 0.25 mm
-    // deep lost 5 to 14 of its positions so, once the fits weighed the
-    // readings' own scatter). All are then kept: where two cables pass the
-    // spot at once the deviation is no single cable's, and setting those
-    // aside cut the signature (of a worn spot's 7 found, 4 deviate as one
-    // cable's on two cables, 3 not). One position on a cable is not enough:
-    // a reference off by a few standard errors passes the one-cable test
-    // whenever it happens to lie near a cable's direction (an independent
-    // review: two and three references off by 0.2 mm were all kept, each
-    // time for one of them), and its cable is then any of the four. More
-    // (up to kOutlierScatteredFraction of the positions read): only when
-    // they look like references off, not like a reading effect or a local
-    // structure.
+    // their neighbours do not, is no mis-seated probe (set aside, a worn
+    // spot 0.25 mm deep loses 5 to 14 of its positions so, with the fits
+    // weighing the readings' own scatter). All are then kept: where two
+    // cables pass the spot at once the deviation is no single cable's, and
+    // setting those aside would cut the signature (of a worn spot's 7 found,
+    // 4 deviate as one cable's on two cables, 3 not). One position on a
+    // cable is not enough: a reference off by a few standard errors passes
+    // the one-cable test whenever it happens to lie near a cable's direction
+    // (were one enough, two and three references off by 0.2 mm would all be
+    // kept, each time for one of them), and its cable is then any of the
+    // four. More (up to kOutlierScatteredFraction of the positions read):
+    // only when they look like references off, not like a reading effect or
+    // a local structure.
     const double base = double(read > 0 ? read : used);
     const double total = double(already + out.size());
     // Those that deviate as one cable's reading would, on a cable that two

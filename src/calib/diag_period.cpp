@@ -56,8 +56,7 @@ bool fit_seeded_period(Model &m, const std::vector<PreparedPos> &pos, const FitO
     // span itself (a period of one turn over the data) is bracketed and
     // fitted; whether it is shown is then the free fit's period's to say.
     const double hi = std::min(pd.upper, 1.25 * span);
-    // A start outside what the search walks: the plain joint fit, as before
-    // there was a search.
+    // A start outside what the search walks: the plain joint fit.
     if (!(m.effect_params(e)[q] >= pd.lower && m.effect_params(e)[q] <= hi)) return fit_model(m, pos, f0, rep);
     // Every point is weighed as f0 says (weigh_with): the whitening once.
     FitOptions f = f0;
@@ -219,9 +218,9 @@ bool fit_seeded_period(Model &m, const std::vector<PreparedPos> &pos, const FitO
     }
     // --- everything free from the profile's minimum. (Not on a budget:
     // capped at 30 evaluations, a final fit on a small jig whose ripple's
-    // period lies past the span stopped half-way at a period inside it, and
-    // was taken as shown with a chi-square 70 % too high; an independent
-    // review's case, 11 of 12 such jigs recommending otherwise.)
+    // period lies past the span stops half-way at a period inside it, and is
+    // taken as shown with a chi-square 70 % too high; 11 of 12 such jigs
+    // then recommend another model.)
     m = std::move(b.m);
     const bool ok = fit_model(m, pos, f, rep);
     rep.evals += evals;

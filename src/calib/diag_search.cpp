@@ -60,10 +60,10 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
     // the model before it (the step that added it was weighed as that one),
     // and the next step's fits, each under cur's weights from cur's values,
     // would otherwise gain that refit as if it were theirs: a ripple whose
-    // period is near the span read chi-square 3383.2 as fitted and 3346.6
-    // refitted, and exit_pulley, which the data did not hold, then read
-    // delta chi2 38 and was added (an independent reviewer's case, with the
-    // readings weighed as blocks, whose weights follow the model closer).
+    // period is near the span reads chi-square 3383.2 as fitted and 3346.6
+    // refitted, and exit_pulley, which the data do not hold, would then read
+    // delta chi2 38 and be added (with the readings weighed as blocks, whose
+    // weights follow the model closer).
     // Kept when it lowers cur's own chi-square. cur_E is cur's evaluation
     // afterwards (`evaluated`: it already is, and is kept when the refit
     // moves nothing).
@@ -140,8 +140,10 @@ bool model_search(const DiagContext &ctx, const Model &start, const FitReport &s
         // rest of the table only for the candidates on top of where the
         // search stops. Every candidate is first screened by one
         // Gauss-Newton step from its start (a seeded period: its held
-        // starts, one step each; the ripple's joint fits of the period were
-        // half the search's fitting, docs/performance.md). The best few by
+        // starts, one step each; the ripple's joint fits of the period, half
+        // of the search's fitting on data without a ripple when every step
+        // runs them, run only for a full fit; `python3 scripts/progress_times.py
+        // build/src/cli/cdm calib diagnose X.csv` times each step). The best few by
         // the screen that the step could take are fitted in full, more while
         // a screened one still ranks first, and the step moves by full fits.
         // Where the screen finds no move every candidate is fitted in full

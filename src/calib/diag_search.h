@@ -39,7 +39,10 @@ struct SearchResult {
     // scored (their tests) but not completed: the diagnosis completes the
     // last search's only (complete_candidates, weighed as the recommended
     // model weighs), since a search followed by another is work thrown away
-    // (a third of the diagnosis' candidate evaluations, docs/performance.md).
+    // (completing every search's table, a third of the diagnosis's
+    // complete_candidates would go to tables never shown; the stages' times:
+    //   python3 scripts/progress_times.py build/src/cli/cdm calib diagnose X.csv
+    // docs/performance.md, "The whole diagnosis", has the last measurement).
     std::vector<Candidate> cands;
     // Every set fitted on the way: its effects and BIC (for the alternatives).
     std::vector<std::pair<std::vector<std::string>, double>> visited;

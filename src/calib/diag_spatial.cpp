@@ -147,17 +147,17 @@ double moran_z(const std::vector<double> &zv, const std::vector<char> &ok, const
     //   E[I^2] = (n/S0)^2 (2 tr(MWMW) + tr(MW)^2) / ((n - K)(n - K + 2)),
     // with, per height h (n_h positions, S0_h ordered neighbour pairs, Q_h
     // the sum of its positions' squared degrees): tr(MW) = -sum S0_h/n_h,
-    // tr(MWMW) = S0 - 2 sum Q_h/n_h + sum (S0_h/n_h)^2. Until 2026-11-25 the
-    // variance was the one for raw residuals with Cliff and Ord's S1 and
-    // S2 entered halved and quartered: half the true variance, every z
-    // sqrt(2) too large, and white residuals crossed the verdict's 1e-3
-    // level about eight times as often as that (a Monte Carlo of white
-    // residuals on the half jig; test_diagnose.cpp,
-    // structure_test_is_calibrated); E[I] ignored the K means (z 0.2 low).
-    // The device model's own fitted parameters are not among the
-    // regressors: exact for the K means, slightly conservative for the
-    // model's smooth fitted shapes (an independent reviewer's Monte Carlo:
-    // mean z -0.2 to -0.6 with 6-10 smooth regressors also projected out).
+    // tr(MWMW) = S0 - 2 sum Q_h/n_h + sum (S0_h/n_h)^2. The raw residuals'
+    // variance, with Cliff and Ord's S1 and S2 entered halved and
+    // quartered, gives half the true variance: every z sqrt(2) too large,
+    // and white residuals cross the verdict's 1e-3 level about eight times
+    // as often as that (a Monte Carlo of white residuals on the half jig;
+    // test_diagnose.cpp, structure_test_is_calibrated); an E[I] that leaves
+    // out the K means puts z 0.2 low. The device model's own fitted
+    // parameters are not among the regressors: exact for the K means,
+    // slightly conservative for the model's smooth fitted shapes (a Monte
+    // Carlo with 6-10 smooth regressors also projected out: mean z -0.2 to
+    // -0.6).
     double S0 = 0, num = 0;
     std::map<int, std::array<double, 2>> per; // height -> {S0_h, Q_h}
     for (size_t j = 0; j < P; ++j) {

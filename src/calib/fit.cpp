@@ -399,11 +399,10 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
             // Gauss-Newton Hessian is the identity, so a Gauss-Newton step
             // would lower the objective by |g|^2 / 2. When that is below
             // SLSQP's own relative tolerance (1e-12), or kConvergedF, a pass
-            // can only confirm the point (it used to, with 15-20 evaluations
-            // of round-off-level changes after every converged pass: a
-            // quarter of a search's evaluations), so the fit stops here. A
-            // point on a bound has a gradient and is polished by SLSQP as
-            // before.
+            // can only confirm the point, spending 15-20 evaluations on
+            // round-off-level changes (after every converged pass, a quarter
+            // of a search's evaluations), so the fit stops here. A point on a
+            // bound has a gradient and is polished by SLSQP.
             Eigen::VectorXd pg;
             const double f0 = 0.5 * (res.squaredNorm() + pb.prior(full, &pg));
             const Eigen::VectorXd gz = W.T.transpose() * (-J.transpose() * res + 0.5 * pg);

@@ -136,10 +136,10 @@ struct FitReport {
 // The largest per-height error taken as the height fixture's (mm): five
 // standard deviations of the spacers' tolerance below, which a Gaussian
 // spacer error passes once in 1.7 million heights. The prior does the
-// regularising; the cap is a sanity bound. At three (0.15 mm, until
-// 2026-11-24) one height in 370 passed it, so one 5-height jig in 74: an
-// independent tester's plate had a height at 0.153 mm, and the model was
-// then "not explained" with two spurious effects recommended. The judge
+// regularising; the cap is a sanity bound. At three (0.15 mm) one height in
+// 370 would pass it, so one 5-height jig in 74: a plate with a height at
+// 0.153 mm then reads "not explained" with two spurious effects recommended
+// (test_diagnose.cpp, a_three_sigma_fixture_height_is_the_jigs). The judge
 // (diag_jig.cpp, fixture_offsets) takes the per-height means up to the same
 // bound, so a mean past it is clamped there as the fit's offset is.
 constexpr double kFixtureMaxMm = 0.25;

@@ -33,11 +33,11 @@ BoundedStep bounded_gauss_newton(const Eigen::MatrixXd &H, const Eigen::VectorXd
     st.u = Eigen::VectorXd::Zero(n);
     // After a full step (no bound in the way) u is the minimum on the working
     // set: the next iteration goes straight to the multipliers. Testing the
-    // recomputed step's length instead failed on badly scaled problems
+    // recomputed step's length instead fails on badly scaled problems
     // (parameters in mm, rad and 1/mm; cond(H) up to 1e12), where that step
-    // is round-off of size eps cond(H) |u|: the loop crept on to its budget
-    // and the fit went to SLSQP without a Gauss-Newton step (an independent
-    // review found it 1-4 times per diagnosis).
+    // is round-off of size eps cond(H) |u|: the loop creeps on to its budget
+    // and the fit goes to SLSQP without a Gauss-Newton step (1-4 times per
+    // diagnosis).
     bool on_minimum = false;
     for (int it = 0; it < 4 * n + 20; ++it) {
         std::vector<size_t> w;

@@ -83,11 +83,11 @@ struct Problem {
     // the position; S = diag(jig_sigma^2), the position's own jig error):
     // generalised least squares, so that a chi-square difference is
     // chi-square distributed. A jig error moves the four readings together
-    // (three directions of four); weighing each reading by 1/C_cc alone, as
-    // until 2026-11-26, ignored that, and on clean half jigs candidates'
-    // delta chi2 had 2-2.5 times chi-square(k)'s variance, p < 0.001 in
-    // 1-2.5 % of them (an independent reviewer's Monte Carlo, 400 seeds;
-    // calibrated with the jig's tolerance at zero). The fourth direction,
+    // (three directions of four); weighing each reading by 1/C_cc alone
+    // ignores that, and on clean half jigs candidates' delta chi2 then has
+    // 2-2.5 times chi-square(k)'s variance, p < 0.001 in 1-2.5 % of them (a
+    // Monte Carlo of 400 seeds; calibrated with the jig's tolerance at
+    // zero). The fourth direction,
     // which no position error moves (the cables' redundancy), is then
     // weighed by the pots' noise alone.
     std::vector<Eigen::Matrix4d> wh;
@@ -241,13 +241,13 @@ struct Problem {
         // Every fixture offset is free, their common part included: it is
         // the spacers' mean error, which is the jig's placement along x, and
         // the judge takes it out with each height's mean (diag_jig.cpp).
-        // Under the sum-zero gauge this used to have, a common x offset of
-        // the jig was left to the device: on clean data with spacers off by
-        // 0.03 mm (their mean -0.0085 mm) every candidate that can shift x
-        // gained delta chi2 ~1730 and the search recommended cable_stretch
-        // for it. Where the model has a translation of its own
-        // (jig_misalignment, anchor_position, holder_geometry) the two are one direction of
-        // the data, told apart by the priors alone: the device's weak prior
+        // Under a sum-zero gauge a common x offset of the jig would be left
+        // to the device: on clean data with spacers off by 0.03 mm (their
+        // mean -0.0085 mm) every candidate that can shift x gains delta chi2
+        // ~1730 and the search recommends cable_stretch for it. Where the
+        // model has a translation of its own (jig_misalignment,
+        // anchor_position, holder_geometry) the two are one direction of the
+        // data, told apart by the priors alone: the device's weak prior
         // against the spacers' tolerance, so the device takes it.
         for (int k = 0; k < F; ++k, ++col) Q(ev.size() + k, col) = 1.0;
         Q.conservativeResize(n, col);
@@ -464,11 +464,11 @@ struct Problem {
     // parameters (a scale-like trend over the heights against cable_stretch
     // or holder_geometry), the offsets stay at what the spacers plausibly
     // are and the device's parameters take the rest. With a weak prior the
-    // fit drifted along that valley to offsets of 0.19 mm on data with none,
-    // or stopped at the then 0.15 mm cap with chi2/dof 1.9 (an independent
-    // tester's cases, docs/calibration.md). Where the data do see an offset
-    // (a height's mean, known to a few micrometres) this prior moves it by
-    // well under one percent.
+    // fit drifts along that valley to offsets of 0.19 mm on data with none,
+    // or, capped at 0.15 mm, stops there with chi2/dof 1.9
+    // (docs/calibration.md, "The jig as it is"). Where the data do see an
+    // offset (a height's mean, known to a few micrometres) this prior moves
+    // it by well under one percent.
     double prior_sd(int a) const { return a >= ev.size() ? scale(a) : 10 * scale(a); }
 
     double prior(const Eigen::VectorXd &full, Eigen::VectorXd *grad) const {

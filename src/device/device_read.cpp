@@ -37,14 +37,14 @@ int cdm_device::finish(cdm_pose &pose, bool have, uint32_t st) const {
 }
 
 // CLOCK_MONOTONIC every time (a TSC read and its scaling in the vDSO, about
-// 20 ns, half of cdm_get_pose). Until 2026-11-24 the coarse clock (the time
-// of the kernel's last timekeeping tick, 5 ns) came first, on the belief
-// that it lags by at most its resolution: on this project's VM (tickless
-// kernel, 4 ms resolution) it lagged by more in 73 % of samples, up to
-// 6.9 ms, so a pose past a 50 ms deadline was reported fresh (CDM_OK, no
-// STALE) up to 8 ms late, and past a 5 ms one up to 1.9 ms late (an
-// independent tester's finding, docs/performance.md). No bound on that lag
-// is promised by the kernel, so the flag now reads the exact clock.
+// 20 ns, half of cdm_get_pose), not CLOCK_MONOTONIC_COARSE (the time of the
+// kernel's last timekeeping tick, 5 ns): the kernel does not bound the
+// coarse clock's lag behind the fine one. On a tickless VM (4 ms
+// resolution) it lagged by more than its resolution in 73 % of samples, up
+// to 6.9 ms, and with it a pose past a 50 ms deadline was reported fresh
+// (CDM_OK, no STALE) up to 8 ms late, past a 5 ms one up to 1.9 ms late.
+// test_fault_stale_never_late holds it; docs/performance.md ("The haptic
+// path") has the clocks' costs.
 bool cdm_device::older_than(uint64_t host_ns, uint64_t limit_ns) const {
     const uint64_t now = monotonic_ns();
     return now > host_ns && now - host_ns > limit_ns;
@@ -96,8 +96,8 @@ bool cdm_device::wait_until(const std::function<bool()> &ready, int timeout_ms) 
 
 // A wait on the reader thread itself (from a sample or event callback)
 // would wait for a pose only that thread can publish: until the timeout,
-// and without one until cdm_close (an independent tester's finding). It
-// returns CDM_ERR_INVALID_ARG at once, *out zeroed (orientation the identity).
+// and without one until cdm_close. It returns CDM_ERR_INVALID_ARG at once,
+// *out zeroed (orientation the identity).
 bool cdm_device::on_reader_thread() const {
     return std::this_thread::get_id() == reader_id_.load(std::memory_order_acquire);
 }

@@ -192,11 +192,11 @@ void MasterWatcher::rescan(bool report) {
         cdm_device_info info;
         // A node just added may not answer yet: udev applies its rule's
         // permissions after the node appears, and a device can take a moment
-        // after enumeration (the emulated one, on a loaded machine, once
-        // told "1.0" for "1.0.0"). An arrival is told with the full info
+        // after enumeration (the emulated one, on a loaded machine, can
+        // tell "1.0" for "1.0.0"). An arrival is told with the full info
         // when the device gives it within kSettleMs (tries kSettleStepMs
         // apart, on this thread, leaving off at once when the watcher is
-        // stopped), else with what enumeration knows, as before.
+        // stopped), else with what enumeration knows.
         // (The deadline is on the clock: a try that itself blocks, a
         // control request timing out, counts too.)
         constexpr int kSettleMs = 250, kSettleStepMs = 25;

@@ -22,11 +22,14 @@ constexpr double kBeatenBic = 10.0;
 // effects (a drift common to the four cables is pot_drift's; a common scale
 // is cable_stretch's): its Jacobian makes all but this share of them. Such
 // an effect is the right physics with parameters to spare, not a stand-in.
-// A stand-in mimics the term to within the noise, not exactly: the share it
-// leaves is the term's chi-square it cannot take, 1e-3..1e-2 of it in the
-// simulated cases (tests/cli/test_beyond_catalogue.py), while a special case
-// leaves round-off and the readings' noise (below 1e-6).
-constexpr double kContainedShare = 1e-4;
+// A special case leaves round-off and the readings' noise (2e-9 for a
+// common drift under pot_drift, 3e-8 for L^2 under cable_stretch); a
+// stand-in mimics a term to within the noise, not exactly, and leaves
+// 5e-5 to 1e-2 of it (the four hidden effects of
+// tests/cli/test_beyond_catalogue.py on the seed's and a half jig: the
+// discovery's share_outside_compared). The bound sits between, a factor of
+// about 30 from each.
+constexpr double kContainedShare = 1e-6;
 
 // The effects of `target` that `base` lacks, as stand-ins for the
 // discovered term that beat them.

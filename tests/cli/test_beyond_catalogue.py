@@ -145,8 +145,10 @@ def test_user_effect_from_the_hint_closes_the_loop(diagnosis, tmp_path):
     cdmpy.register_effect(effect, ["c%d" % k for k in range(len(terms))], scales, hint, units=["mm"] * len(terms),
                           lower=[-100 * s for s in scales], upper=[100 * s for s in scales], initial=[0.0] * len(terms),
                           stage="path", geometry=True)
+    device = tmp_path / "device.json"
+    device.write_text(json.dumps(d["device"]))  # the device the diagnosis above used
     try:
-        r = cdmpy.diagnose(d["data"]["path"], None, effects=[effect])
+        r = cdmpy.diagnose(d["data"]["path"], device, effects=[effect])
     finally:
         cdmpy.unregister_effect(effect)
     assert r["explained"] or r["negligible_only"], r["verdict"][:600]

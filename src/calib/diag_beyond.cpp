@@ -23,12 +23,13 @@ constexpr double kBeatenBic = 10.0;
 // is cable_stretch's): its Jacobian makes all but this share of them. Such
 // an effect is the right physics with parameters to spare, not a stand-in.
 // A special case leaves round-off and the readings' noise (2e-9 for a
-// common drift under pot_drift, 3e-8 for L^2 under cable_stretch); a
-// stand-in mimics a term to within the noise, not exactly, and leaves
-// 5e-5 to 1e-2 of it (the four hidden effects of
-// tests/cli/test_beyond_catalogue.py on the seed's and a half jig: the
+// drift common to the cables under pot_drift; 1e-29 or less for L^2 under
+// cable_stretch and for the sag's term under a user effect of the same
+// shape); a stand-in mimics a term to within the noise, not exactly, and
+// leaves 5e-5 to 1e-2 of it (the hidden effects of
+// tests/cli/test_beyond_catalogue.py on the seed's jig and a half jig: the
 // discovery's share_outside_compared). The bound sits between, a factor of
-// about 30 from each.
+// 50 from the nearest of each.
 constexpr double kContainedShare = 1e-6;
 
 // The effects of `target` that `base` lacks, as stand-ins for the
@@ -54,7 +55,6 @@ void beaten_stand_ins(const Model &target, const Model &base, const Discovery &d
 bool beyond_catalogue(const DiagContext &ctx, const Model &user, const FitReport &user_rep, const Model &target,
                       const FitReport &target_rep, const Eval &target_E, bool target_explained,
                       const nlohmann::json &jig_report, const V3 &noise, Beyond &out, std::string &err) {
-    out = Beyond{};
     out.user = find_stand_ins(user, user_rep);
     out.recommended = find_stand_ins(target, target_rep);
     const std::vector<StandIn> &si = out.recommended;

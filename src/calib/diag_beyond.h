@@ -29,8 +29,9 @@ struct Beyond {
 // model the residual analysis speaks of (the recommended one, or the
 // user's without the search); target_E its evaluation and target_explained
 // its verdict's tests; user/user_rep: the user's model; jig_report:
-// jig_analysis's report of target_E; noise: target's noise floor. False +
-// err when a fit or a user effect fails.
+// jig_analysis's report of target_E; noise: target's noise floor; out:
+// default-constructed (it is filled, not reset). False + err when a fit or
+// a user effect fails.
 bool beyond_catalogue(const DiagContext &ctx, const Model &user, const FitReport &user_rep, const Model &target,
                       const FitReport &target_rep, const Eval &target_E, bool target_explained,
                       const nlohmann::json &jig_report, const V3 &noise, Beyond &out, std::string &err);

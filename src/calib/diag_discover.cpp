@@ -24,7 +24,7 @@ namespace {
 // What a term may depend on, per position and cable. Lengths in metres, so
 // that a coefficient reads in mm per m^p.
 struct TermIn {
-    double L;      // the cable's mean reading (its chord length), m
+    double L;      // the cable's chord, anchor to holder at the jig position (nominal geometry), m
     V3 u;          // its unit direction, anchor to holder, device frame
     double t_h;    // hours since the session's first position
     double height; // the fixture height (jig x), m
@@ -108,7 +108,7 @@ std::vector<std::array<TermIn, 4>> term_inputs(const std::vector<PreparedPos> &p
         const size_t j = order[r];
         for (size_t c = 0; c < 4; ++c) {
             TermIn &x = in[j][c];
-            x.L = pos[j].mean(long(c)) / 1000.0;
+            x.L = lv.chord[j][c] / 1000.0;
             x.u = lv.dir[j][c];
             x.t_h = (pos[j].t_s - t0) / 3600.0;
             x.height = pos[j].ref(0) / 1000.0;
@@ -185,8 +185,8 @@ Selection select_terms(Eigen::VectorXd e, const Eigen::MatrixXd &F, const Eigen:
 
 // The other model against the terms: its linearised refit's chi-square
 // (its residual with its own Jacobian and the fixture's offsets projected
-// out), and the share of the terms' whitened columns its Jacobian cannot
-// make (0: the terms are a special case of the other model's effects).
+// out), and the share of the leading term's whitened column its Jacobian
+// cannot make (0: the term is a special case of the other model's effects).
 bool against_other(const Model &m, const DiagContext &ctx, const FitOptions &fo,
                    const std::vector<Eigen::Matrix<double, 4, Eigen::Dynamic>> &terms, double &chi2, double &outside,
                    std::string &err) {
@@ -195,8 +195,10 @@ bool against_other(const Model &m, const DiagContext &ctx, const FitOptions &fo,
     if (!fit_residual_jacobian_with(m, ctx.pos, fo, terms, r, J, X, err)) return false;
     const Eigen::MatrixXd Q = span_basis(J);
     chi2 = project_out(Q, r).squaredNorm();
-    const double all = X.squaredNorm();
-    outside = all > 0 ? (X - Q * (Q.transpose() * X)).squaredNorm() / all : 0.0;
+    // The leading term's share: the one the proposal is about (a later,
+    // smaller term the other model lacks does not make the lead new).
+    const double all = X.col(0).squaredNorm();
+    outside = all > 0 ? (X.col(0) - Q * (Q.transpose() * X.col(0))).squaredNorm() / all : 0.0;
     return true;
 }
 
@@ -248,7 +250,7 @@ void describe(const DiagContext &ctx, const std::vector<Term> &lib, const Select
     const Term &lead = lib[size_t(s.terms[0])];
     out.json = {{"terms", terms},
                 {"per_cable", "one coefficient common to the four cables, added to each cable's reading (mm); L the "
-                              "cable's mean reading in m, u its unit direction anchor to holder in the device frame, "
+                              "cable's chord (anchor to holder at the jig position, nominal geometry) in m, u its unit direction anchor to holder in the device frame, "
                               "t hours since the first position, height the fixture height in m, approach the sign of "
                               "the cable's length change from the position measured before"},
                 {"delta_chi2", out.dchi2},
@@ -285,7 +287,6 @@ void describe(const DiagContext &ctx, const std::vector<Term> &lib, const Select
 
 bool discover_terms(const DiagContext &ctx, const Model &base, const FitReport &base_rep, const Model *other,
                     const FitReport *other_rep, const std::string &other_name, Discovery &out, std::string &err) {
-    out = Discovery{};
     out.other_name = other_name;
     const size_t P = ctx.pos.size();
     if (P < 20) return true;

@@ -36,9 +36,9 @@ struct Discovery {
     double dchi2 = 0;       // chi-square the terms gain over `base` (linearised joint refit)
     double bic_vs_base = 0; // BIC change against base alone
     double bic_vs_other = NAN; // BIC change against `other` (the stand-ins' model), when given
-    // The share of the terms' whitened columns that `other`'s Jacobian
-    // cannot make: near 0 when the terms are a special case of its effects
-    // (a drift common to the cables is pot_drift's), when given.
+    // The share of the leading term's whitened column that `other`'s
+    // Jacobian cannot make: near 0 when the term is a special case of its
+    // effects (a drift common to the cables is pot_drift's), when given.
     double outside_other = NAN;
     Eval E;                 // base + terms after one joint Gauss-Newton step, on the data
     nlohmann::json json = nullptr;
@@ -55,7 +55,8 @@ struct Discovery {
 // recommended one, with its stand-ins; other_rep its fit). Both are weighed
 // as base weighs the data (ctx.fo with weigh_with = base). False + err only
 // when a user effect fails.
-// other_name: how the words call `other` ("the stand-ins").
+// other_name: how the words call `other` ("the stand-ins"). out:
+// default-constructed (it is filled, not reset).
 bool discover_terms(const DiagContext &ctx, const Model &base, const FitReport &base_rep, const Model *other,
                     const FitReport *other_rep, const std::string &other_name, Discovery &out, std::string &err);
 

@@ -28,6 +28,7 @@ LengthView length_view(const Model &m, const std::vector<PreparedPos> &pos) {
     v.lres.resize(P);
     v.angle.resize(P);
     v.dir.resize(P);
+    v.chord.resize(P);
     // The model's readings at every reference (one call of a user effect
     // that works on arrays over them all).
     std::vector<double> tp(3 * P), ts(P), yp(4 * P);
@@ -51,6 +52,7 @@ LengthView length_view(const Model &m, const std::vector<PreparedPos> &pos) {
             v.angle[j][size_t(c)] = std::atan2(d[0], std::hypot(d[1], d[2])) * 180 / M_PI;
             const V3 u(d[0], d[1], d[2]);
             v.dir[j][size_t(c)] = u.norm() > 0 ? V3(u / u.norm()) : V3::Zero();
+            v.chord[j][size_t(c)] = u.norm();
         }
     }
     return v;

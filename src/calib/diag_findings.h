@@ -29,6 +29,7 @@ constexpr double kFindingLevel = 1e-3;
 struct LengthView {
     std::vector<std::array<double, 4>> lmean, lres, angle;
     std::vector<std::array<V3, 4>> dir; // d length / d holder position: each cable's unit direction
+    std::vector<std::array<double, 4>> chord; // each cable's straight length, anchor to holder (mm)
 };
 LengthView length_view(const Model &m, const std::vector<PreparedPos> &pos);
 // The view with the holder moved by off[j] at each position (the jig's own

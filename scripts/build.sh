@@ -9,6 +9,9 @@ TYPE=${CDM_BUILD_TYPE:-RelWithDebInfo} # CI: Release, the build users run (scrip
 # small change take seconds per unchanged object.
 launcher=()
 command -v ccache >/dev/null 2>&1 && launcher=(-DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+# Paths under the tree are hashed relative to each build directory, so two
+# build directories of the same configuration share their objects.
+export CCACHE_BASEDIR="$PWD"
 if [ ! -f "$BUILD/build.ninja" ]; then
   cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE="$TYPE" -DPython3_EXECUTABLE="$(command -v python3)" \
     -DCDM_WERROR=ON "${launcher[@]}" \

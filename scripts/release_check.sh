@@ -11,6 +11,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 launcher=()
 command -v ccache >/dev/null 2>&1 && launcher=(-DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+# Paths under the tree are hashed relative to each build directory, so two
+# build directories of the same configuration share their objects.
+export CCACHE_BASEDIR="$PWD"
 for variant in default nodds; do
   dir=build-release-$variant
   extra=()

@@ -273,6 +273,9 @@ void describe(const DiagContext &ctx, const std::vector<Term> &lib, const Select
                                "ratio passes 1e-3 after Bonferroni over the library and it lowers the BIC; the error "
                                "after one joint Gauss-Newton step"},
                 {"hypothesis", true}};
+    out.lead_words = "without them, the residual follows " + lead.variable + " (the library's best term, " + lead.name +
+                     ", does not fit as well as " + out.other_name + ": BIC " + fmt_num(out.bic_vs_other, 0, true) +
+                     "; the effect's shape is not among the library's terms): look there";
     const std::string reaches = std::isfinite(xr) ? "brings x to " + fmt_num(xr, 3) + " mm" +
                                                          (std::isfinite(xr_fix) ? " with the fixture's per-height offsets out" : "")
                                                    : "leaves no position solvable after one step (its error is not known)";

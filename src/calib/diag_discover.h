@@ -44,6 +44,9 @@ struct Discovery {
     nlohmann::json json = nullptr;
     std::string words;      // the verdict's sentence ("" when nothing was found)
     std::string other_name; // what bic_vs_other compares with, in words
+    // Where the terms do not compete: which variable the residual follows,
+    // as a pointer for the user ("" when nothing was found).
+    std::string lead_words;
     // Worth a reader's time: no model to compare with, or the terms' model
     // within the alternatives' margin (10) of it or better. A term that
     // loses to the catalogue's model by more is in the JSON only.

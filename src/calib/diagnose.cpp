@@ -371,7 +371,10 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
             verdict += " " + sentence + ".";
         }
     }
-    if (bey.discovery.competitive()) verdict += " Beyond the catalogue: " + bey.discovery.words + ".";
+    if (bey.discovery.competitive())
+        verdict += " Beyond the catalogue: " + bey.discovery.words + ".";
+    else if (bey.discovery.found && !bey.recommended.empty())
+        verdict += " Beyond the catalogue: " + bey.discovery.lead_words + ".";
     if (!bey.attribution.words.empty()) verdict += " The jig's errors in doubt: " + bey.attribution.words + ".";
     // What the screen set aside as it read the file (dataset_glitches.h).
     if (!data.glitches.empty()) verdict += " " + glitches_words(data);

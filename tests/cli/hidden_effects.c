@@ -18,6 +18,9 @@
  *   hidden_worn_spot    a worn band of the pots' tracks: the reading is off
  *                       by A exp(-(L - L0)^2 / (2 s^2)) near L0: depends on
  *                       the length alone, and no polynomial of it.
+ *   hidden_warmup       the cables warm after a cold start and lengthen by
+ *                       a L (1 - exp(-t / tau)): depends on the time and
+ *                       the length (through the geometry API's t_s).
  */
 #define CDM_EXPERIMENTAL
 #include <math.h>
@@ -77,6 +80,14 @@ static int worn_spot(void *user, const double *q, const double p[3], double r[4]
     return 0;
 }
 
+static int warmup(void *user, const double *q, size_t n, const cdm_effect_context *ctx, double *values) {
+    (void)user;
+    for (size_t j = 0; j < n; ++j)
+        for (int i = 0; i < 4; ++i)
+            values[4 * j + (size_t)i] += q[0] * ctx->chord_mm[4 * j + (size_t)i] * (1 - exp(-ctx->t_s[j] / q[1]));
+    return 0;
+}
+
 int cdm_plugin_init(int (*register_fn)(const cdm_effect_def *));
 int cdm_plugin_init(int (*register_fn)(const cdm_effect_def *)) {
     static const char *const n_sag[] = {"c"}, *const n_guide[] = {"k"}, *const n_weight[] = {"w"},
@@ -102,9 +113,22 @@ int cdm_plugin_init(int (*register_fn)(const cdm_effect_def *)) {
     }
     defs[3].lower = lo_spot;
     defs[3].upper = hi_spot;
-    for (size_t k = 0; k < sizeof defs / sizeof defs[0]; ++k) {
+    for (int k = 0; k < 4; ++k) {
         const int rc = register_fn(&defs[k]);
         if (rc != CDM_OK) return rc;
     }
-    return CDM_OK;
+    static const char *const n_warm[] = {"a", "tau_s"};
+    static const double s_warm[] = {1e-4, 600}, lo_warm[] = {-1e-2, 10}, hi_warm[] = {1e-2, 1e5};
+    cdm_effect_def w = {0};
+    w.struct_size = sizeof w;
+    w.n_params = 2;
+    w.name = "hidden_warmup";
+    w.doc = "the cables warming after a cold start (test truth)";
+    w.param_names = n_warm;
+    w.param_scale = s_warm;
+    w.lower = lo_warm;
+    w.upper = hi_warm;
+    w.apply_geom = warmup;
+    w.stage = CDM_EFFECT_STAGE_READING;
+    return register_fn(&w);
 }

@@ -8,7 +8,9 @@ in a simulated jig session, and checks what a user would read:
     listed (recommended.stand_ins) and the words say "with stand-ins";
   - the proposed term (`discovered`) names the physical variable the hidden
     effect depends on.
-The session is the seed's plate at 13 x 13 holes, 5 heights, 40 samples
+Five effects: cable sag, a guide beside the exits, the grip's weight, a worn
+band of the tracks, the cables warming in time (through the geometry API's
+t_s). The session is the seed's plate at 13 x 13 holes, 5 heights, 40 samples
 (0.05 mm pot noise, 0.03 mm jig tolerance: the defaults): large enough that
 each hidden effect (0.05-0.15 mm of reading) is far above the noise of a
 per-position mean (0.05 / sqrt(40) = 0.008 mm), small enough for CI.
@@ -30,7 +32,12 @@ CASES = {
                                                               "L*(1-u_y^2)", "L^2*(1-u_y^2)", "L^3*(1-u_y^2)"}),
     "holder_weight": ({"hidden_holder_weight": {"w": 5e-4}}, "u_z", {"L*u_z", "u_z"}),
     "worn_spot": ({"hidden_worn_spot": {"amplitude": 0.12, "centre": 200.0, "width": 8.0}}, "cable length", None),
+    "warmup": ({"hidden_warmup": {"a": 5e-4, "tau_s": 120.0}}, "time", None),
 }
+# Shapes the library has no term for (a bump in length, an exponential
+# settling in time): the proposal names the variable, the user writes the
+# shape; the loop is closed by hand, not by the library's terms.
+NOT_IN_LIBRARY = {"worn_spot", "warmup"}
 
 
 def truth_file(tmp_path, effects):
@@ -91,10 +98,11 @@ def test_proposed_term_names_the_variable(diagnosis):
     assert variable in lead["variable"] or variable in lead["term"], (name, disc["terms"])
     if shapes is not None:
         assert lead["term"] in shapes, (name, disc["terms"])
-    # The term, fitted with the model, brings the error toward the floor:
-    # its x RMS is no larger than the model it was searched in.
+    # The term, fitted with the model, lowers its chi-square; the verdict
+    # points to it: as a hypothesis where it competes with the stand-ins,
+    # as the variable to look at where its shape is not the library's.
     assert disc["delta_chi2"] > 0
-    assert "A hypothesis" in d["verdict"]
+    assert "A hypothesis" in d["verdict"] or "the residual follows " + lead["variable"] in d["verdict"], d["verdict"]
 
 
 # The terms of the library as a user would write them from the verdict's
@@ -126,8 +134,8 @@ def test_user_effect_from_the_hint_closes_the_loop(diagnosis, tmp_path):
     The worn spot is left out: no term of the library has its shape (a bump
     in length), so the hint there is a direction to look in, not the effect."""
     name, d = diagnosis
-    if name == "worn_spot":
-        pytest.skip("the library has no term of a bump's shape: the hint does not close this loop")
+    if name in NOT_IN_LIBRARY:
+        pytest.skip("the library has no term of this shape: the hint names the variable, not the effect")
     import sys
     sys.path.insert(0, os.path.join(os.environ["CDM_SOURCE_DIR"], "bindings", "python"))
     import cdm as cdmpy

@@ -69,16 +69,10 @@ struct DeviceCloser {
     void operator()(cdm_device *d) const { cdm_close(d); }
 };
 
-int cmd_bridge_dds(const BridgeArgs &a) {
-    if (std::string why = bridge::check_prefix(a.prefix); !why.empty())
-        throw UsageError("--prefix \"" + a.prefix + "\" " + why);
-    cdm_device *raw_dev = nullptr;
-    if (int rc = open_device(a, raw_dev); rc != kExitOk) return rc;
-    std::unique_ptr<cdm_device, DeviceCloser> dev(raw_dev);
-    cdm_device_info info{};
-    info.struct_size = sizeof info;
-    if (int rc = cdm_get_info(dev.get(), &info); rc != CDM_OK) return report_error("get info", rc);
-
+// The DDS participant and writers for the device `info` describes, and the
+// line that says what is bridged where; null (the message on stderr) when
+// Cyclone DDS refuses them.
+std::unique_ptr<bridge::DdsPublisher> start_publisher(const BridgeArgs &a, const cdm_device_info &info) {
     bridge::DdsConfig cfg;
     cfg.domain = a.domain;
     cfg.prefix = a.prefix;
@@ -91,7 +85,7 @@ int cmd_bridge_dds(const BridgeArgs &a) {
     auto pub = bridge::DdsPublisher::create(cfg, err);
     if (!pub) {
         std::fprintf(stderr, "cdm: %s\n", err.c_str());
-        return kExitFailure;
+        return nullptr;
     }
     const std::string &base = pub->topic_base();
     std::printf("bridging %s (serial %s) to DDS domain %u: %spose (geometry_msgs/msg/PoseStamped), %sjoy "
@@ -99,6 +93,22 @@ int cmd_bridge_dds(const BridgeArgs &a) {
                 "Ctrl-C stops\n",
                 info.uri, info.serial, a.domain, base.c_str(), base.c_str(), base.c_str(), base.c_str());
     std::fflush(stdout);
+    return pub;
+}
+
+int cmd_bridge_dds(const BridgeArgs &a) {
+    if (std::string why = bridge::check_prefix(a.prefix); !why.empty())
+        throw UsageError("--prefix \"" + a.prefix + "\" " + why);
+    cdm_device *raw_dev = nullptr;
+    if (int rc = open_device(a, raw_dev); rc != kExitOk) return rc;
+    std::unique_ptr<cdm_device, DeviceCloser> dev(raw_dev);
+    cdm_device_info info{};
+    info.struct_size = sizeof info;
+    if (int rc = cdm_get_info(dev.get(), &info); rc != CDM_OK) return report_error("get info", rc);
+
+    auto pub = start_publisher(a, info);
+    if (!pub) return kExitFailure;
+    std::string err;
 
     std::signal(SIGINT, on_stop_signal);
     std::signal(SIGTERM, on_stop_signal);

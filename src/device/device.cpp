@@ -353,24 +353,29 @@ bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t hos
     return true;
 }
 
+void cdm_device::reject_report(int reason, const uint8_t *buf, size_t len) {
+    const proto::Reject rej = proto::Reject(reason);
+    // The reader thread is the only writer of the count: the text is stored
+    // before the count rises (release), so a caller that sees the count
+    // (acquire, in cdm_device_stats) also sees the text that goes with it.
+    const uint64_t k = n_malformed_.load(std::memory_order_relaxed) + 1;
+    ++malformed_by_kind_[size_t(rej) % 8];
+    char text[200];
+    std::snprintf(text, sizeof text,
+                  "input report rejected (reason %d: %s): %zu bytes, report ID 0x%02x; %llu rejected so far",
+                  int(rej), proto::reject_text(rej), len, len ? buf[0] : 0u, (unsigned long long)k);
+    // Logged at the 1st, 10th, 100th... rejection: a flood stays readable.
+    uint64_t p10 = 1;
+    while (p10 * 10 <= k) p10 *= 10;
+    set_error(text, k == p10 ? log::kWarning : -1);
+    n_malformed_.store(k, std::memory_order_release);
+}
+
 void cdm_device::handle_report(const uint8_t *buf, size_t len, uint64_t host_ns) {
     proto::InputReport r;
     const proto::Reject rej = proto::parse_input(buf, len, r);
     if (rej != proto::Reject::None) {
-        // The reader thread is the only writer of the count: the text is stored
-        // before the count rises (release), so a caller that sees the count
-        // (acquire, in cdm_device_stats) also sees the text that goes with it.
-        const uint64_t k = n_malformed_.load(std::memory_order_relaxed) + 1;
-        ++malformed_by_kind_[size_t(rej) % 8];
-        char text[200];
-        std::snprintf(text, sizeof text,
-                      "input report rejected (reason %d: %s): %zu bytes, report ID 0x%02x; %llu rejected so far",
-                      int(rej), proto::reject_text(rej), len, len ? buf[0] : 0u, (unsigned long long)k);
-        // Logged at the 1st, 10th, 100th... rejection: a flood stays readable.
-        uint64_t p10 = 1;
-        while (p10 * 10 <= k) p10 *= 10;
-        set_error(text, k == p10 ? log::kWarning : -1);
-        n_malformed_.store(k, std::memory_order_release);
+        reject_report(int(rej), buf, len);
         return;
     }
     if (!account_sequence(r.sequence, r.device_time_us, host_ns)) return;

@@ -112,6 +112,9 @@ private:
     void wait_for_arrival();
     // host_ns: CLOCK_MONOTONIC when the transport's read returned it.
     void handle_report(const uint8_t *buf, size_t len, uint64_t host_ns);
+    // A report the parser rejected: counted by kind, its reason kept in the
+    // handle's error text (reader thread).
+    void reject_report(int reason, const uint8_t *buf, size_t len);
     // false: discard (duplicate or late)
     bool account_sequence(uint32_t seq, uint64_t device_us, uint64_t host_ns);
     bool wait_until(const std::function<bool()> &ready, int timeout_ms);

@@ -85,9 +85,38 @@ def _route_findings(findings):
     return pos_notes, len_notes, periods
 
 
+def _route_trends(diag, page, pos_notes, len_notes):
+    """The library's test of each plotted series (positions.trends: a one-way
+    analysis of variance over bins of the variable, Bonferroni over the
+    series): each significant one annotates its panel, and the text lists
+    them, so the page never shows a trend the words deny."""
+    trends = [t for t in (_list(_dict(diag, "positions") or {}, "trends") or [])
+              if isinstance(t, dict) and t.get("significant") is True]
+    if not trends:
+        return
+    items = []
+    for t in trends:
+        var, axis, cable = str(t.get("variable", "?")), str(t.get("axis", "?")), t.get("cable")
+        who = f"cable {cable} " if isinstance(cable, int) and not isinstance(cable, bool) else ""
+        note = (f"{who}{var}: trend, range {fmt_g(t.get('range_mm'), 2)} mm "
+                f"(F-test p = {fmt_g(t.get('p_value'), 2)})")
+        if t.get("panel") == "vs_cable_length":
+            len_notes.setdefault(cable, []).append(note)
+            items.append(f"cable {cable}'s reading against its length")
+        elif axis in AXES:
+            pos_notes.setdefault((var, AXES.index(axis)), []).append(note)
+            items.append(f"{axis} against {who}{var}")
+    page.add("<p>The residuals plotted below vary with the variable in " + str(len(items)) + " of their series "
+             "(a one-way analysis of variance of the residual over ten bins of equal count of the variable, "
+             "Bonferroni over every series plotted, level 1e-3): " + _e("; ".join(items[:12]))
+             + ("; ..." if len(items) > 12 else "") + ". The position residual is the current model's; the "
+             "findings above are about the residual they name.</p>")
+
+
 def section_variables(diag, page, P):
     page.add("<h2>5. Residual versus physical variables</h2>")
     pos_notes, len_notes, periods = _route_findings(_findings(diag, page))
+    _route_trends(diag, page, pos_notes, len_notes)
     if not P.ok:
         page.add("<p>Plots not available: no per-position data.</p>")
         return
@@ -117,7 +146,9 @@ def _findings(diag, page):
         page.add(_table(["variable", "kind", "axis", "period (mm)", "amplitude (mm)",
                          "p-value", "finding"], rows, "cands"))
     else:
-        page.add("<p>No trend or periodicity found in the residual.</p>")
+        of = us.get("residual_of")
+        page.add("<p>No finding in the residual"
+                 + (f" of {_e(of)}" if isinstance(of, str) and of else "") + ".</p>")
     return findings
 
 

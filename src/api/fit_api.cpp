@@ -36,17 +36,7 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
     // not reported only as "converged". Candidates are not tried here.
     const cdm::diag::Verdict v =
         cdm::diag::judge(cf.fitted, cf.grid, cf.jig, cf.report.n_free, cf.fit_options.hole_sigma);
-    std::string text =
-        v.explained ? "the fitted effects explain the data to the noise and the jig's tolerance (no other effect "
-                      "tried: `cdm calib diagnose` does)"
-                    : "the fitted effects do not explain the data: chi2/dof " + cdm::diag::fmt_num(v.chi2 / v.dof, 2) +
-                          " (" + cdm::diag::fmt_p(v.chi2_p) +
-                          (v.chi2_scale > 1.005 ? ", widened x" + cdm::diag::fmt_num(v.chi2_scale, 2) +
-                                                      " for the plate's holes"
-                                                : "") +
-                          "), spatial structure z = " +
-                          cdm::diag::fmt_num(v.moran_z, 1) + " (" + cdm::diag::fmt_p(v.moran_p) +
-                          "); the calibration corrects only what they can: `cdm calib diagnose` says what is missing";
+    const std::string text = cdm::diag::fit_check_words(v);
     json check = {{"explained", v.explained},
                   {"chi2_per_dof", v.chi2 / v.dof},
                   {"chi2_p_value", v.chi2_p},

@@ -65,14 +65,15 @@ std::string fit_key(const DiagContext &ctx, const Model &m) {
     return k;
 }
 
-// The "period" parameters (mm) of effect `name` in m: {effect, parameter}.
+// The periods in cable length (ParamRole::LengthPeriod) of effect `name` in
+// m: {effect, parameter}.
 std::vector<std::pair<size_t, size_t>> period_params(const Model &m, const std::string &name) {
     std::vector<std::pair<size_t, size_t>> v;
     for (size_t e = 0; e < m.effect_count(); ++e) {
         if (m.effect_name(e) != name) continue;
         const auto &ps = m.effect_desc(e).params;
         for (size_t q = 0; q < ps.size(); ++q)
-            if (ps[q].name == "period" && (ps[q].unit == "mm" || ps[q].unit.empty())) v.push_back({e, q});
+            if (ps[q].role == ParamRole::LengthPeriod) v.push_back({e, q});
     }
     return v;
 }

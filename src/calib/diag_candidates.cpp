@@ -70,13 +70,13 @@ std::vector<ParamValues> effect_starts(const Model &base, const std::string &eff
     auto d = find_effect(effect);
     if (!d) return {{}};
     for (auto &p : d->params) {
-        if (p.name != "period" || (p.unit != "mm" && !p.unit.empty())) continue;
+        if (p.role != ParamRole::LengthPeriod) continue;
         const PeriodPeak pk = length_period(length_view(base, pos));
         if (!pk.valid) return {{}};
         std::vector<ParamValues> v;
         for (double f : {1.0, 0.9, 1.1}) {
             const double per = std::min(std::max(pk.period_mm * f, p.lower), p.upper);
-            v.push_back({{"period", per}});
+            v.push_back({{p.name, per}});
         }
         return v;
     }
@@ -98,7 +98,7 @@ bool period_shown(const Model &m, const std::string &effect, const std::vector<P
         if (m.effect_name(k) != effect) continue;
         const EffectDesc &d = m.effect_desc(k);
         for (size_t q = 0; q < d.params.size(); ++q) {
-            if (d.params[q].name != "period") continue;
+            if (d.params[q].role != ParamRole::LengthPeriod) continue;
             // One full period at least within the measured lengths, as the
             // periodogram searches (periods up to the span).
             return m.effect_params(k)[q] <= length_span(pos);
@@ -113,8 +113,7 @@ static double searched_periods(const std::string &effect, const std::vector<Prep
     auto d = find_effect(effect);
     if (!d) return 1;
     for (auto &p : d->params)
-        if (p.name == "period" && (p.unit == "mm" || p.unit.empty()))
-            return std::max(1.0, periods_searched(length_span(pos)));
+        if (p.role == ParamRole::LengthPeriod) return std::max(1.0, periods_searched(length_span(pos)));
     return 1;
 }
 

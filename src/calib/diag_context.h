@@ -166,11 +166,11 @@ Model model_with(const Model &from, const std::vector<std::string> &keep, const 
 std::vector<std::string> reading_effects(const Model &m);
 
 // Starting values for an effect whose parameters enter non-linearly and
-// that the data can seed: a parameter named "period" in mm (drum
-// eccentricity, or a user effect) starts at the peak of the cable-length
+// that the data can seed: a period in cable length (ParamRole::LengthPeriod:
+// drum eccentricity, or a user effect's "period" in mm) starts at the peak of the cable-length
 // periodogram of `base`'s residual and at 0.9 and 1.1 times it. One
 // ParamValues per start; a single empty one when nothing is seeded.
-// False when `effect` in m has a parameter named "period" longer than the
+// False when `effect` in m has a period in cable length longer than the
 // span of the measured cable lengths: such a "period" does not repeat in
 // the data and is a smooth trend in disguise (a flexible stand-in for gain or
 // non-linearity), so that fit is not taken.

@@ -37,6 +37,11 @@ struct Verdict {
     // chi-square's Satterthwaite scale c (chi2 / c ~ chi-square(dof / c))
     // and the largest variance ratio Moran's z was divided by (1: none).
     double chi2_scale = 1, moran_scale = 1;
+    // A scale that prints as 1.00 (the two decimals the words give it) is
+    // not called a widening.
+    static constexpr double kWidenedShown = 1.005;
+    bool chi2_widened() const { return chi2_scale > kWidenedShown; }
+    bool widened() const { return chi2_scale > kWidenedShown || moran_scale > kWidenedShown; }
     bool explained = false;
     std::vector<char> failing;
     int n_failing = 0;

@@ -79,7 +79,7 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
                             " at the noise floor " + fmt_num(noise(0), 3) + " mm";
     // With the plate's holes shared by every height the tests are widened
     // for it (judge()), and the text says so beside the numbers.
-    const bool widened = v.chi2_scale > 1.005 || v.moran_scale > 1.005;
+    const bool widened = v.widened();
     const std::string tests = "chi2/dof " + fmt_num(v.chi2 / v.dof, 2) + " (" + fmt_p(v.chi2_p) +
                               "), spatial structure z = " + fmt_num(v.moran_z, 1) + " (" + fmt_p(v.moran_p) + ")" +
                               (widened ? "; both tests widened for the plate's hole errors, which repeat at every "
@@ -207,6 +207,17 @@ std::string outliers_words(const nlohmann::json &set_aside, size_t read) {
            " mm of the model (each beyond the 1 % family-wise chi-square against the noise and the jig, and against its "
            "neighbours): a mis-seated probe, a wrong hole or a bump during the samples, not the device; re-measure " +
            (one ? "it" : "them") + ". The statistics above are without " + (one ? "it" : "them") + ".";
+}
+
+std::string fit_check_words(const Verdict &v) {
+    if (v.explained)
+        return "the fitted effects explain the data to the noise and the jig's tolerance (no other effect tried: "
+               "`cdm calib diagnose` does)";
+    return "the fitted effects do not explain the data: chi2/dof " + fmt_num(v.chi2 / v.dof, 2) + " (" +
+           fmt_p(v.chi2_p) +
+           (v.chi2_widened() ? ", widened x" + fmt_num(v.chi2_scale, 2) + " for the plate's holes" : "") +
+           "), spatial structure z = " + fmt_num(v.moran_z, 1) + " (" + fmt_p(v.moran_p) +
+           "); the calibration corrects only what they can: `cdm calib diagnose` says what is missing";
 }
 
 } // namespace diag

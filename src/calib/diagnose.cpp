@@ -475,6 +475,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
     out["dof"] = vcur.dof;
     out["chi2_p_value"] = vcur.chi2_p;
     out["chi2_test"] = {{"scale", vcur.chi2_scale},
+                        {"widened", vcur.chi2_widened()},
                         {"method", "chi2 / scale against chi-square(dof / scale) (Satterthwaite; scale 1: chi-square(dof)); "
                                    "the scale is tr(R^2)/tr(R), R the residuals' correlation from the plate's holes"}};
     out["structure"] = {{"statistic", vcur.moran_z},

@@ -51,4 +51,10 @@ nlohmann::json glitches_json(const Dataset &d);
 bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOptions &opt, nlohmann::json &out,
               Model &fitted, std::string &err);
 
+namespace diag {
+struct Verdict;
+// `cdm calib fit`'s words on a fit's own two tests (no candidate tried).
+std::string fit_check_words(const Verdict &v);
+} // namespace diag
+
 } // namespace cdm

@@ -37,28 +37,17 @@ nlohmann::json params_json(const Model &model, const FitReport &rep) {
 }
 
 std::string effect_advice(const Model &m, const FitReport &rep, const std::vector<PreparedPos> &pos) {
+    double tmin = INFINITY, tmax = -INFINITY;
+    for (auto &pp : pos) {
+        tmin = std::min(tmin, pp.t_s);
+        tmax = std::max(tmax, pp.t_s);
+    }
     std::string s;
     for (size_t k = 0; k < m.effect_count(); ++k) {
         const EffectDesc &d = m.effect_desc(k);
-        const auto &p = m.effect_params(k);
-        if (d.name == "pot_drift") {
-            double tmin = INFINITY, tmax = -INFINITY;
-            for (auto &pp : pos) {
-                tmin = std::min(tmin, pp.t_s);
-                tmax = std::max(tmax, pp.t_s);
-            }
-            const double h0 = tmin / 3600, h1 = tmax / 3600;
-            double worst = 0;
-            for (int c = 0; c < 4; ++c)
-                worst = std::max(worst, std::fabs(p[size_t(c)] * (h1 - h0) + p[4] * (h1 * h1 - h0 * h0)));
-            s += " The readings drift by up to " + fmt_num(worst, 3) +
-                 " mm over the session: warm the device up before measuring, or re-measure a reference hole at "
-                 "intervals.";
-        } else if (d.name == "drum_eccentricity") {
-            const double sd = (k < rep.std.size() && !rep.std[k].empty()) ? rep.std[k][0] : 0.0;
-            s += " The drums ripple with a period of " + fmt_num(p[0], 2) + " +- " + fmt_num(sd, 2) +
-                 " mm of cable (one turn).";
-        }
+        if (!d.advice) continue;
+        static const std::vector<double> none;
+        s += d.advice(AdviceIn{m.effect_params(k), k < rep.std.size() ? rep.std[k] : none, tmin / 3600, tmax / 3600});
     }
     return s;
 }

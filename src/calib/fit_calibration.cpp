@@ -25,6 +25,13 @@ namespace {
 // run again from the best of them that ends lower (the others at their
 // start), and kept when it ends lower than the first. A model of one
 // effect has no sub-model but the nominal, which its start is.
+// An effect of the Position stage: it corrects the estimated position, so
+// it is fitted in position space after the readings' fit, not with it.
+bool on_position(const std::string &name) {
+    const auto d = find_effect(name);
+    return d && d->stage == Stage::Position;
+}
+
 bool fit_not_worse_than_nested(Model &model, const std::vector<PreparedPos> &pos, const FitOptions &f,
                                FitReport &rep, std::vector<std::string> &restarted_from) {
     const Model start = model;
@@ -132,7 +139,7 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
     Model &model = out.model;
     model = Model(g);
     for (auto &e : opt.effects) {
-        if (e == "ellipsoid") continue; // fitted in position space below
+        if (on_position(e)) continue; // fitted in position space below
         if (!model.add_effect(e, {}, err)) return false;
     }
     const bool user_jig = opt.jig_tolerance_mm >= 0;
@@ -194,10 +201,19 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
         }
         out.fitted = diag::evaluate(model, pos);
     }
-    // The ellipsoid on top of the physical model, when asked for.
-    if (std::find(opt.effects.begin(), opt.effects.end(), "ellipsoid") != opt.effects.end()) {
+    // The Position-stage effect (the seed's ellipsoid) on top of the
+    // physical model, when asked for: fitted in closed form to what the
+    // physical model leaves (fit_ellipsoid, eq. 4-5), its three parameters
+    // in their declared order.
+    const auto pe = std::find_if(opt.effects.begin(), opt.effects.end(), on_position);
+    if (pe != opt.effects.end()) {
         Ellipsoid e2 = diag::ellipsoid_on(out.fitted, pos);
-        if (!model.add_effect("ellipsoid", ParamValues{{"L", e2.L}, {"M", e2.M}, {"N", e2.N}}, err))
+        const auto &ps = find_effect(*pe)->params;
+        if (ps.size() != 3) {
+            err = "effect \"" + *pe + "\": a Position-stage effect is the seed's ellipsoid, of 3 parameters";
+            return false;
+        }
+        if (!model.add_effect(*pe, ParamValues{{ps[0].name, e2.L}, {ps[1].name, e2.M}, {ps[2].name, e2.N}}, err))
             return false;
         out.fitted = diag::evaluate(model, pos);
         out.report.n_free += 3;

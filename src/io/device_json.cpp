@@ -66,10 +66,14 @@ bool device_from_json(const JsonValue &j, const std::string &source, DeviceGeome
         return false;
     }
     DeviceGeometry g;
+    // "pulley_radius_mm": files written by cdm 1.0 and 1.1 carry it; the
+    // pulley's radius is exit_pulley's own parameter, so the key is checked
+    // and its value not used.
+    double pulley_radius_mm = 0;
     if (!get_number(j, "a_mm", kFrameMinMm, kFrameMaxMm, "mm", source, g.a_mm, err, true) ||
         !get_number(j, "b_mm", kFrameMinMm, kFrameMaxMm, "mm", source, g.b_mm, err, true) ||
         !get_number(j, "m_mm", kHolderMinMm, kFrameMaxMm, "mm", source, g.m_mm, err, true) ||
-        !get_number(j, "pulley_radius_mm", 0.0, kPulleyMaxMm, "mm", source, g.pulley_radius_mm, err, false))
+        !get_number(j, "pulley_radius_mm", 0.0, kPulleyMaxMm, "mm", source, pulley_radius_mm, err, false))
         return false;
     if (g.m_mm >= 2 * g.a_mm || g.m_mm >= 2 * g.b_mm) {
         err = where(source, *j.find("m_mm")) + "m_mm must be smaller than 2*a_mm and 2*b_mm (the holder is inside the frame)";
@@ -105,7 +109,6 @@ nlohmann::json device_to_json(const DeviceGeometry &g) {
     j["a_mm"] = g.a_mm;
     j["b_mm"] = g.b_mm;
     j["m_mm"] = g.m_mm;
-    j["pulley_radius_mm"] = g.pulley_radius_mm;
     j["exit_axis"] = g.exit_axis;
     return j;
 }

@@ -1,5 +1,6 @@
-// The catalogue rendered from the registry, for docs/calibration.md (a
-// model test fails when the page's copy differs).
+// The catalogue rendered from the registry, for docs/calibration.md and
+// docs/effects.md (a model test fails when a page's copy differs, and
+// rewrites it with CDM_UPDATE_DOCS=1).
 #include <sstream>
 
 #include "model/effect.h"
@@ -28,6 +29,32 @@ std::string cell(const std::string &t) {
     return o;
 }
 } // namespace
+
+std::string stages_markdown() {
+    struct Row {
+        Stage stage;
+        const char *title, *changes;
+    };
+    static const Row rows[] = {
+        {Stage::Jig, "Jig", "the jig's reference position, mapped into the device frame"},
+        {Stage::Geometry, "Geometry", "each cable's anchor and holder attachment point"},
+        {Stage::Path, "Path", "the cable's length from anchor to holder"},
+        {Stage::Transfer, "Transfer", "the pot: counted length → reading"},
+        {Stage::User, "User", "the lengths (path stage) or the readings (reading stage), by user callbacks "
+                              "(`cdm_effect_register`, plugins, Python, C#)"},
+        {Stage::Position, "Position", "the estimated position (not a reading effect; not fitted with the others)"},
+    };
+    std::ostringstream os;
+    os << "| stage | what it changes | built-ins, in order |\n|---|---|---|\n";
+    for (const Row &r : rows) {
+        std::string names;
+        for (const auto &e : all_effects())
+            if (e->builtin_id >= 0 && e->stage == r.stage) names += (names.empty() ? "`" : ", `") + e->name + "`";
+        os << "| " << r.title << " | " << r.changes << " | " << (names.empty() ? "in the model's order" : names)
+           << " |\n";
+    }
+    return os.str();
+}
 
 std::string catalogue_markdown() {
     std::ostringstream os;

@@ -24,6 +24,16 @@ enum class Stage {
     Position  // corrects the estimated position (the seed's ellipsoid)
 };
 
+// What the diagnosis may do with a parameter beyond fitting it from its
+// initial value: declared by the effect, never read from its name.
+enum class ParamRole : std::uint8_t {
+    Plain,
+    // A period in the cable's length (mm): the residual's periodogram seeds
+    // it, and a fit searches along its profile (a sine's period has many
+    // local minima).
+    LengthPeriod
+};
+
 struct ParamDesc {
     std::string name;
     std::string unit;
@@ -39,6 +49,12 @@ struct ParamDesc {
     // reading as the cable lengthens"). Default: the fit's bounds, no claim.
     double plausible_lo = -INFINITY, plausible_hi = INFINITY;
     std::string below_means = std::string(), above_means = std::string();
+    ParamRole role = ParamRole::Plain;
+    ParamDesc as(ParamRole r) const {
+        ParamDesc p = *this;
+        p.role = r;
+        return p;
+    }
     ParamDesc plausible(double lo, double hi, std::string below = "", std::string above = "") const {
         ParamDesc p = *this;
         p.plausible_lo = lo;
@@ -63,6 +79,13 @@ struct PointDisplacements {
 // more): the evaluator's per-call buffers are sized by it.
 constexpr int kMaxUserParams = 64;
 
+// What an effect's advice may use: its fitted values and their standard
+// errors, and the session's span of acquisition time (hours).
+struct AdviceIn {
+    const std::vector<double> &value, &std;
+    double t0_h, t1_h;
+};
+
 struct EffectDesc {
     std::string name;
     std::string doc;       // the physics in one paragraph, with the typical magnitude
@@ -70,6 +93,10 @@ struct EffectDesc {
     int builtin_id;        // index in CDM_BUILTIN_EFFECTS (effects/list.h), or -1 for a user effect
     std::vector<ParamDesc> params;
     PointDisplacements points = PointDisplacements(); // the parameters are 4 points' displacements
+    // What a fitted value means for the user's practice, in a sentence that
+    // starts with a space ("" when the fit says nothing beyond its numbers):
+    // the diagnosis appends it to its advice.
+    std::string (*advice)(const AdviceIn &) = nullptr;
     // user effects only: at least one of apply, apply_batch and apply_geom
     // (cdm.h says which is called when)
     cdm_effect_apply_fn apply = nullptr;
@@ -114,5 +141,7 @@ int unregister_user_effect(const std::string &name, std::string &err);
 // The catalogue as a Markdown table (docs/calibration.md carries a copy that
 // a test keeps equal): one row per built-in, in the order of application.
 std::string catalogue_markdown();
+// The stages in order with the built-ins of each, for docs/effects.md.
+std::string stages_markdown();
 
 } // namespace cdm

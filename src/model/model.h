@@ -19,13 +19,12 @@
 namespace cdm {
 
 // Nominal device description (device JSON: {"a_mm":..,"b_mm":..,"m_mm":..},
-// optional "exit_axis": [[x,y,z] x4], "pulley_radius_mm", "jig": {...}).
+// optional "exit_axis": [[x,y,z] x4], "jig": {...}).
 struct DeviceGeometry {
     double a_mm = 150.0; // project default (the seed does not give it)
     double b_mm = 150.0;
     double m_mm = 30.0;
     std::array<std::array<double, 3>, 4> exit_axis{{{1, 0, 0}, {1, 0, 0}, {1, 0, 0}, {1, 0, 0}}};
-    double pulley_radius_mm = 5.0; // starting value of exit_pulley's radius
 
     std::array<double, 3> anchor(int i) const;      // nominal exit point of cable i (0..3)
     std::array<double, 3> holder(int i) const;      // nominal holder corner offset of cable i

@@ -135,6 +135,9 @@ bool user_param(const cdm_effect_def *def, uint32_t k, bool v12, const std::stri
     p.rand_lo = 0.5 * p.scale;
     p.rand_hi = 2 * p.scale;
     if (v12 && p.lower >= 0) p.signed_random = false;
+    // The C ABI's declaration of a period in cable length (cdm.h,
+    // cdm_effect_def.param_names): a parameter named "period" in mm.
+    if (p.name == "period" && (p.unit == "mm" || p.unit.empty())) p.role = ParamRole::LengthPeriod;
     return true;
 }
 

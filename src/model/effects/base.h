@@ -15,7 +15,9 @@
 //   static bool gauge(const GaugeContext &c, Eigen::MatrixXd &basis);  optional
 #pragma once
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 #include <Eigen/Dense>
@@ -25,6 +27,14 @@
 #include "model/model.h"
 
 namespace cdm {
+
+// A number in an effect's advice: `prec` fixed decimals, as the diagnosis
+// prints its own numbers.
+inline std::string fixed(double v, int prec) {
+    char b[64];
+    std::snprintf(b, sizeof b, "%.*f", prec, v);
+    return b;
+}
 
 // What the kernel knows about one sample besides the effects' parameters:
 // the holder centre (device frame, mm) and the acquisition time (s since the

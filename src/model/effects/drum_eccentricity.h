@@ -5,10 +5,10 @@
 // are one make: one period, fitted; amplitude and phase per cable, as a sine
 // and a cosine coefficient. Typical amplitude 0.05-0.2 mm.
 //
-// The period enters non-linearly: the diagnosis starts it from the peak of
-// the cable-length periodogram of the residual (any parameter named
-// "period" in mm is started that way, user effects included) and refines it
-// jointly with the amplitudes; its standard error comes with the fit.
+// The period enters non-linearly: declared ParamRole::LengthPeriod, the
+// diagnosis starts it from the peak of the cable-length periodogram of the
+// residual and refines it jointly with the amplitudes; its standard error
+// comes with the fit.
 #pragma once
 #include "model/effects/base.h"
 
@@ -25,6 +25,7 @@ struct DrumEccentricity : EffectBase {
         // One turn of a string pot's drum is a few cm to a few dm; an
         // eccentricity or track ripple of a mm would be seen by eye.
         d.params.push_back(param("period", "mm", 10.0, 5.0, 400.0, 100.0, 60.0, 130.0, false)
+                               .as(ParamRole::LengthPeriod)
                                .plausible(20, 300, "a period shorter than any drum's turn",
                                           "a period longer than any drum's turn: a smooth trend in length"));
         for (int i = 1; i <= 4; ++i) {
@@ -33,7 +34,12 @@ struct DrumEccentricity : EffectBase {
             d.params.push_back(param("b" + std::to_string(i), "mm", 0.1, -5, 5, 0.0, 0.05, 0.2)
                                    .plausible(-1, 1, "a ripple over 1 mm", "a ripple over 1 mm"));
         }
+        d.advice = advice;
         return d;
+    }
+    static std::string advice(const AdviceIn &a) {
+        return " The drums ripple with a period of " + fixed(a.value[0], 2) + " +- " +
+               fixed(a.std.empty() ? 0.0 : a.std[0], 2) + " mm of cable (one turn).";
     }
     static constexpr int kCableParams = 3;
     static void cable_params(int cable, int *idx) {

@@ -26,7 +26,18 @@ struct PotDrift : EffectBase {
         d.params.push_back(param("c", "mm/h^2", 0.2, -50, 50, 0.0, 0.0, 0.0)
                                .plausible(-5, 5, "a drift accelerating by over 5 mm/h^2",
                                           "a drift accelerating by over 5 mm/h^2"));
+        d.advice = advice;
         return d;
+    }
+    // The largest drift of a cable's reading over the session's span.
+    static std::string advice(const AdviceIn &a) {
+        double worst = 0;
+        for (int c = 0; c < 4; ++c)
+            worst = std::max(worst, std::fabs(a.value[size_t(c)] * (a.t1_h - a.t0_h) +
+                                              a.value[4] * (a.t1_h * a.t1_h - a.t0_h * a.t0_h)));
+        return " The readings drift by up to " + fixed(worst, 3) +
+               " mm over the session: warm the device up before measuring, or re-measure a reference hole at "
+               "intervals.";
     }
     static constexpr int kCableParams = 2;
     static void cable_params(int cable, int *idx) {

@@ -11,6 +11,7 @@
 #include <random>
 #include <fstream>
 #include <setjmp.h>
+#include <unistd.h>
 #include <sstream>
 #include <vector>
 
@@ -580,23 +581,47 @@ static void effect_accessors(void **) {
     assert_false(m.add_effect("cable_gain", {{"g1", INFINITY}}, err));
 }
 
-// docs/calibration.md's catalogue table is the registry's (the list in
-// effects/list.h): regenerate it from the expected text printed here.
-static void catalogue_table_matches_docs(void **) {
-    std::ifstream f(CDM_SOURCE_DIR "/docs/calibration.md");
+// A generated table of a page: the text between `begin` and `end` must be
+// `want`. With CDM_UPDATE_DOCS=1 in the environment the page is rewritten
+// instead (an exclusive temporary beside it, then a rename), so a new
+// effect's rows are generated, never pasted.
+static void generated_table(const char *page, const std::string &begin, const std::string &end,
+                            const std::string &want) {
+    const std::string path = std::string(CDM_SOURCE_DIR "/") + page;
+    std::ifstream f(path);
     assert_true(f.good());
     std::stringstream ss;
     ss << f.rdbuf();
     const std::string doc = ss.str();
-    const std::string begin = "<!-- catalogue:begin (generated: tests/unit/model/test_model.cpp) -->\n";
-    const std::string end = "<!-- catalogue:end -->";
     const size_t a = doc.find(begin), b = doc.find(end);
-    const std::string want = catalogue_markdown();
-    if (a == std::string::npos || b == std::string::npos || doc.substr(a + begin.size(), b - a - begin.size()) != want) {
-        std::printf("docs/calibration.md: the catalogue between\n%s and %s\nmust read:\n%s", begin.c_str(), end.c_str(),
-                    want.c_str());
-        fail();
+    if (a == std::string::npos || b == std::string::npos || b < a) fail_msg("%s: no %s ... %s markers", page, begin.c_str(), end.c_str());
+    if (doc.substr(a + begin.size(), b - a - begin.size()) == want) return;
+    const char *update = std::getenv("CDM_UPDATE_DOCS");
+    if (update && std::string(update) == "1") {
+        const std::string out = doc.substr(0, a + begin.size()) + want + doc.substr(b);
+        std::string tmp = path + ".XXXXXX";
+        const int fd = mkstemp(&tmp[0]);
+        assert_true(fd >= 0);
+        const bool ok = write(fd, out.data(), out.size()) == ssize_t(out.size()) && fsync(fd) == 0;
+        close(fd);
+        if (!ok || rename(tmp.c_str(), path.c_str()) != 0) {
+            unlink(tmp.c_str());
+            fail_msg("%s: could not rewrite it", page);
+        }
+        std::printf("%s: rewrote the table between %s and %s\n", page, begin.c_str(), end.c_str());
+        return;
     }
+    std::printf("%s: the table between\n%s and %s\nmust read (CDM_UPDATE_DOCS=1 rewrites it):\n%s", page,
+                begin.c_str(), end.c_str(), want.c_str());
+    fail();
+}
+
+// The pages' tables are the registry's (the list in effects/list.h).
+static void catalogue_table_matches_docs(void **) {
+    generated_table("docs/calibration.md", "<!-- catalogue:begin (generated: tests/unit/model/test_model.cpp) -->\n",
+                    "<!-- catalogue:end -->", catalogue_markdown());
+    generated_table("docs/effects.md", "<!-- stages:begin (generated: tests/unit/model/test_model.cpp) -->\n",
+                    "<!-- stages:end -->", stages_markdown());
 }
 
 // The driver's path (cdm_get_pose -> Model::position) does not allocate,

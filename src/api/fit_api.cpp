@@ -69,7 +69,7 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
             {"nominal_error_mm", cdm::diag::stats3(cf.nominal.err)},
             {"error_mm", cdm::diag::stats3(cf.fitted.err)},
             // The samples the dataset's screen set aside (the diagnosis' data.glitches).
-            {"glitches", cdm::diag::glitches_json(data)},
+            {"glitches", cdm::glitches_json(data)},
             // The positions set aside (the diagnosis' data.outliers, the same test).
             {"outliers", outliers}};
 }

@@ -15,6 +15,8 @@
 #include <unordered_map>
 #include <vector>
 
+#include <nlohmann/json_fwd.hpp>
+
 #include "io/file.h"
 
 namespace cdm {
@@ -149,6 +151,12 @@ bool parse_dataset(const std::string &text, const std::string &source, Dataset &
 // without the positions it set aside as outliers. False + err when the rows
 // cannot be read again, or no position would be left.
 bool without_points(const Dataset &d, const std::vector<long> &points, Dataset &out, std::string &err);
+
+// The samples the glitch screen set aside, as JSON (the diagnosis's and
+// cdm_fit's "glitches"): whether it ran, the count, the test, the first
+// kGlitchesListed by line.
+constexpr size_t kGlitchesListed = 100;
+nlohmann::json glitches_json(const Dataset &d);
 
 // The one dataset writer: the header, then add_row() per sample, then
 // commit() (atomic: io::AtomicFile). Rows are written as they come, so a

@@ -3,6 +3,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <set>
+
+#include <nlohmann/json.hpp>
 
 #include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/normal.hpp>
@@ -148,6 +151,28 @@ void GlitchJudge::finish(std::vector<DatasetGlitch> &glitches, std::vector<size_
     std::sort(rows_.begin(), rows_.end());
     glitches = std::move(glitches_);
     rows = std::move(rows_);
+}
+
+// See dataset.h.
+nlohmann::json glitches_json(const Dataset &d) {
+    std::set<long> points;
+    nlohmann::json list = nlohmann::json::array();
+    for (auto &g : d.glitches) {
+        points.insert(g.point);
+        if (list.size() < kGlitchesListed)
+            list.push_back({{"line", g.line}, {"point", g.point}, {"cable", g.cable}, {"reading_mm", g.reading},
+                            {"median_mm", g.median}, {"sd", g.z}});
+    }
+    return {{"screened", d.glitch_z > 0},
+            {"count", d.glitches.size()},
+            {"positions", points.size()},
+            {"threshold_sd", d.glitch_z},
+            {"noise_sd_mm", std::vector<double>(d.glitch_scale, d.glitch_scale + 4)},
+            {"test", "|reading - position median| > threshold_sd * max(cable's pooled noise sd, position's 1.4826 MAD); "
+                     "threshold: two-sided Gaussian, Bonferroni 0.01 over every reading, times sqrt(1 + pi/(2n)) for the "
+                     "median of n samples; not screened (screened: false) with fewer than 10 positions of 3 samples or "
+                     "when the suspects' samples would exceed 2^20 held at once"},
+            {"samples", list}};
 }
 
 } // namespace cdm

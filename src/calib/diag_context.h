@@ -156,15 +156,6 @@ bool has_user_effect(const Model &m);
 void for_each_parallel(const DiagContext &ctx, size_t n, const std::function<bool(size_t)> &serial,
                        const std::function<void(size_t)> &work);
 
-// A copy of `from` keeping only its reading-space effects named in `keep`
-// (with their fitted values), plus `add` (if not empty) at `add_init`.
-Model model_with(const Model &from, const std::vector<std::string> &keep, const std::string &add,
-                 const ParamValues &add_init = {});
-
-// The reading-space effects of a model, in its order (Position-stage
-// effects, the ellipsoid, left out: they are not fitted on the readings).
-std::vector<std::string> reading_effects(const Model &m);
-
 // Starting values for an effect whose parameters enter non-linearly and
 // that the data can seed: a parameter named "period" in mm (drum
 // eccentricity, or a user effect) starts at the peak of the cable-length

@@ -24,26 +24,6 @@ const char *kAxis[3] = {"x", "y", "z"};
 
 } // namespace
 
-std::map<std::pair<int, int>, HeightMean> height_means(const Eval &E, const Grid &G, const V3 &jig) {
-    std::map<std::pair<int, int>, HeightMean> hm;
-    for (size_t j = 0; j < E.res.size(); ++j)
-        if (E.ok[j])
-            for (int a = 0; a < 3; ++a) {
-                const double w = 1.0 / (E.var_mean[j](a) + jig(a) * jig(a));
-                auto &h = hm[{G.height_index[j], a}];
-                h.sw += w;
-                h.swr += w * E.res[j](a);
-            }
-    return hm;
-}
-
-FixtureOffsets fixture_offsets(const Eval &E, const Grid &G, const V3 &jig) {
-    FixtureOffsets f;
-    for (auto &kv : height_means(E, G, jig))
-        f[kv.first] = std::clamp(kv.second.mean(), -kFixtureMaxMm, kFixtureMaxMm);
-    return f;
-}
-
 Eval without_fixture(const Eval &E, const Grid &G, const FixtureOffsets &f) {
     Eval out = E;
     for (size_t j = 0; j < out.res.size(); ++j)

@@ -32,23 +32,6 @@
 namespace cdm {
 namespace diag {
 
-// (height index, axis) -> the fixture's offset (mm): the weighted per-height
-// mean residual, clamped to +-kFixtureMaxMm (the fit's bound on its
-// offsets: a cliff at the bound, where 0.149 mm would be all the jig's and
-// 0.151 mm none of it, would make the judge disagree with the fit it judges).
-// Empty for a layout without fixture heights.
-using FixtureOffsets = std::map<std::pair<int, int>, double>;
-
-// Weighted per-height mean residual and its standard error, per axis:
-// (height index, axis) -> mean, weights 1 / (the mean's noise + jig^2).
-struct HeightMean {
-    double sw = 0, swr = 0;
-    double mean() const { return sw > 0 ? swr / sw : 0.0; }
-    double se() const { return sw > 0 ? 1.0 / std::sqrt(sw) : INFINITY; }
-};
-std::map<std::pair<int, int>, HeightMean> height_means(const Eval &E, const Grid &G, const V3 &jig);
-FixtureOffsets fixture_offsets(const Eval &E, const Grid &G, const V3 &jig);
-
 // E with the fixture's offsets subtracted from its residuals.
 Eval without_fixture(const Eval &E, const Grid &G, const FixtureOffsets &f);
 

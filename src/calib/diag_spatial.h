@@ -1,11 +1,14 @@
 // Spatial structure of the residuals over the jig plate: the neighbour grid,
-// Moran's I, and the chi-square verdict that combines them with the noise
+// the per-height means (the fixture's offsets), Moran's I, and the chi-square verdict that combines them with the noise
 // model (the noise estimates over the plate's lines: diag_noise.h; the
 // positions set aside: diag_outliers.h).
 #pragma once
 
 #include <array>
+#include <cmath>
+#include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "calib/diag_eval.h"
@@ -41,6 +44,23 @@ struct Verdict {
     std::vector<char> failing;
     int n_failing = 0;
 };
+
+// (height index, axis) -> the fixture's offset (mm): the weighted per-height
+// mean residual, clamped to +-kFixtureMaxMm (the fit's bound on its
+// offsets: a cliff at the bound, where 0.149 mm would be all the jig's and
+// 0.151 mm none of it, would make the judge disagree with the fit it judges).
+// Empty for a layout without fixture heights.
+using FixtureOffsets = std::map<std::pair<int, int>, double>;
+
+// Weighted per-height mean residual and its standard error, per axis:
+// (height index, axis) -> mean, weights 1 / (the mean's noise + jig^2).
+struct HeightMean {
+    double sw = 0, swr = 0;
+    double mean() const { return sw > 0 ? swr / sw : 0.0; }
+    double se() const { return sw > 0 ? 1.0 / std::sqrt(sw) : INFINITY; }
+};
+std::map<std::pair<int, int>, HeightMean> height_means(const Eval &E, const Grid &G, const V3 &jig);
+FixtureOffsets fixture_offsets(const Eval &E, const Grid &G, const V3 &jig);
 
 // Moran's z of standardised residuals zv over G's neighbour graph.
 double moran_z(const std::vector<double> &zv, const std::vector<char> &ok, const Grid &G);

@@ -46,7 +46,7 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
 
 // The samples the dataset's glitch screen set aside (calib/dataset_glitches.h)
 // as a sentence for the verdict ("" when none); their JSON is
-// glitches_json (calib/diagnose.h).
+// glitches_json (calib/dataset_glitches.h).
 std::string glitches_words(const Dataset &d);
 // The positions diagnose() set aside as outliers (data.outliers.set_aside),
 // of `read` positions, as a sentence for the verdict.

@@ -38,14 +38,6 @@ struct DiagnoseOptions {
     std::optional<diag::ReadingNoise> reading_noise;
 };
 
-// The samples the dataset's glitch screen set aside (calib/dataset_glitches.h):
-// the JSON of data.glitches, also in cdm_fit's result (whether it ran, the
-// count, the test, the first kGlitchesListed by line).
-constexpr size_t kGlitchesListed = 100;
-namespace diag {
-nlohmann::json glitches_json(const Dataset &d);
-}
-
 // On success fills `out` (the diagnosis JSON) and `fitted` (the model with
 // the requested effects fitted). False + err (naming what is wrong) otherwise.
 bool diagnose(const Dataset &data, const DeviceGeometry &g, const DiagnoseOptions &opt, nlohmann::json &out,

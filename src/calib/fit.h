@@ -140,7 +140,7 @@ struct FitReport {
 // 370 would pass it, so one 5-height jig in 74: a plate with a height at
 // 0.153 mm then reads "not explained" with two spurious effects recommended
 // (test_diagnose.cpp, a_three_sigma_fixture_height_is_the_jigs). The judge
-// (diag_jig.cpp, fixture_offsets) takes the per-height means up to the same
+// (diag_spatial.cpp, fixture_offsets) takes the per-height means up to the same
 // bound, so a mean past it is clamped there as the fit's offset is.
 constexpr double kFixtureMaxMm = 0.25;
 // The fixture heights' offsets are a random effect with this standard
@@ -153,6 +153,15 @@ constexpr double kFixturePriorSdMm = 0.05;
 // False with rep.message when cancelled or when a user effect's apply
 // returns non-zero (the message names the effect).
 bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt, FitReport &rep);
+
+// The reading-space effects of a model, in its order (Position-stage
+// effects, the ellipsoid, left out: they are not fitted on the readings).
+std::vector<std::string> reading_effects(const Model &m);
+// A copy of `from` keeping only its reading-space effects named in `keep`
+// (with their fitted values), plus `add` (if not empty) at `add_init`: the
+// sub-models and extensions a fit is compared with.
+Model model_with(const Model &from, const std::vector<std::string> &keep, const std::string &add,
+                 const ParamValues &add_init = {});
 
 // The whitening a fit of `weigh` under opt computes (weigh_with and weights
 // in opt are ignored): for FitOptions::weights. failure names a user

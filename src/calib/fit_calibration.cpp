@@ -29,7 +29,7 @@ bool fit_not_worse_than_nested(Model &model, const std::vector<PreparedPos> &pos
                                FitReport &rep, std::vector<std::string> &restarted_from) {
     const Model start = model;
     if (!fit_model(model, pos, f, rep)) return false;
-    const std::vector<std::string> names = diag::reading_effects(model);
+    const std::vector<std::string> names = reading_effects(model);
     if (names.size() < 2) return true; // (a fit stopped short is the likeliest to be beaten)
     std::vector<std::vector<std::string>> subs;
     for (auto &n : names) subs.push_back({n});
@@ -46,7 +46,7 @@ bool fit_not_worse_than_nested(Model &model, const std::vector<PreparedPos> &pos
     double best = rep.chi2 - tol;
     std::optional<Model> best_sub;
     for (auto &s : subs) {
-        Model sub = diag::model_with(start, s, "");
+        Model sub = model_with(start, s, "");
         FitReport r;
         if (!fit_model(sub, pos, fw, r)) return false;
         if (r.converged && r.chi2 < best) best = r.chi2, best_sub = sub;
@@ -56,7 +56,7 @@ bool fit_not_worse_than_nested(Model &model, const std::vector<PreparedPos> &pos
     std::string err;
     for (size_t e = 0; e < start.effect_count(); ++e) {
         const std::string &n = start.effect_name(e);
-        const auto sub_effects = diag::reading_effects(*best_sub);
+        const auto sub_effects = reading_effects(*best_sub);
         ParamValues pv;
         const bool in_sub = std::find(sub_effects.begin(), sub_effects.end(), n) != sub_effects.end();
         const Model &from = in_sub ? *best_sub : start;
@@ -71,7 +71,7 @@ bool fit_not_worse_than_nested(Model &model, const std::vector<PreparedPos> &pos
     if (r2.chi2 < rep.chi2) {
         model = std::move(again);
         rep = r2;
-        restarted_from = diag::reading_effects(*best_sub);
+        restarted_from = reading_effects(*best_sub);
     }
     return true;
 }

@@ -4,10 +4,10 @@
 
 #include "api/errors.h"
 #include "api/jobs.h"
-#include "calib/diag_stats.h"
-#include "calib/diagnose.h"
-#include "calib/fit_calibration.h"
-#include "calib/fit_outliers.h"
+#include "calib/evaluation/stats.h"
+#include "calib/diagnosis/diagnose.h"
+#include "calib/calibration/fit_calibration.h"
+#include "calib/calibration/fit_outliers.h"
 #include "cdm/cdm.h"
 #include "model/effect.h"
 

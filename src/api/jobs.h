@@ -9,7 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "calib/dataset.h"
+#include "calib/dataset/dataset.h"
 #include "io/file.h"
 #include "model/model.h"
 

@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "cdm/cdm.h"
-#include "device/replay_format.h"
+#include "device/recording/replay_format.h"
 #include "io/mcap.h"
 
 namespace {

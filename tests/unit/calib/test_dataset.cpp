@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "calib/dataset.h"
+#include "calib/dataset/dataset.h"
 
 extern "C" {
 #include <cmocka.h>

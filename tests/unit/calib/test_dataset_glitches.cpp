@@ -23,8 +23,8 @@
 #include <unistd.h>
 #include <vector>
 
-#include "calib/dataset.h"
-#include "calib/simulate.h"
+#include "calib/dataset/dataset.h"
+#include "calib/dataset/simulate.h"
 
 extern "C" {
 #include <cmocka.h>

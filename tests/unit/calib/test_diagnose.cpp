@@ -22,12 +22,12 @@
 #include <fcntl.h>
 #include <unistd.h>
 
-#include "calib/diag_eval.h"
-#include "calib/diag_outliers.h"
-#include "calib/diag_spatial.h"
-#include "calib/diagnose.h"
-#include "calib/fit.h"
-#include "calib/simulate.h"
+#include "calib/evaluation/eval.h"
+#include "calib/evaluation/outliers.h"
+#include "calib/evaluation/spatial.h"
+#include "calib/diagnosis/diagnose.h"
+#include "calib/fit/fit.h"
+#include "calib/dataset/simulate.h"
 #include "model/effect.h"
 
 extern "C" {

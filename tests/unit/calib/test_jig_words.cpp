@@ -15,9 +15,9 @@
 #include <string>
 #include <vector>
 
-#include "calib/diag_jig.h"
-#include "calib/diag_spatial.h"
-#include "calib/diag_stats.h"
+#include "calib/evaluation/jig.h"
+#include "calib/evaluation/spatial.h"
+#include "calib/evaluation/stats.h"
 
 extern "C" {
 #include <cmocka.h>

@@ -30,7 +30,7 @@
 #include <string>
 #include <vector>
 
-#include "calib/fit.h"
+#include "calib/fit/fit.h"
 #include "model/effect.h"
 #include "model/model.h"
 

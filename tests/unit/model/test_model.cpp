@@ -14,7 +14,7 @@
 #include <sstream>
 #include <vector>
 
-#include "calib/fit.h"
+#include "calib/fit/fit.h"
 #include "model/effect.h"
 #include "model/evaluator.h"
 #include "model/model.h"

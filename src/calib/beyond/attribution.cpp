@@ -1,4 +1,4 @@
-// See diag_attribution.h.
+// See attribution.h.
 #include "calib/beyond/attribution.h"
 #include "model/effect.h"
 

@@ -1,4 +1,4 @@
-// See diag_beyond.h.
+// See beyond.h.
 #include "calib/beyond/beyond.h"
 #include "model/effect.h"
 

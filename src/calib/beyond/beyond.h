@@ -1,9 +1,9 @@
 // Beyond the catalogue, as one stage of the diagnosis: the stand-ins of the
-// user's model and of the recommended one (diag_standins.h); where a model
+// user's model and of the recommended one (standins.h); where a model
 // leans on stand-ins or leaves structure, the term the catalogue lacks
-// (diag_discover.h), searched in the residual of the model without its
+// (discover.h), searched in the residual of the model without its
 // stand-ins and compared with them; and whether the jig's booked errors are
-// the jig's (diag_attribution.h).
+// the jig's (attribution.h).
 #pragma once
 
 #include <string>

@@ -1,4 +1,4 @@
-// See diag_discover.h.
+// See discover.h.
 #include "calib/beyond/discover.h"
 #include "model/effect.h"
 

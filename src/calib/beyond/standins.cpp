@@ -1,4 +1,4 @@
-// See diag_standins.h.
+// See standins.h.
 #include "calib/beyond/standins.h"
 #include "model/effect.h"
 

@@ -1,7 +1,7 @@
 // Misplaced positions set aside in rounds, for every job that fits a model
 // to a jig (the diagnosis, the fit alone). A round runs the job on the
 // data and names the positions its model and their neighbours both disown
-// (find_outliers, diag_outliers.h); the job is run again without them
+// (find_outliers, calib/evaluation/outliers.h); the job is run again without them
 // (their pull on the jig's tolerance and on the fit gone, more can show),
 // at most kOutlierRounds runs, and at most kOutlierMaxFraction of the
 // positions read over all rounds (so none below 50 positions: a small jig
@@ -27,7 +27,7 @@ constexpr int kOutlierRounds = 3;
 
 // One run of a job on `data`: false + err when the job fails; `found`: the
 // positions (indices into data.pos) to set aside, empty when none, judged by
-// find_outliers with `already` set aside of `read` (diag_outliers.h).
+// find_outliers with `already` set aside of `read` (calib/evaluation/outliers.h).
 using OutlierRound = std::function<bool(const Dataset &data, size_t already, size_t read,
                                         std::vector<diag::Outlier> &found, diag::Declined &declined,
                                         std::string &err)>;
@@ -42,7 +42,7 @@ bool run_setting_aside_outliers(const Dataset &data, bool enabled, const Outlier
 
 // The positions a fitted calibration's model and their neighbours both
 // disown, judged as the diagnosis judges them: on the residual with the
-// jig's own per-height and per-hole offsets removed (diag_jig.h), against
+// jig's own per-height and per-hole offsets removed (calib/evaluation/jig.h), against
 // the noise and the jig's tolerance.
 std::vector<diag::Outlier> calibration_outliers(const CalibrationFit &cf, size_t already, size_t read,
                                                 diag::Declined &declined);

@@ -42,11 +42,11 @@ constexpr double kDatasetNominalRowPeriodS = 0.01;
 // it the resolution is an upper bound (see Dataset::resolution).
 constexpr size_t kDatasetResolutionValues = size_t(1) << 16;
 
-struct DatasetSource; // where the rows can be read again (dataset.cpp)
+struct DatasetSource; // where the rows can be read again (read.cpp)
 
 // A sample set aside as a glitch: one reading far from the rest of its
 // position's samples (a spike of the pot's wiper, a dropped ADC bit, a bumped
-// cable). See screen_glitches in dataset_glitches.h for the test.
+// cable). See screen_glitches in glitches.h for the test.
 struct DatasetGlitch {
     size_t line = 0;       // 1-based line of the file
     long point = 0;
@@ -81,7 +81,7 @@ struct Dataset {
     // smallest step among the first that many (an upper bound on it).
     double resolution[4] = {0, 0, 0, 0};
     std::shared_ptr<const DatasetSource> source;
-    // Samples set aside as glitches (the screen in dataset_glitches.h):
+    // Samples set aside as glitches (the screen in glitches.h):
     // left out of every position's statistics and of for_each_sample; `rows`
     // still counts them. excluded_rows: their 0-based data-row indices, sorted.
     std::vector<DatasetGlitch> glitches;
@@ -139,7 +139,7 @@ std::string dataset_fault_text(DatasetFault f, int column, const std::string &na
 // ranges above; a field echoed in a message is cut to ~40 characters.
 // `io_failure` (optional) tells a file that could not be read (missing,
 // special, too large: CDM_ERR_IO) from one that does not parse.
-// Glitches are screened as the file is loaded (dataset_glitches.h): when
+// Glitches are screened as the file is loaded (glitches.h): when
 // some position's readings spread wider than the noise allows, the file is
 // read again for those positions' samples, and once more without the
 // samples set aside (Dataset::glitches says which, and why).

@@ -1,4 +1,4 @@
-// Glitch screening of a jig dataset: the test is in dataset_glitches.h.
+// Glitch screening of a jig dataset: the test is in glitches.h.
 #include "calib/dataset/glitches.h"
 
 #include <algorithm>
@@ -128,7 +128,7 @@ void GlitchJudge::judge(std::vector<ScreenSample> &samples) {
         }
     }
     // Glitches are rare; a quarter of a position's samples apart is two
-    // populations, not glitches (dataset_glitches.h).
+    // populations, not glitches (glitches.h).
     if (!here.empty() && here.size() <= std::max<size_t>(1, n / 4)) {
         glitches_.insert(glitches_.end(), here.begin(), here.end());
         rows_.insert(rows_.end(), here_rows.begin(), here_rows.end());

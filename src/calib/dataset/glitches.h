@@ -1,4 +1,4 @@
-// Glitch screening of a jig dataset (private to calib; dataset.cpp runs it
+// Glitch screening of a jig dataset (private to calib; read.cpp runs it
 // as the file is loaded).
 //
 // A glitch is one sample whose reading departs from the rest of its

@@ -1,4 +1,4 @@
-// See dataset_heights.h.
+// See heights.h.
 #include "calib/dataset/heights.h"
 
 #include <algorithm>

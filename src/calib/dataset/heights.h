@@ -1,4 +1,4 @@
-// A jig dataset's fixture heights (private to calib; dataset.cpp runs it once
+// A jig dataset's fixture heights (private to calib; read.cpp runs it once
 // the file is read): which x_ref values are heights and which positions sit
 // off their height (Dataset::heights, Dataset::off_height_points).
 #pragma once

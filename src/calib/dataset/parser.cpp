@@ -1,4 +1,4 @@
-// See dataset_parser.h: the parser of one jig CSV line at a time.
+// See parser.h: the parser of one jig CSV line at a time.
 #include "calib/dataset/parser.h"
 
 #include <algorithm>

@@ -1,8 +1,8 @@
-// The jig CSV reader's parts (private to calib: dataset.cpp is the public
+// The jig CSV reader's parts (private to calib: read.cpp is the public
 // side). Parser: one line at a time, into per-position statistics
-// (dataset_parser.cpp); stream_lines: a byte source fed to a Parser in
+// (parser.cpp); stream_lines: a byte source fed to a Parser in
 // blocks of whole lines, the lines' values found on a second thread and
-// the rows taken in file order (dataset_stream.cpp).
+// the rows taken in file order (stream.cpp).
 #pragma once
 
 #include <cmath>
@@ -131,7 +131,7 @@ private:
 };
 
 // Feeds read(buf, n) (bytes read, 0 at the end, < 0 on error, err set) to
-// the parser; see dataset_stream.cpp. read_error (optional): set when the
+// the parser; see stream.cpp. read_error (optional): set when the
 // failure returned is read's.
 bool stream_lines(const std::function<long(char *, size_t)> &read, Parser &p, std::string &err,
                   bool *read_error = nullptr);

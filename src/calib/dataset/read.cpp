@@ -62,7 +62,7 @@ struct SourceReader {
     }
 };
 
-// The glitch screen (dataset_glitches.h), on a dataset just parsed by `p`:
+// The glitch screen (glitches.h), on a dataset just parsed by `p`:
 // the suspect positions' samples are read again, and when some are set
 // aside the dataset is parsed once more without them.
 bool screen_glitches(Dataset &d, Parser &p, std::string &err) {

@@ -1,4 +1,4 @@
-// See diag_verdict.h.
+// See verdict.h.
 #include "calib/diagnosis/verdict.h"
 
 #include <cmath>

@@ -26,7 +26,7 @@ struct Judgement {
     bool explained = false;     // every test passes
     bool negligible_only = false; // fails only on things below a tenth of the noise floor
     // The tests pass, but with effects whose fitted values their physics
-    // does not allow (diag_standins.h): "fits to the noise floor with
+    // does not allow (calib/beyond/standins.h): "fits to the noise floor with
     // stand-ins", neither explained nor negligible_only.
     bool with_stand_ins = false;
     std::string words;          // "explains the data; x RMS ..." or "does not explain the data: ..."
@@ -44,9 +44,9 @@ Judgement judge_model(const Verdict &v, const Eval &E, const std::vector<Candida
                       const nlohmann::json *findings, const V3 &noise, double x_rms_jig_out = NAN,
                       const std::vector<StandIn> *stand_ins = nullptr);
 
-// The samples the dataset's glitch screen set aside (calib/dataset_glitches.h)
+// The samples the dataset's glitch screen set aside (calib/dataset/glitches.h)
 // as a sentence for the verdict ("" when none); their JSON is
-// glitches_json (calib/dataset_glitches.h).
+// glitches_json (calib/dataset/dataset.h).
 std::string glitches_words(const Dataset &d);
 // The positions diagnose() set aside as outliers (data.outliers.set_aside),
 // of `read` positions, as a sentence for the verdict.

@@ -61,7 +61,7 @@ struct SeedRequest {
 // the seed evaluations asked for. False + err when the rows cannot be read
 // again (the file changed since it was loaded). piped: the rows parsed on
 // this thread and visited on a second one (the same results, bit for bit:
-// diag_eval.cpp); false, all on this thread.
+// eval.cpp); false, all on this thread.
 bool sample_pass(const Dataset &d, const std::vector<PreparedPos> &pos, const std::vector<Eval *> &linear,
                  const std::vector<SeedRequest> &seeds, std::string &err, bool piped = false);
 bool evaluate_seed(const DeviceGeometry &g, const Dataset &d, const std::vector<PreparedPos> &pos,

@@ -1,4 +1,4 @@
-// See diag_findings.h.
+// See findings.h.
 #include "calib/evaluation/findings.h"
 
 #include <algorithm>

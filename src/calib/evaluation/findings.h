@@ -33,7 +33,7 @@ struct LengthView {
 };
 LengthView length_view(const Model &m, const std::vector<PreparedPos> &pos);
 // The view with the holder moved by off[j] at each position (the jig's own
-// error, diag_jig.h, taken out of the length residuals).
+// error, jig.h, taken out of the length residuals).
 LengthView shifted(const LengthView &v, const std::vector<V3> &off);
 
 // The strongest period of the cable-length residual, pooled over the four
@@ -51,7 +51,7 @@ PeriodPeak length_period(const LengthView &v);
 // independent periods it searches over lengths spanning `span_mm` (from
 // kShortestPeriodMm to the span; 0 when the span is shorter): a searched
 // period's false-alarm count, for the periodogram and for a candidate
-// whose period starts from it (diag_candidates.cpp).
+// whose period starts from it (calib/search/candidates.cpp).
 constexpr double kShortestPeriodMm = 8.0;
 double periods_searched(double span_mm);
 

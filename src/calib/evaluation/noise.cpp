@@ -1,4 +1,4 @@
-// See diag_noise.h. docs/calibration.md explains each estimate.
+// See noise.h. docs/calibration.md explains each estimate.
 #include "calib/evaluation/noise.h"
 
 #include <algorithm>

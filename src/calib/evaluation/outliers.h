@@ -19,7 +19,7 @@ namespace diag {
 // missing effect would leave. A mis-seated probe, a wrong hole, a bump
 // during the samples. More than kOutlierMaxFraction of the positions are
 // not "a few bad positions" but a worse jig or a wrong model, and none is
-// returned: the verdict judges them (the rounds of fit_outliers.h cap the
+// returned: the verdict judges them (the rounds of calib/calibration/fit_outliers.h cap the
 // total the same way, against the positions read). Beyond it, up to
 // kOutlierScatteredFraction, only when those a round finds look like
 // references off (a probe in the wrong hole moves the holder any way) and

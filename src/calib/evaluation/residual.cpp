@@ -1,4 +1,4 @@
-// See diag_residual.h.
+// See residual.h.
 #include "calib/evaluation/residual.h"
 
 #include <algorithm>

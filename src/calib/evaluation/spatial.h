@@ -1,7 +1,7 @@
 // Spatial structure of the residuals over the jig plate: the neighbour grid,
 // the per-height means (the fixture's offsets), Moran's I, and the chi-square verdict that combines them with the noise
-// model (the noise estimates over the plate's lines: diag_noise.h; the
-// positions set aside: diag_outliers.h).
+// model (the noise estimates over the plate's lines: noise.h; the
+// positions set aside: outliers.h).
 #pragma once
 
 #include <array>

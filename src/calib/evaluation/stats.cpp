@@ -1,4 +1,4 @@
-// See diag_stats.h. Boost.Math raises on domain errors by default; the
+// See stats.h. Boost.Math raises on domain errors by default; the
 // callers pass checked arguments, and the guards below turn the degenerate
 // cases (no degrees of freedom, a non-positive statistic) into p = 1.
 #include "calib/evaluation/stats.h"

@@ -39,7 +39,7 @@ struct PreparedPos {
 
 std::vector<PreparedPos> prepare(const Dataset &d);
 
-// A fit's whitening of the readings (fit_problem.h), fixed by the model it
+// A fit's whitening of the readings (problem.h), fixed by the model it
 // is weighed with and the options' noise model: fit_weights.
 struct FitWeights;
 
@@ -48,7 +48,7 @@ struct FitOptions {
     // The plate's error per hole (mm, per axis), shared by the hole's
     // positions at every height: a random effect, so that the fit is
     // generalised least squares with each hole's readings as one block
-    // (fit_problem.h). hole[j]: position j's hole (-1: a hole of its own;
+    // (problem.h). hole[j]: position j's hole (-1: a hole of its own;
     // empty: no hole model); jig_sigma is then what is left per position.
     // Treating those errors as independent gave a candidate able to follow
     // part of a plate's pattern several times the chi-square independent
@@ -70,7 +70,7 @@ struct FitOptions {
     // model_chi2 profiles them) instead of at zero. A candidate's start is
     // then exactly the model it extends, and the fit cannot end above it.
     // The diagnosis uses it for a candidate that ended above its base
-    // (diag_candidates.cpp); every other fit starts them at zero, as the
+    // (calib/search/candidates.cpp); every other fit starts them at zero, as the
     // results measured in docs/ were.
     bool profile_fixture_start = false;
     int max_evals = 400;
@@ -106,7 +106,7 @@ struct FitOptions {
     // not improve on the best is not enough), ends on that point, and says
     // so in FitReport::abandoned. The diagnosis gives up a joint fit of a
     // seeded period that has gone past twice the span of the measured
-    // lengths (diag_batch.cpp): its result, ending there, is not shown.
+    // lengths (calib/search/batch.cpp): its result, ending there, is not shown.
     std::vector<std::pair<std::pair<size_t, size_t>, double>> abandon_above;
     // The positions' readings, Jacobian and weights evaluated on this many
     // threads (each position's on one: the results are the same bit for bit
@@ -140,16 +140,16 @@ struct FitReport {
 // 370 would pass it, so one 5-height jig in 74: a plate with a height at
 // 0.153 mm then reads "not explained" with two spurious effects recommended
 // (test_diagnose.cpp, a_three_sigma_fixture_height_is_the_jigs). The judge
-// (diag_spatial.cpp, fixture_offsets) takes the per-height means up to the same
+// (calib/evaluation/spatial.cpp, fixture_offsets) takes the per-height means up to the same
 // bound, so a mean past it is clamped there as the fit's offset is.
 constexpr double kFixtureMaxMm = 0.25;
 // The fixture heights' offsets are a random effect with this standard
 // deviation (a machined spacer's tolerance): the fit's prior on them
-// (fit_problem.h, prior_sd).
+// (problem.h, prior_sd).
 constexpr double kFixturePriorSdMm = 0.05;
 
 // Fits every parameter of every effect in `m` except the ellipsoid's, from
-// their current values. Gauge freedoms are fixed explicitly (see fit.cpp).
+// their current values. Gauge freedoms are fixed explicitly (see optimiser.cpp).
 // False with rep.message when cancelled or when a user effect's apply
 // returns non-zero (the message names the effect).
 bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt, FitReport &rep);

@@ -1,5 +1,5 @@
-// See fit_problem.h (fit_detail::bounded_gauss_newton): the Gauss-Newton
-// step within the parameters' box, shared by fit_model (fit.cpp) and the
+// See problem.h (fit_detail::bounded_gauss_newton): the Gauss-Newton
+// step within the parameters' box, shared by fit_model (optimiser.cpp) and the
 // fixture offsets' profile (Problem::profile_fixture).
 #include <algorithm>
 #include <cmath>
@@ -9,7 +9,7 @@
 #include "calib/fit/problem.h"
 
 namespace cdm {
-// (fit_problem.h says what it solves: Problem::profile_fixture uses it too.)
+// (problem.h says what it solves: Problem::profile_fixture uses it too.)
 namespace fit_detail {
 
 BoundedStep bounded_gauss_newton(const Eigen::MatrixXd &H, const Eigen::VectorXd &g, const Eigen::VectorXd &x0,

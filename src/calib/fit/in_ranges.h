@@ -1,7 +1,7 @@
 // Work over [0, n) split into contiguous ranges, one thread each: for
 // per-row work whose rows are independent and written by one range only, so
 // that what it computes does not depend on the number of threads, bit for
-// bit (a fit's positions, an evaluation's; fit_problem.h, diag_eval.cpp).
+// bit (a fit's positions, an evaluation's; problem.h, calib/evaluation/eval.cpp).
 #pragma once
 
 #include <algorithm>

@@ -1,5 +1,5 @@
 // The fit's data: per-position means of the four readings, each with the
-// variance of its mean (calib/fit.h says why the fit works on means).
+// variance of its mean (calib/fit/fit.h says why the fit works on means).
 #include <algorithm>
 
 #include "calib/fit/fit.h"

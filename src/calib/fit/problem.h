@@ -5,7 +5,7 @@
 // Jacobian over the fitted parameters and the fixture heights' x offsets,
 // each plate hole's block decorrelated (generalised least squares); the
 // gauge (full = base + Q * free), the bounds and the weak prior.
-// Private to src/calib: fit.cpp runs the optimiser on it, fit_queries.cpp
+// Private to src/calib: optimiser.cpp runs the optimiser on it, queries.cpp
 // answers the diagnosis's questions about a model (its chi-square, its
 // Jacobian, an effect's overlap with the others).
 #pragma once
@@ -27,7 +27,7 @@
 
 namespace cdm::fit_detail {
 
-// The Gauss-Newton step within the bounds (defined in fit.cpp): the u that minimises the local
+// The Gauss-Newton step within the bounds (defined in optimiser.cpp): the u that minimises the local
 // quadratic model 0.5 u'Hu + g'u of the objective subject to
 // lo <= x0 + Q u <= hi (every parameter the gauge leaves free), by the
 // primal active-set method for a convex quadratic programme (Nocedal and
@@ -240,7 +240,7 @@ struct Problem {
         }
         // Every fixture offset is free, their common part included: it is
         // the spacers' mean error, which is the jig's placement along x, and
-        // the judge takes it out with each height's mean (diag_jig.cpp).
+        // the judge takes it out with each height's mean (calib/evaluation/jig.cpp).
         // Under a sum-zero gauge a common x offset of the jig would be left
         // to the device: on clean data with spacers off by 0.03 mm (their
         // mean -0.0085 mm) every candidate that can shift x gains delta chi2

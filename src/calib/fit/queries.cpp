@@ -1,5 +1,5 @@
 // The diagnosis's questions about a model on the data, answered with the
-// fit's own problem (fit_problem.h) and without fitting: an effect's
+// fit's own problem (problem.h) and without fitting: an effect's
 // overlap with the others, the chi-square, the weighted residual and its
 // Jacobian; the whitening a fit weighed with it computes.
 #include <Eigen/QR>

@@ -1,11 +1,11 @@
-// fit_all and for_each_parallel (diag_context.h): batches of independent
+// fit_all and for_each_parallel (context.h): batches of independent
 // fits and other per-item work on ctx.threads threads.
 //
 // A batch is a list of tasks, not of jobs. A plain job is one task (one
 // fit). A seeded job (a period seeded from the data: drum_eccentricity) is
 // several: one fit per start with the period held, then the joint fits in
 // the order of those fits' chi-squares, of which the first whose period is
-// shown in the data is the job's result (diag_context.h, FitJob). Run as one
+// shown in the data is the job's result (context.h, FitJob). Run as one
 // task, such a job was the critical path of the diagnosis's first batch:
 // 0.47 s of wall time where every other candidate together took 0.12 s on
 // the other core, on data with no ripple, where all three joint fits run

@@ -44,7 +44,7 @@ struct Candidate {
 // `screen`, every candidate not named in `in_full` is fitted by the screen
 // only (FitJob::one_step: one Gauss-Newton step from its start; a seeded
 // period's held starts, one step each) and marked `screened`: its numbers
-// are estimates for ranking, not a candidate's fit (diag_search.cpp).
+// are estimates for ranking, not a candidate's fit (search.cpp).
 bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
                       const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,
                       std::string &err, bool details = true, bool screen = false,

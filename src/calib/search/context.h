@@ -1,6 +1,6 @@
 // What every stage of the diagnosis shares: the data prepared once, the
 // noise model the fit weighs readings with, and how to fit a model with
-// progress and cancellation. Private to src/calib (the diag_*.cpp stages).
+// progress and cancellation. The search's and the diagnosis's stages share it.
 #pragma once
 
 #include <cmath>
@@ -94,7 +94,7 @@ struct DiagContext {
 // fit (period free) is run from the best of them by chi-square; m and rep
 // are that fit's, rep.evals and rep.seconds count the held fits and the
 // joint fits this order needed (not those a second thread tried ahead and
-// were not needed: diag_batch.cpp). (Three joint fits, one per start, would
+// were not needed: batch.cpp). (Three joint fits, one per start, would
 // be half of a diagnosis's evaluation work, evaluations times parameters,
 // with exit_pulley hidden; docs/performance.md, "The whole diagnosis", "A
 // seeded period", says what runs instead.) A joint fit
@@ -111,7 +111,7 @@ struct FitJob {
     std::string seeded;
     std::vector<Model> more_starts;
     // A screen's job (score_candidates with `screen`, a search step:
-    // diag_search.cpp): one Gauss-Newton step from the start
+    // search.cpp): one Gauss-Newton step from the start
     // (FitOptions::single_step, without the standard errors); a seeded job
     // runs its held fits only, each one step, and rep is the one its held
     // order puts first, the period counted among rep.n_free as the joint
@@ -132,7 +132,7 @@ int usable_cores();
 // with a user effect are fitted in turn on the calling thread (a user's
 // callback need not be reentrant), and so is every job when the model the
 // fits are weighed with (ctx.fo.weigh_with) holds one. A seeded job's fits
-// are separate tasks (diag_batch.cpp), with the result of fitting them in
+// are separate tasks (batch.cpp), with the result of fitting them in
 // turn. False + err (the message of the fit that failed first; the others
 // are then stopped) when a fit fails or is cancelled.
 bool fit_all(const DiagContext &ctx, std::vector<FitJob> &jobs, std::string &err);
@@ -179,7 +179,7 @@ inline bool fit_shown(const Model &m, const FitReport &r, const std::string &eff
 // The joint fit of a seeded period from m, fitted with the period held at
 // its start (chi-square start_chi2): a search over the period of the
 // profile chi-square (each point a fit with the period held), then one fit
-// with everything free from its minimum (diag_period.cpp). `period`: the
+// with everything free from its minimum (period.cpp). `period`: the
 // {effect, parameter} of the period in m (with more than one, the plain
 // joint fit). f's weights must be fixed (weigh_with) so that the points
 // compare. A search that leaves the span of the measured lengths stops

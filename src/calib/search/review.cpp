@@ -1,4 +1,4 @@
-// See diag_review.h.
+// See review.h.
 #include "calib/search/review.h"
 
 #include <string>

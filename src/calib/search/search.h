@@ -69,7 +69,7 @@ struct SearchResult {
 // from another's end without its sets could go back and forth.
 // restarts: true for a model's evaluation when the diagnosis will search
 // again from that model under a noise model re-estimated from it. A step
-// whose screen (diag_search.cpp) finds no move then ends the search without
+// whose screen (search.cpp) finds no move then ends the search without
 // fitting every candidate in full: those fits would be judged under a noise
 // model about to change, and the next search fits them under the new one
 // (as the swaps, above).

@@ -1,4 +1,4 @@
-// See diag_validation.h.
+// See validation.h.
 #include "calib/search/validation.h"
 
 #include <atomic>

@@ -13,7 +13,7 @@
 #include "api/calibration_handle.h"
 #include "api/errors.h"
 #include "api/jobs.h"
-#include "calib/diagnose.h"
+#include "calib/diagnosis/diagnose.h"
 #include "io/calibration_json.h"
 #include "io/device_json.h"
 #include "io/file.h"

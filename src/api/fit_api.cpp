@@ -4,10 +4,10 @@
 
 #include "api/errors.h"
 #include "api/jobs.h"
-#include "calib/diag_stats.h"
-#include "calib/diagnose.h"
-#include "calib/fit_calibration.h"
-#include "calib/fit_outliers.h"
+#include "calib/evaluation/stats.h"
+#include "calib/diagnosis/diagnose.h"
+#include "calib/calibration/fit_calibration.h"
+#include "calib/calibration/fit_outliers.h"
 #include "cdm/cdm.h"
 #include "model/effect.h"
 
@@ -59,7 +59,7 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
             {"nominal_error_mm", cdm::diag::stats3(cf.nominal.err)},
             {"error_mm", cdm::diag::stats3(cf.fitted.err)},
             // The samples the dataset's screen set aside (the diagnosis' data.glitches).
-            {"glitches", cdm::diag::glitches_json(data)},
+            {"glitches", cdm::glitches_json(data)},
             // The positions set aside (the diagnosis' data.outliers, the same test).
             {"outliers", outliers}};
 }

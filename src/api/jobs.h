@@ -9,7 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "calib/dataset.h"
+#include "calib/dataset/dataset.h"
 #include "io/file.h"
 #include "model/model.h"
 
@@ -41,7 +41,7 @@ int open_job(const char *data_path, const char *device_path, const JobArgs &a, J
 // Writes the fitted model as a calibration, if one was asked for. Its
 // "fit" block says where it came from: the data file, the fitted model's
 // error, and what of the data the fit did not use (`outliers`, `glitches`:
-// the job's blocks, fit_outliers.h and diag::glitches_json), so a reader of
+// the job's blocks, calib/calibration/fit_outliers.h and glitches_json), so a reader of
 // the calibration alone knows which positions and samples were left out.
 int commit_calibration(JobInputs &in, const Model &fitted, const char *data_path, const nlohmann::json &error_mm,
                        const nlohmann::json &outliers, const nlohmann::json &glitches);

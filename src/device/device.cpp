@@ -9,7 +9,7 @@
 #include <ctime>
 #include <vector>
 
-#include "device/replay_format.h"
+#include "device/recording/replay_format.h"
 #include "device/transport_hidapi.h"
 #include "io/log.h"
 

@@ -16,7 +16,7 @@ namespace cdm::io {
 // 64 MiB is far beyond any real one yet bounds a hostile or mistaken input.
 constexpr size_t kJsonMaxBytes = size_t(64) << 20;
 // A dataset row is ~60 bytes: 1 GiB is ~17 million samples (days of
-// recording at 200 Hz). Datasets are streamed (calib/dataset.h), so the cap
+// recording at 200 Hz). Datasets are streamed (calib/dataset/dataset.h), so the cap
 // bounds the work, not the memory.
 constexpr size_t kDatasetMaxBytes = size_t(1) << 30;
 

@@ -1,7 +1,7 @@
 // MCAP (https://mcap.dev/spec), the container of ROS 2 bags and Foxglove:
 // a writer and a reader of the container itself, written from the
 // specification. What goes in it (cdm's channels, schemas and encodings)
-// is src/device/recording_mcap.*; docs/recording.md describes both.
+// is src/device/recording/recording_mcap.*; docs/recording.md describes both.
 //
 // The writer puts messages in uncompressed chunks, each followed by its
 // message indexes, and ends the file with a summary (schemas, channels,

@@ -1,5 +1,5 @@
 // The model's readings and their derivatives with respect to every fitted
-// parameter, for the fit (calib/fit.cpp). The Jacobian comes from the same
+// parameter, for the fit (calib/fit/optimiser.cpp). The Jacobian comes from the same
 // templated kernel as the readings (effects/list.h): forward-mode automatic
 // differentiation seeded only on the position and on the parameters each
 // cable depends on, scattered into the full Jacobian by the layout; central

@@ -8,10 +8,10 @@
 #include <cstdlib>
 #include <unistd.h>
 
-#include "calib/dataset.h"
-#include "calib/diagnose.h"
-#include "calib/fit.h"
-#include "calib/simulate.h"
+#include "calib/dataset/dataset.h"
+#include "calib/diagnosis/diagnose.h"
+#include "calib/fit/fit.h"
+#include "calib/dataset/simulate.h"
 #include "io/file.h"
 
 namespace {

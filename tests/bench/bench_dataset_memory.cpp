@@ -28,9 +28,9 @@
 #include <string>
 #include <vector>
 
-#include "calib/dataset.h"
-#include "calib/diagnose.h"
-#include "calib/simulate.h"
+#include "calib/dataset/dataset.h"
+#include "calib/diagnosis/diagnose.h"
+#include "calib/dataset/simulate.h"
 #include "io/file.h"
 
 namespace {

@@ -31,10 +31,10 @@
 
 #include <nlohmann/json.hpp>
 
-#include "calib/diag_candidates.h"
-#include "calib/diag_context.h"
-#include "calib/fit.h"
-#include "calib/simulate.h"
+#include "calib/search/candidates.h"
+#include "calib/search/context.h"
+#include "calib/fit/fit.h"
+#include "calib/dataset/simulate.h"
 
 using namespace cdm;
 

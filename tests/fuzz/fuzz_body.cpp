@@ -6,7 +6,7 @@
 
 #include "cdm/cdm.h"
 #include "device/protocol.h"
-#include "device/replay_format.h"
+#include "device/recording/replay_format.h"
 
 namespace cdm_fuzz {
 

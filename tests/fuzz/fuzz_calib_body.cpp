@@ -4,7 +4,7 @@
 #include <cstdlib>
 #include <string>
 
-#include "calib/dataset.h"
+#include "calib/dataset/dataset.h"
 #include "cdm/cdm.h"
 #include "model/model.h"
 #include "io/calibration_json.h"

@@ -6,7 +6,7 @@
 #include <cstdlib>
 #include <string>
 
-#include "calib/dataset.h"
+#include "calib/dataset/dataset.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     const std::string text(reinterpret_cast<const char *>(data), size);

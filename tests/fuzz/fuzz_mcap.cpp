@@ -1,4 +1,4 @@
-// MCAP recordings (src/io/mcap.*, src/device/recording_mcap.*): any bytes
+// MCAP recordings (src/io/mcap.*, src/device/recording/recording_mcap.*): any bytes
 // are either refused with "NAME: byte OFFSET: what" or accepted with every
 // message and record inside the file, lengths within the format's bounds.
 #include <cstdlib>
@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "cdm/cdm.h"
-#include "device/replay_format.h"
+#include "device/recording/replay_format.h"
 #include "io/mcap.h"
 
 namespace {

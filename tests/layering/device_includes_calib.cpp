@@ -1,2 +1,2 @@
 // Not allowed: device is not built on calib.
-#include "calib/fit.h"
+#include "calib/fit/fit.h"

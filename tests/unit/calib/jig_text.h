@@ -11,7 +11,7 @@
 #include <unistd.h>
 #include <vector>
 
-#include "calib/simulate.h"
+#include "calib/dataset/simulate.h"
 
 namespace cdm {
 namespace test {

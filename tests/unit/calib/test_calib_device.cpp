@@ -10,8 +10,8 @@
 #include <cstdint>
 #include <string>
 
-#include "calib/diagnose.h"
-#include "calib/simulate.h"
+#include "calib/diagnosis/diagnose.h"
+#include "calib/dataset/simulate.h"
 #include "cdm/cdm.h"
 #include "device/sim/sim_truth.h"
 #include "io/calibration_json.h"

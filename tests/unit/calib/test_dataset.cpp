@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "calib/dataset.h"
+#include "calib/dataset/dataset.h"
 
 extern "C" {
 #include <cmocka.h>
@@ -276,7 +276,7 @@ static void file_in_pieces_equals_whole_text(void **) {
 }
 
 // A file of many blocks (the reader's values are found for blocks ahead on
-// a second thread, dataset.cpp): every position's statistics are Welford's
+// a second thread, calib/dataset/read.cpp): every position's statistics are Welford's
 // update in file order, bit for bit, as the test computes them here row by
 // row; blank and comment lines between rows, CRLF ends and a last line
 // without its '\n' change nothing but the line count.

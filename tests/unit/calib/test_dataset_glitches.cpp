@@ -1,4 +1,4 @@
-// The glitch screen of jig datasets (src/calib/dataset_glitches.h): clean
+// The glitch screen of jig datasets (src/calib/dataset/glitches.h): clean
 // data loses nothing, injected spikes are set aside exactly (and nothing
 // else), and what is left equals the file without them.
 //
@@ -23,8 +23,8 @@
 #include <unistd.h>
 #include <vector>
 
-#include "calib/dataset.h"
-#include "calib/simulate.h"
+#include "calib/dataset/dataset.h"
+#include "calib/dataset/simulate.h"
 
 extern "C" {
 #include <cmocka.h>

@@ -22,12 +22,12 @@
 #include <fcntl.h>
 #include <unistd.h>
 
-#include "calib/diag_eval.h"
-#include "calib/diag_outliers.h"
-#include "calib/diag_spatial.h"
-#include "calib/diagnose.h"
-#include "calib/fit.h"
-#include "calib/simulate.h"
+#include "calib/evaluation/eval.h"
+#include "calib/evaluation/outliers.h"
+#include "calib/evaluation/spatial.h"
+#include "calib/diagnosis/diagnose.h"
+#include "calib/fit/fit.h"
+#include "calib/dataset/simulate.h"
 #include "model/effect.h"
 
 extern "C" {
@@ -181,7 +181,7 @@ static void check_consistent(const nlohmann::json &r) {
     const auto &rec = r["recommended"];
     // A candidate contains the model it extends (its effect at the neutral
     // start): its fit should not end above it. One unit of chi-square is
-    // the base fit's own convergence (diag_candidates.cpp): below it no test
+    // the base fit's own convergence (calib/search/candidates.cpp): below it no test
     // moves. (While the fixture offsets' profile clamped them off their
     // sum-zero gauge, the fixture-height test's exit_pulley row read delta
     // chi2 -629485 on the nominal model.) Not a theorem: the fit minimises
@@ -732,7 +732,7 @@ static void drift_is_named(void **) {
 // unexplained; the verdict named only the findings, so the drift the
 // candidate table showed was on no sentence. check_consistent now asks that
 // every significant candidate be named. With each position's four readings
-// weighed as one block (fit_problem.h) that drift is recommended (anchors or their equivalent holder points, and the
+// weighed as one block (calib/fit/problem.h) that drift is recommended (anchors or their equivalent holder points, and the
 // drift); at 0.6 of its size it is where the blind case was: significant,
 // not paid for by the BIC, and named.
 static void small_drift_beside_a_finding_is_named(void **) {
@@ -915,7 +915,7 @@ static void per_sample_statistics_without_samples(void **) {
 }
 
 // The pass over the rows parses on one thread and visits on another, in
-// chunks (diag_eval.cpp). A file changed in place after it was loaded, on a
+// chunks (calib/evaluation/eval.cpp). A file changed in place after it was loaded, on a
 // row in its second chunk, fails the pass there with the reader's error
 // naming that row's line, and the pass ends (no visit left waiting, no
 // thread left): as the pass in turn would.

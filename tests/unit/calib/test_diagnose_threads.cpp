@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "calib/diagnose.h"
-#include "calib/simulate.h"
+#include "calib/diagnosis/diagnose.h"
+#include "calib/dataset/simulate.h"
 
 extern "C" {
 #include <cmocka.h>

@@ -6,7 +6,7 @@
 // The statistics are then exact numbers the test can state: the common
 // part's chi-square (1 dof) and the spread about it (K - 1 dof).
 // Also: a false-alarm probability over fewer than one searched period is
-// never below the single test's p (diag_stats).
+// never below the single test's p (calib/evaluation/stats.h).
 #include <cmath>
 #include <cstdarg>
 #include <cstddef>
@@ -15,9 +15,9 @@
 #include <string>
 #include <vector>
 
-#include "calib/diag_jig.h"
-#include "calib/diag_spatial.h"
-#include "calib/diag_stats.h"
+#include "calib/evaluation/jig.h"
+#include "calib/evaluation/spatial.h"
+#include "calib/evaluation/stats.h"
 
 extern "C" {
 #include <cmocka.h>

@@ -15,8 +15,8 @@
 #include <string>
 #include <vector>
 
-#include "calib/diag_noise.h"
-#include "calib/diag_outliers.h"
+#include "calib/evaluation/noise.h"
+#include "calib/evaluation/outliers.h"
 
 extern "C" {
 #include <cmocka.h>

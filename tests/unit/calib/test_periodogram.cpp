@@ -17,7 +17,7 @@
 #include <setjmp.h>
 #include <vector>
 
-#include "calib/diag_residual.h"
+#include "calib/evaluation/residual.h"
 
 extern "C" {
 #include <cmocka.h>

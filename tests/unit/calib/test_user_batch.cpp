@@ -20,10 +20,10 @@
 #include <cstring>
 #include <setjmp.h>
 
-#include "calib/diag_eval.h"
-#include "calib/diagnose.h"
-#include "calib/fit.h"
-#include "calib/simulate.h"
+#include "calib/evaluation/eval.h"
+#include "calib/diagnosis/diagnose.h"
+#include "calib/fit/fit.h"
+#include "calib/dataset/simulate.h"
 #include "model/effect.h"
 #include "model/evaluator.h"
 

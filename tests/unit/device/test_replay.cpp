@@ -19,7 +19,7 @@
 #include "cdm/cdm.h"
 #include "device/device.h"
 #include "device/protocol.h"
-#include "device/replay_format.h"
+#include "device/recording/replay_format.h"
 #include "test_util.h"
 
 // cmocka last: its fail() macro must not meet the C++ headers.

@@ -21,7 +21,7 @@
 #include <string>
 
 #include "api/errors.h"
-#include "calib/dataset.h"
+#include "calib/dataset/dataset.h"
 #include "cdm/cdm.h"
 
 extern "C" {

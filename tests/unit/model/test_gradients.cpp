@@ -30,7 +30,7 @@
 #include <string>
 #include <vector>
 
-#include "calib/fit.h"
+#include "calib/fit/fit.h"
 #include "model/effect.h"
 #include "model/model.h"
 
@@ -278,7 +278,7 @@ static void fit_jacobian_full_model(void **) {
     assert_int_equal(bad, 0);
 }
 
-// The fit's weighting (fit_problem.h) is generalised least squares: the
+// The fit's weighting (calib/fit/problem.h) is generalised least squares: the
 // chi-square equals r' S^-1 r computed densely in raw reading space, r the
 // readings' residuals (mean - y) and S, per hole, the block of
 // diag(var_mean) + dP diag(jig_sigma^2) dP' per position (its own jig

@@ -15,7 +15,7 @@
 #include <sstream>
 #include <vector>
 
-#include "calib/fit.h"
+#include "calib/fit/fit.h"
 #include "model/effect.h"
 #include "model/evaluator.h"
 #include "model/model.h"
@@ -471,7 +471,7 @@ static void fit_ends_at_its_minimum(void **) {
 
 // A parameter whose best value lies past its bound ends on the bound, with
 // the others at their best for it there: the fit's Gauss-Newton steps solve
-// the linearised problem within the bounds (fit.cpp, bounded_gauss_newton),
+// the linearised problem within the bounds (calib/fit/optimiser.cpp, bounded_gauss_newton),
 // and must neither stop short of the bound nor leave a parameter off its
 // best. The data hold pot 1's zero 23 mm off, past cable_offset's 20 mm
 // bound, beside gain errors that share the readings' direction. The fit

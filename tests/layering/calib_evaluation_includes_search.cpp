@@ -1,0 +1,2 @@
+// Not allowed: calib/evaluation is below calib/search.
+#include "calib/search/context.h"

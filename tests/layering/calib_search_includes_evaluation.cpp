@@ -1,0 +1,3 @@
+// Allowed: calib/search is built on calib/evaluation.
+#include "calib/evaluation/eval.h"
+int layering_probe_ok;

@@ -24,6 +24,7 @@
 #include "calib/search/validation.h"
 #include "calib/diagnosis/verdict.h"
 #include "calib/diagnosis/diagnose_json.h"
+#include "calib/diagnosis/panels.h"
 #include "calib/calibration/fit_calibration.h"
 #include "calib/calibration/fit_outliers.h"
 #include "cdm/cdm.h"
@@ -542,6 +543,7 @@ static bool diagnose_data(const Dataset &data, const DeviceGeometry &g, const Di
         pj["lengths_mm"] = lm;
         pj["length_residual_mm"] = lr;
         pj["cable_angle_deg"] = ang;
+        pj["trends"] = panel_trends(pos, cur, lv);
         out["positions"] = pj;
         // Fingerprints of what is missing: only candidates that are
         // significant on top of the recommended model (or the user's,

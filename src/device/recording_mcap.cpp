@@ -44,6 +44,8 @@ float64 w 1
 // examples/ros2/cdm_msgs/msg/State.msg, then its dependencies.
 const char *const kStateDefinition = R"msg(# One cdm_pose beside the pose of /cdm/pose in a cdm MCAP recording
 # (docs/recording.md): what a geometry_msgs/PoseStamped does not carry.
+# Every 10 ms of device time, and at every report where buttons, flags or
+# dropped change.
 # cdm writes it from this file's text (tests/cli/test_mcap.py compares them).
 # Wall-clock time of the report (CLOCK_REALTIME), the recording's log time.
 builtin_interfaces/Time stamp
@@ -179,9 +181,12 @@ public:
         ++reports_;
         last_ns_ = host_ns;
         if (!pose) return CDM_OK;
-        const std::string p = pose_cdr(t, *pose), s = state_cdr(t, *pose);
-        if (!w_.write_message(pose_, t, reinterpret_cast<const uint8_t *>(p.data()), p.size(), err) ||
-            !w_.write_message(state_, t, reinterpret_cast<const uint8_t *>(s.data()), s.size(), err))
+        const std::string p = pose_cdr(t, *pose);
+        if (!w_.write_message(pose_, t, reinterpret_cast<const uint8_t *>(p.data()), p.size(), err))
+            return CDM_ERR_IO;
+        if (!state_due(*pose)) return CDM_OK;
+        const std::string s = state_cdr(t, *pose);
+        if (!w_.write_message(state_, t, reinterpret_cast<const uint8_t *>(s.data()), s.size(), err))
             return CDM_ERR_IO;
         return CDM_OK;
     }
@@ -190,7 +195,22 @@ public:
     uint64_t reports() const override { return reports_; }
 
 private:
+    // kStatePeriodUs of device time since the last state, or buttons, flags
+    // or dropped changed (an event is never thinned out), or the device
+    // clock went back (a reset).
+    bool state_due(const cdm_pose &p) {
+        const bool due = !states_ || p.buttons != last_state_.buttons || p.flags != last_state_.flags ||
+                         p.dropped != last_state_.dropped || p.device_time_us < last_state_.device_time_us ||
+                         p.device_time_us - last_state_.device_time_us >= kStatePeriodUs;
+        if (due) {
+            last_state_ = p;
+            ++states_;
+        }
+        return due;
+    }
     mcap::Writer w_;
+    cdm_pose last_state_{};
+    uint64_t states_ = 0;
     uint16_t report_ = 0, pose_ = 0, state_ = 0;
     uint64_t reports_ = 0;
     uint64_t last_ns_ = 0; // the last report's host time

@@ -22,6 +22,11 @@ constexpr const char *kPoseTopic = "/cdm/pose";
 constexpr const char *kPoseSchema = "geometry_msgs/msg/PoseStamped"; // metres, quaternion x,y,z,w
 constexpr const char *kStateTopic = "/cdm/state";
 constexpr const char *kStateSchema = "cdm_msgs/msg/State"; // examples/ros2/cdm_msgs/msg/State.msg
+// A state every 10 ms of device time (100 Hz), and at every report where
+// buttons, flags or dropped change: the grip and velocity of a human hand
+// move well below 50 Hz, and 1 kHz of them would take a third of the file
+// (docs/recording.md, "Size"); the raw reports keep every sample.
+constexpr uint64_t kStatePeriodUs = 10000;
 constexpr const char *kDeviceMetadata = "cdm.device";
 constexpr const char *kPoseFrame = "cdm";
 // cdm.device metadata: CLOCK_REALTIME - CLOCK_MONOTONIC (ns, decimal) when

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 from cyclonedds.core import Policy, Qos
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import float32, float64, int32, sequence, uint8, uint32, uint64
+from cyclonedds.idl.types import byte, float32, float64, int32, sequence, uint32, uint64
 from cyclonedds.util import duration
 
 
@@ -78,7 +78,7 @@ class KeyValue(IdlStruct, typename="diagnostic_msgs::msg::dds_::KeyValue_"):
 
 @dataclass
 class DiagnosticStatus(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticStatus_"):
-    level: uint8 = 0  # OK 0, WARN 1, ERROR 2, STALE 3 (an IDL octet)
+    level: byte = 0  # OK 0, WARN 1, ERROR 2, STALE 3 (an IDL octet)
     name: str = ""
     message: str = ""
     hardware_id: str = ""

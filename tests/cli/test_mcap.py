@@ -252,8 +252,11 @@ def replay_error(path):
 
 
 def test_hostile_and_truncated_mcap(tmp_path):
-    good, n = record(tmp_path, "g.mcap")
+    # 3 s: several chunks (one holds about 1.3 s of compressed recording).
+    good, n = record(tmp_path, "g.mcap", "3")
     data = good.read_bytes()
+    with open(good, "rb") as f:
+        assert len(make_reader(f).get_summary().chunk_indexes) >= 2
 
     # Cut inside the header: refused, naming the byte.
     cut = tmp_path / "cut_header.mcap"

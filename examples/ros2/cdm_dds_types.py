@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 from cyclonedds.core import Policy, Qos
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import float32, float64, int32, sequence, uint32, uint64
+from cyclonedds.idl.types import byte, float32, float64, int32, sequence, uint32, uint64
 from cyclonedds.util import duration
 
 
@@ -62,8 +62,37 @@ class Joy(IdlStruct, typename="sensor_msgs::msg::dds_::Joy_"):
 
 
 @dataclass
-class Float64(IdlStruct, typename="std_msgs::msg::dds_::Float64_"):
-    data: float64 = 0.0
+class JointState(IdlStruct, typename="sensor_msgs::msg::dds_::JointState_"):
+    header: Header = field(default_factory=Header)
+    name: sequence[str] = field(default_factory=list)
+    position: sequence[float64] = field(default_factory=list)
+    velocity: sequence[float64] = field(default_factory=list)
+    effort: sequence[float64] = field(default_factory=list)
+
+
+@dataclass
+class KeyValue(IdlStruct, typename="diagnostic_msgs::msg::dds_::KeyValue_"):
+    key: str = ""
+    value: str = ""
+
+
+@dataclass
+class DiagnosticStatus(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticStatus_"):
+    level: byte = 0  # OK 0, WARN 1, ERROR 2, STALE 3 (an IDL octet)
+    name: str = ""
+    message: str = ""
+    hardware_id: str = ""
+    values: sequence[KeyValue] = field(default_factory=list)
+
+
+@dataclass
+class DiagnosticArray(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticArray_"):
+    header: Header = field(default_factory=Header)
+    status: sequence[DiagnosticStatus] = field(default_factory=list)
+
+
+# The device's health, for ROS 2 tools (rqt_robot_monitor, the aggregator).
+DIAGNOSTICS_TOPIC = "rt/diagnostics"
 
 
 @dataclass
@@ -99,7 +128,8 @@ def stamp_ns(header):
 
 
 # What the bridge offers (docs/ros2.md): pose, joy and gripper best effort,
-# keep last 1; status reliable, transient local, keep last 10.
+# keep last 1; status reliable, transient local, keep last 10; diagnostics
+# ROS 2's default (reliable, volatile, keep last 10).
 def pose_qos():
     return Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1))
 

@@ -7,7 +7,8 @@
     python3 ros2_subscriber.py --serial CDMSIM0001
 
 Prints the pose (metres, frame of the master's base), the buttons, the
-gripper, and the status when it changes. The status topic has cdm's own type
+gripper (sensor_msgs/JointState, joint "grip"), the status when it changes,
+and the master's entry on /diagnostics. The status topic has cdm's own type
 (cdm_msgs/msg/Status): build ./cdm_msgs in a colcon workspace and source it to
 see it; without it the node says so and listens to the rest. Not runnable in
 cdm's own tree (no ROS 2 there): tests/dds reads the same topics at the DDS
@@ -19,8 +20,8 @@ import rclpy
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import Joy
-from std_msgs.msg import Float64
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState, Joy
 
 try:
     from cdm_msgs.msg import Status
@@ -39,10 +40,13 @@ class MasterListener(Node):
     def __init__(self, prefix, serial, print_hz):
         super().__init__("cdm_master_listener")
         base = "/%s/%s/" % (prefix, serial)
+        self.serial = serial
         self.pose = self.joy = self.grip = None
         self.create_subscription(PoseStamped, base + "pose", self.on_pose, SENSOR)
         self.create_subscription(Joy, base + "joy", lambda m: setattr(self, "joy", m), SENSOR)
-        self.create_subscription(Float64, base + "gripper", lambda m: setattr(self, "grip", m), SENSOR)
+        self.create_subscription(JointState, base + "gripper", lambda m: setattr(self, "grip", m), SENSOR)
+        # /diagnostics with ROS 2's default QoS, as every diagnostics tool reads it.
+        self.create_subscription(DiagnosticArray, "/diagnostics", self.on_diagnostics, 10)
         if Status is not None:
             self.create_subscription(Status, base + "status", self.on_status, STATUS)
         else:
@@ -54,6 +58,12 @@ class MasterListener(Node):
         self.pose = msg
         self.poses += 1
 
+    def on_diagnostics(self, a):
+        for st in a.status:
+            if st.hardware_id == self.serial:
+                self.get_logger().info("diagnostics: level %d, %s" % (st.level[0] if isinstance(st.level, bytes)
+                                                                       else st.level, st.message))
+
     def on_status(self, s):
         self.get_logger().info("status: stale %s, disconnected %s, compensated %s, dropped %d, published %d"
                                % (s.stale, s.disconnected, s.compensated, s.dropped, s.published))
@@ -64,7 +74,7 @@ class MasterListener(Node):
             return
         p, q = self.pose.pose.position, self.pose.pose.orientation
         buttons = list(self.joy.buttons) if self.joy else []
-        grip = self.grip.data if self.grip else float("nan")
+        grip = self.grip.position[0] if self.grip and self.grip.position else float("nan")
         self.get_logger().info("%d poses; position %.4f %.4f %.4f m, q (x,y,z,w) %.3f %.3f %.3f %.3f, "
                                "buttons (clutch, aux, mark) %s, gripper %.3f rad"
                                % (self.poses, p.x, p.y, p.z, q.x, q.y, q.z, q.w, buttons, grip))

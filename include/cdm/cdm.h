@@ -717,7 +717,9 @@ CDM_API int cdm_sim_truth(cdm_device *dev, uint32_t sequence, double position_mm
 typedef struct cdm_recorder cdm_recorder;
 CDM_API int cdm_recorder_open(const char *path, const uint8_t *info_report, size_t len, cdm_recorder **out);
 /** since 1.1: `format` "cdmrec", "mcap" or "csv" whatever the name (a
- *  temporary's), or NULL for the extension's. */
+ *  temporary's), or NULL for the extension's. MCAP's chunks are compressed
+ *  with zstd; "mcap:lz4" and "mcap:none" choose lz4 or none ("mcap:zstd"
+ *  says the default). */
 CDM_API int cdm_recorder_open_ex(const char *path, const char *format, const uint8_t *info_report, size_t len,
                                  cdm_recorder **out);
 /** The report only: MCAP gets no pose for it, a CSV refuses it

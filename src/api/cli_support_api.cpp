@@ -218,12 +218,15 @@ int cdm_recorder_open_ex(const char *path, const char *format, const uint8_t *in
             return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_recorder_open: info_report is empty (len 0; the device-info "
                                                   "report of cdm_device_info_report, 128 bytes in protocol 1)");
         cdm::recording::Format f = cdm::recording::format_for_path(path);
-        if (format && !cdm::recording::parse_format(format, f))
+        std::string compression;
+        if (format && !cdm::recording::parse_format(format, f, &compression))
             return cdm::fail(CDM_ERR_INVALID_ARG, std::string("cdm_recorder_open: format \"") + format +
-                                                      "\" is not one of cdmrec, mcap, csv");
+                                                      "\" is not one of cdmrec, mcap (mcap:zstd, mcap:lz4, "
+                                                      "mcap:none), csv");
         auto rec = std::make_unique<cdm_recorder>();
         std::string err;
-        if (int rc = cdm::recording::open_writer(path, f, info_report, len, rec->writer, err); rc != CDM_OK)
+        if (int rc = cdm::recording::open_writer(path, f, info_report, len, rec->writer, err, compression);
+            rc != CDM_OK)
             return cdm::fail(rc, err);
         *out = rec.release();
         return int(CDM_OK);

@@ -3,15 +3,20 @@
 // rmw_cyclonedds reads and writes, whatever the writer side would default to.
 #include "dds_publisher.h"
 
+#include <time.h>
+
 #include <cctype>
 #include <cstring>
+#include <utility>
 
 #include <dds/dds.h>
 
 #include "cdm_msgs.h"
+#include "diagnostic_msgs.h"
 #include "geometry_msgs.h"
 #include "sensor_msgs.h"
 #include "std_msgs.h"
+#include "type_hash.h"
 
 namespace cdm::bridge {
 
@@ -36,8 +41,11 @@ builtin_interfaces_msg_dds__Time_ ros_time(int64_t ns) {
     return t;
 }
 
-dds_qos_t *make_qos(bool reliable, int depth, bool transient_local) {
+// `ros_type`'s hash goes in USER_DATA, as rmw_cyclonedds does it.
+dds_qos_t *make_qos(bool reliable, int depth, bool transient_local, const char *ros_type) {
     dds_qos_t *q = dds_create_qos();
+    const std::string user_data = type_hash_user_data(ros_type);
+    dds_qset_userdata(q, user_data.data(), user_data.size());
     if (reliable)
         dds_qset_reliability(q, DDS_RELIABILITY_RELIABLE, DDS_MSECS(100));
     else
@@ -80,6 +88,7 @@ std::unique_ptr<DdsPublisher> DdsPublisher::create(const DdsConfig &c, std::stri
     std::unique_ptr<DdsPublisher> p(new DdsPublisher());
     p->base_ = "rt/" + c.prefix + "/" + c.serial + "/";
     p->frame_id_ = c.frame_id;
+    p->hardware_id_ = c.serial;
     p->participant_ = dds_create_participant(dds_domainid_t(c.domain), nullptr, nullptr);
     if (p->participant_ < 0) {
         err = dds_error("DDS participant on domain " + std::to_string(c.domain) +
@@ -90,7 +99,8 @@ std::unique_ptr<DdsPublisher> DdsPublisher::create(const DdsConfig &c, std::stri
     }
     struct Spec {
         const dds_topic_descriptor_t *desc;
-        const char *leaf;
+        const char *ros_type;
+        const char *leaf; // under base_, or a ROS 2 topic of its own ("rt/...")
         bool reliable;
         int depth;
         bool transient_local;
@@ -101,15 +111,21 @@ std::unique_ptr<DdsPublisher> DdsPublisher::create(const DdsConfig &c, std::stri
     // so that default ROS subscribers match too). The status must not be
     // lost and a late joiner should see the current state: reliable,
     // transient local, the last few kept so a short stale episode is seen.
+    // /diagnostics: ROS 2's default QoS (reliable, volatile, keep last 10),
+    // what diagnostic_updater publishes with and its readers expect.
     const Spec specs[] = {
-        {&geometry_msgs_msg_dds__PoseStamped__desc, "pose", false, 1, false, &p->pose_w_},
-        {&sensor_msgs_msg_dds__Joy__desc, "joy", false, 1, false, &p->joy_w_},
-        {&std_msgs_msg_dds__Float64__desc, "gripper", false, 1, false, &p->grip_w_},
-        {&cdm_msgs_msg_dds__Status__desc, "status", true, 10, true, &p->status_w_},
+        {&geometry_msgs_msg_dds__PoseStamped__desc, "geometry_msgs/msg/PoseStamped", "pose", false, 1, false,
+         &p->pose_w_},
+        {&sensor_msgs_msg_dds__Joy__desc, "sensor_msgs/msg/Joy", "joy", false, 1, false, &p->joy_w_},
+        {&sensor_msgs_msg_dds__JointState__desc, "sensor_msgs/msg/JointState", "gripper", false, 1, false,
+         &p->grip_w_},
+        {&cdm_msgs_msg_dds__Status__desc, "cdm_msgs/msg/Status", "status", true, 10, true, &p->status_w_},
+        {&diagnostic_msgs_msg_dds__DiagnosticArray__desc, "diagnostic_msgs/msg/DiagnosticArray", "rt/diagnostics",
+         true, 10, false, &p->diag_w_},
     };
     for (const Spec &s : specs) {
-        const std::string name = p->base_ + s.leaf;
-        dds_qos_t *q = make_qos(s.reliable, s.depth, s.transient_local);
+        const std::string name = std::string(s.leaf).rfind("rt/", 0) == 0 ? s.leaf : p->base_ + s.leaf;
+        dds_qos_t *q = make_qos(s.reliable, s.depth, s.transient_local, s.ros_type);
         const dds_entity_t topic = dds_create_topic(p->participant_, s.desc, name.c_str(), q, nullptr);
         dds_entity_t w = topic;
         if (topic >= 0) w = dds_create_writer(p->participant_, topic, q, nullptr);
@@ -160,8 +176,18 @@ bool DdsPublisher::publish_pose(const cdm_pose &p, int64_t stamp_ns, std::string
         return false;
     }
 
-    std_msgs_msg_dds__Float64_ g{};
-    g.data = p.grip;
+    // The gripper as a one-joint JointState: its opening in radians.
+    char joint_name[] = "grip";
+    char *names[1] = {joint_name};
+    double position[1] = {p.grip};
+    sensor_msgs_msg_dds__JointState_ g{};
+    g.header = h;
+    g.name._maximum = g.name._length = 1;
+    g.name._buffer = names;
+    g.name._release = false;
+    g.position._maximum = g.position._length = 1;
+    g.position._buffer = position;
+    g.position._release = false;
     if ((rc = dds_write(grip_w_, &g)) != DDS_RETCODE_OK) {
         err = dds_error("DDS write " + base_ + "gripper", rc);
         return false;
@@ -190,6 +216,51 @@ bool DdsPublisher::publish_status(uint32_t flags, int64_t pose_stamp_ns, uint32_
     const dds_return_t rc = dds_write(status_w_, &s);
     if (rc != DDS_RETCODE_OK) {
         err = dds_error("DDS write " + base_ + "status", rc);
+        return false;
+    }
+    return publish_diagnostics(flags, n, err);
+}
+
+bool DdsPublisher::publish_diagnostics(uint32_t flags, const StatusCounts &n, std::string &err) {
+    // The worst condition names the level and the message.
+    uint8_t level = 0; // OK
+    std::string message = "ok";
+    if (flags & CDM_POSE_END_OF_STREAM) level = 3, message = "end of stream: the replay or script ended";
+    else if (flags & CDM_POSE_DISCONNECTED) level = 2, message = "disconnected: the pose is the last good one";
+    else if (flags & CDM_POSE_STALE) level = 1, message = "stale: no report for longer than the stale timeout";
+    else if (flags & CDM_POSE_OUT_OF_WORKSPACE) level = 1, message = "out of workspace: the position is held";
+    const std::pair<const char *, std::string> kv[] = {
+        {"flags", std::to_string(flags)},           {"reports", std::to_string(n.reports)},
+        {"dropped", std::to_string(n.dropped)},     {"malformed", std::to_string(n.malformed)},
+        {"published", std::to_string(n.published)}, {"skipped", std::to_string(n.skipped)},
+        {"compensated", (flags & CDM_POSE_COMPENSATED) ? "true" : "false"},
+    };
+    diagnostic_msgs_msg_dds__KeyValue_ values[sizeof kv / sizeof kv[0]];
+    for (size_t i = 0; i < sizeof kv / sizeof kv[0]; ++i) {
+        values[i].key = const_cast<char *>(kv[i].first);
+        values[i].value = const_cast<char *>(kv[i].second.c_str());
+    }
+    const std::string name = "cdm bridge: " + hardware_id_;
+    diagnostic_msgs_msg_dds__DiagnosticStatus_ st{};
+    st.level = level;
+    st.name = const_cast<char *>(name.c_str());
+    st.message = const_cast<char *>(message.c_str());
+    st.hardware_id = const_cast<char *>(hardware_id_.c_str());
+    st.values._maximum = st.values._length = uint32_t(sizeof kv / sizeof kv[0]);
+    st.values._buffer = values;
+    st.values._release = false;
+    diagnostic_msgs_msg_dds__DiagnosticArray_ a{};
+    // Diagnostics are stamped when they are published (ROS time).
+    timespec now{};
+    clock_gettime(CLOCK_REALTIME, &now);
+    a.header.stamp = ros_time(int64_t(now.tv_sec) * 1000000000 + now.tv_nsec);
+    a.header.frame_id = const_cast<char *>("");
+    a.status._maximum = a.status._length = 1;
+    a.status._buffer = &st;
+    a.status._release = false;
+    const dds_return_t rc = dds_write(diag_w_, &a);
+    if (rc != DDS_RETCODE_OK) {
+        err = dds_error("DDS write rt/diagnostics", rc);
         return false;
     }
     return true;

@@ -32,21 +32,28 @@ public:
     DdsPublisher(const DdsPublisher &) = delete;
     DdsPublisher &operator=(const DdsPublisher &) = delete;
 
-    // Writes pose, joy and gripper for one pose, stamped stamp_ns (ROS time:
+    // Writes pose, joy and gripper (sensor_msgs/JointState) for one pose, stamped stamp_ns (ROS time:
     // CLOCK_REALTIME, ns). False and `err` on a DDS failure.
     bool publish_pose(const cdm_pose &p, int64_t stamp_ns, std::string &err);
     // Writes a status: the newest published pose's stamp, sequence and
-    // device time (zeros before the first), `flags` now, and the counts.
+    // device time (zeros before the first), `flags` now, and the counts;
+    // and the same health on /diagnostics (publish_diagnostics).
     bool publish_status(uint32_t flags, int64_t pose_stamp_ns, uint32_t sequence, uint64_t device_time_us,
                         const StatusCounts &n, std::string &err);
+
+    // One diagnostic_msgs/DiagnosticArray on /diagnostics (DDS rt/diagnostics)
+    // with one status named "cdm bridge: SERIAL", hardware_id the serial:
+    // level OK, WARN (stale, out of workspace), ERROR (disconnected) or
+    // STALE (end of stream), the condition in words, the counts as values.
+    bool publish_diagnostics(uint32_t flags, const StatusCounts &n, std::string &err);
 
     // "rt/<prefix>/<serial>/" : the DDS names' common start.
     const std::string &topic_base() const { return base_; }
 
 private:
     DdsPublisher() = default;
-    std::string base_, frame_id_;
-    int32_t participant_ = 0, pose_w_ = 0, joy_w_ = 0, grip_w_ = 0, status_w_ = 0;
+    std::string base_, frame_id_, hardware_id_;
+    int32_t participant_ = 0, pose_w_ = 0, joy_w_ = 0, grip_w_ = 0, status_w_ = 0, diag_w_ = 0;
 };
 
 // A ROS 2 name token for `text` (a device serial): characters other than

@@ -4,9 +4,12 @@
 #include <time.h>
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <memory>
 #include <string>
 #include <thread>
@@ -25,6 +28,7 @@ struct BridgeArgs {
     std::string uri, calib, prefix = "cdm", frame_id = "cdm";
     bool dds = false;
     unsigned domain = 0;
+    bool domain_given = false; // --domain on the command line: ROS_DOMAIN_ID is not read
     double seconds = 0, rate = 0, status_rate = 10;
 };
 
@@ -42,6 +46,21 @@ int64_t monotonic_to_realtime_ns(uint64_t mono_ns) {
     const int64_t rt_ns = int64_t(rt.tv_sec) * 1000000000 + rt.tv_nsec;
     const int64_t mo_ns = int64_t(mo.tv_sec) * 1000000000 + mo.tv_nsec;
     return int64_t(mono_ns) + (rt_ns - mo_ns);
+}
+
+// The domain as ROS 2 chooses it: --domain, else ROS_DOMAIN_ID (unset or
+// empty: 0), which must then be a domain id ROS 2 accepts (0..232).
+unsigned domain_id(const BridgeArgs &a) {
+    if (a.domain_given) return a.domain;
+    const char *env = std::getenv("ROS_DOMAIN_ID");
+    if (!env || !*env) return 0;
+    unsigned v = 0;
+    const char *end = env + std::strlen(env);
+    const auto r = std::from_chars(env, end, v);
+    if (r.ec != std::errc() || r.ptr != end || v > 232)
+        throw UsageError(std::string("ROS_DOMAIN_ID=\"") + env +
+                         "\" is not a ROS 2 domain id (an integer 0..232); set it right or pass --domain");
+    return v;
 }
 
 int open_device(const BridgeArgs &a, cdm_device *&dev) {
@@ -74,7 +93,7 @@ struct DeviceCloser {
 // Cyclone DDS refuses them.
 std::unique_ptr<bridge::DdsPublisher> start_publisher(const BridgeArgs &a, const cdm_device_info &info) {
     bridge::DdsConfig cfg;
-    cfg.domain = a.domain;
+    cfg.domain = domain_id(a);
     cfg.prefix = a.prefix;
     cfg.serial = bridge::ros_name_token(info.serial);
     cfg.frame_id = a.frame_id;
@@ -89,9 +108,9 @@ std::unique_ptr<bridge::DdsPublisher> start_publisher(const BridgeArgs &a, const
     }
     const std::string &base = pub->topic_base();
     std::printf("bridging %s (serial %s) to DDS domain %u: %spose (geometry_msgs/msg/PoseStamped), %sjoy "
-                "(sensor_msgs/msg/Joy), %sgripper (std_msgs/msg/Float64), %sstatus (cdm_msgs/msg/Status); "
-                "Ctrl-C stops\n",
-                info.uri, info.serial, a.domain, base.c_str(), base.c_str(), base.c_str(), base.c_str());
+                "(sensor_msgs/msg/Joy), %sgripper (sensor_msgs/msg/JointState), %sstatus (cdm_msgs/msg/Status), "
+                "rt/diagnostics (diagnostic_msgs/msg/DiagnosticArray); Ctrl-C stops\n",
+                info.uri, info.serial, cfg.domain, base.c_str(), base.c_str(), base.c_str(), base.c_str());
     std::fflush(stdout);
     return pub;
 }
@@ -99,6 +118,7 @@ std::unique_ptr<bridge::DdsPublisher> start_publisher(const BridgeArgs &a, const
 int cmd_bridge_dds(const BridgeArgs &a) {
     if (std::string why = bridge::check_prefix(a.prefix); !why.empty())
         throw UsageError("--prefix \"" + a.prefix + "\" " + why);
+    domain_id(a); // a bad ROS_DOMAIN_ID is a usage error before the device opens
     cdm_device *raw_dev = nullptr;
     if (int rc = open_device(a, raw_dev); rc != kExitOk) return rc;
     std::unique_ptr<cdm_device, DeviceCloser> dev(raw_dev);
@@ -202,7 +222,10 @@ void add_bridge_command(CLI::App &app) {
     b->add_option("URI", a.uri, "device URI: sim:[?options], replay:FILE, hid:/dev/hidrawN, serial:SN")->required();
     b->add_flag("--dds", a.dds,
                 "publish over DDS (Cyclone DDS) with ROS 2's names and types: rt/PREFIX/SERIAL/{pose,joy,gripper,status}");
-    b->add_option("--domain", a.domain, "DDS domain id (ROS_DOMAIN_ID)")->check(range(0, 232));
+    static CLI::Option *domain_opt =
+        b->add_option("--domain", a.domain, "DDS domain id (default: $ROS_DOMAIN_ID, else 0)")
+            ->check(range(0, 232))
+            ->default_str(""); // not a fixed 0: the environment's when not given
     b->add_option("--prefix", a.prefix, "topic prefix (ROS 2 name tokens separated by '/')");
     b->add_option("--frame-id", a.frame_id, "header.frame_id of pose and joy");
     b->add_option("--rate", a.rate, "publish at most this many poses per second (0: every report)")
@@ -218,6 +241,7 @@ void add_bridge_command(CLI::App &app) {
     b->callback([] {
         select_command([] {
             if (int rc = load_plugins(plugins); rc != kExitOk) return rc;
+            a.domain_given = domain_opt->count() > 0;
             return cmd_bridge(a);
         });
     });

@@ -317,8 +317,15 @@ int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, cons
 }
 
 int cmd_record(const std::string &uri, const std::string &file, double seconds, const JigArgs &ja,
-               bool exporting = false) {
+               const std::string &compression, bool exporting = false) {
     check_output(uri, file);
+    std::string format = format_of(file);
+    if (!compression.empty()) {
+        if (format != "mcap" || ja.jig)
+            throw UsageError("--compression " + compression + ": only an MCAP recording (FILE.mcap) has chunks to "
+                                                              "compress");
+        format += ":" + compression;
+    }
     RecordCtx ctx;
     ctx.jig = ja.jig;
     const std::string tmp = file + ".tmp";
@@ -348,7 +355,7 @@ int cmd_record(const std::string &uri, const std::string &file, double seconds, 
         cdm_device_error(dev, warn, sizeof warn);
         if (std::strncmp(warn, "warning:", 8) == 0) std::fprintf(stderr, "cdm: export: %s\n", warn);
     }
-    if (rc == CDM_OK && !ja.jig && (rc = open_recorder(dev, tmp, format_of(file), ctx)) != kExitOk) {
+    if (rc == CDM_OK && !ja.jig && (rc = open_recorder(dev, tmp, format.c_str(), ctx)) != kExitOk) {
         cdm_close(dev);
         return rc;
     }
@@ -394,12 +401,16 @@ void add_record_command(CLI::App &app) {
                        "comma-separated fixture heights in mm (default 30,40,50,60,70, or the sim: URI's)");
     record->add_option("--jig-samples", ja.samples, "samples kept per position (0: 100, or the sim: URI's)")
         ->check(range(0, 1000000));
+    static std::string r_compression;
+    const char *compression_help = "MCAP's chunk compression: zstd (the default), lz4 (faster, larger) or none";
+    record->add_option("--compression", r_compression, compression_help)
+        ->check(CLI::IsMember({"zstd", "lz4", "none"}));
     static std::vector<std::string> r_plugins;
     add_plugin_option(record, r_plugins);
     record->callback([] {
         select_command([] {
             if (int rc = load_plugins(r_plugins); rc != kExitOk) return rc;
-            return cmd_record(r_uri, r_file, r_seconds, ja);
+            return cmd_record(r_uri, r_file, r_seconds, ja, r_compression);
         });
     });
 
@@ -410,11 +421,13 @@ void add_record_command(CLI::App &app) {
     static std::string e_in, e_out;
     exp->add_option("REC", e_in, "a recording made by cdm record (.cdmrec or .mcap)")->required();
     exp->add_option("OUT", e_out, "output file (written to OUT.tmp, which must not exist, then renamed)")->required();
+    static std::string e_compression;
+    exp->add_option("--compression", e_compression, compression_help)->check(CLI::IsMember({"zstd", "lz4", "none"}));
     exp->callback([] {
         select_command([] {
             if (e_in.find('?') != std::string::npos)
                 throw UsageError("export: REC \"" + e_in + "\" contains '?', which a replay: URI cannot hold");
-            return cmd_record("replay:" + e_in + "?speed=0", e_out, 0, JigArgs{}, true);
+            return cmd_record("replay:" + e_in + "?speed=0", e_out, 0, JigArgs{}, e_compression, true);
         });
     });
 }

@@ -1,5 +1,7 @@
 #include "device/protocol.h"
 
+#include <zlib.h>
+
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -264,14 +266,8 @@ void serialize_cal_chunk(const CalChunk &c, uint8_t *buf) {
 }
 
 uint32_t crc32(const uint8_t *data, size_t len, uint32_t crc) {
-    // Bitwise: calibration blobs are at most 16 KiB and read once, a table
-    // would buy nothing measurable.
-    crc = ~crc;
-    for (size_t i = 0; i < len; ++i) {
-        crc ^= data[i];
-        for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
-    }
-    return ~crc;
+    if (len == 0) return crc; // zlib answers its initial value for a null buffer
+    return uint32_t(::crc32_z(crc, data, len));
 }
 
 } // namespace cdm::proto

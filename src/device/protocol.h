@@ -147,7 +147,8 @@ Reject parse_cal_chunk(const uint8_t *buf, size_t len, CalChunk &out);
 void serialize_cal_chunk(const CalChunk &c, uint8_t *buf); // kCalChunkReportSize bytes
 
 // CRC-32 (IEEE 802.3: reflected polynomial 0xEDB88320, init and final xor
-// 0xFFFFFFFF), the one zlib and Ethernet use; crc32("123456789") = 0xCBF43926.
+// 0xFFFFFFFF), zlib's crc32; crc32("123456789") = 0xCBF43926. Pass the
+// previous result as `crc` to continue over several pieces.
 uint32_t crc32(const uint8_t *data, size_t len, uint32_t crc = 0);
 
 // The HID report descriptor the firmware presents (docs/protocol.md lists it

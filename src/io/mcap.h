@@ -3,21 +3,26 @@
 // specification. What goes in it (cdm's channels, schemas and encodings)
 // is src/device/recording/recording_mcap.*; docs/recording.md describes both.
 //
-// The writer puts messages in uncompressed chunks, each followed by its
-// message indexes, and ends the file with a summary (schemas, channels,
-// statistics, chunk and metadata indexes, summary offsets) so that readers
-// seek instead of scanning. It writes each chunk with its indexes in one
-// write(2), so a process killed mid-recording leaves every chunk written
-// before it (the reader below keeps them and says what was lost).
+// The writer puts messages in chunks (compressed with zstd by default, lz4
+// or none on request), each followed by its message indexes, and ends the
+// file with a summary (schemas, channels, statistics, chunk and metadata
+// indexes, summary offsets) so that readers seek instead of scanning. It
+// writes each chunk with its indexes in one write(2), so a process killed
+// mid-recording leaves every chunk written before it (the reader below
+// keeps them and says what was lost).
 //
 // The reader takes the whole file in memory and checks every length
 // against what is left before it reads: hostile input is refused with
-// "NAME: byte OFFSET: what", never read out of bounds.
+// "NAME: byte OFFSET: what", never read out of bounds. Decompression is
+// bounded by the size a chunk announces, which is itself capped.
+//
+// CRCs are zlib's crc32 (ISO-HDLC), the checksum MCAP's CRC fields use.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -45,9 +50,12 @@ enum Op : uint8_t {
     kDataEnd = 0x0F,
 };
 
-// CRC-32 (ISO-HDLC, as zlib's crc32): the checksum MCAP's CRC fields use.
-// Pass the previous result to continue over several pieces.
-uint32_t crc32(const uint8_t *data, size_t len, uint32_t crc = 0);
+// A chunk's compression, by its name in the Chunk record: "" (none),
+// "zstd", "lz4" (an LZ4 frame).
+enum class Compression { None, Zstd, Lz4 };
+const char *compression_name(Compression c);
+// "none" (or ""), "zstd", "lz4"; false for anything else.
+bool parse_compression(const std::string &name, Compression &out);
 
 using StringMap = std::vector<std::pair<std::string, std::string>>;
 
@@ -64,8 +72,10 @@ public:
     Writer &operator=(const Writer &) = delete;
 
     // Creates `path` (a new file only: O_EXCL, never through a symlink) and
-    // writes the magic and the Header record.
-    bool open(const std::string &path, const std::string &profile, const std::string &library, std::string &err);
+    // writes the magic and the Header record. Chunks are compressed with
+    // `compression`.
+    bool open(const std::string &path, const std::string &profile, const std::string &library, std::string &err,
+              Compression compression = Compression::Zstd);
     // Before the first message: declarations (ids from 1) and Metadata.
     uint16_t add_schema(const std::string &name, const std::string &encoding, const std::string &data);
     uint16_t add_channel(uint16_t schema_id, const std::string &topic, const std::string &message_encoding,
@@ -86,16 +96,23 @@ private:
     struct ChunkInfo {
         uint64_t start, length, index_length, t0, t1;
         std::map<uint16_t, uint64_t> index_offsets; // channel -> MessageIndex offset in the file
-        uint64_t size;
+        uint64_t size, compressed_size;
     };
     struct Declared {
         uint16_t id;
         std::string record; // the Schema or Channel record, opcode and length included
     };
     bool flush_chunk(std::string &err);
+    // The open chunk's records compressed (or copied) into `out`.
+    bool compress_chunk(std::string &out, std::string &err);
     bool emit(const std::string &bytes, std::string &err); // one write(2) loop, CRC, truncation on failure
     int fd_ = -1;
     bool failed_ = false;
+    Compression compression_ = Compression::Zstd;
+    struct FreeZstd {
+        void operator()(void *p) const;
+    };
+    std::unique_ptr<void, FreeZstd> zstd_; // ZSTD_CCtx, reused from chunk to chunk
     std::string path_, fail_text_;
     uint64_t offset_ = 0;   // bytes in the file
     uint32_t data_crc_ = 0; // over every byte written before DataEnd
@@ -128,7 +145,13 @@ struct Message {
     uint16_t channel = 0;
     uint32_t sequence = 0;
     uint64_t log_time = 0, publish_time = 0;
-    size_t offset = 0, length = 0; // of the message data in the file's bytes
+    // The message's bytes: in the file's bytes (top level, uncompressed
+    // chunk) or in File::chunk_data (compressed chunk).
+    const uint8_t *data = nullptr;
+    size_t length = 0;
+    // Where errors about the message point: the byte of its data in the
+    // file, or of its Chunk record when that is compressed.
+    size_t offset = 0;
 };
 struct Metadata {
     std::string name;
@@ -136,10 +159,22 @@ struct Metadata {
 };
 
 struct File {
+    File() = default;
+    File(File &&) = default;
+    File &operator=(File &&) = default;
+    File(const File &) = delete; // messages point into chunk_data
+    File &operator=(const File &) = delete;
     std::string profile, library;
     std::map<uint16_t, Schema> schemas;
     std::map<uint16_t, Channel> channels;
     std::vector<Message> messages; // in file order
+    // Decompressed chunks the messages point into (not zero-filled first: a
+    // chunk announcing more than its data makes costs no memory for the rest).
+    struct Buffer {
+        std::unique_ptr<uint8_t[]> bytes;
+        size_t size = 0;
+    };
+    std::vector<Buffer> chunk_data;
     std::vector<Metadata> metadata;
     bool complete = false; // DataEnd, footer and closing magic all found
     // Set when the file ends before its footer (a recorder killed, a disk
@@ -152,11 +187,18 @@ struct File {
 // the file itself: ids and channels are 16-bit in MCAP anyway.
 // 16 M messages: 2 GiB of cdm's recording holds about 7 M.
 constexpr size_t kMaxMessages = size_t(16) << 20;
+// Decompressed bytes of all chunks together: the cap on a recording's file
+// size (replay_format.h's kMaxFileBytes), so a small hostile file cannot
+// claim more memory than a large honest one.
+constexpr uint64_t kMaxUncompressedBytes = uint64_t(2) << 30;
 
 // Reads the data section: Header, Schemas, Channels, Messages (top level or
-// in uncompressed chunks, whose CRC is checked when not 0), Metadata;
-// skips attachments, indexes and unknown opcodes as the specification
-// asks. A compressed chunk is refused naming its compression. The summary
+// in chunks, uncompressed, zstd or lz4, whose uncompressed CRC is checked
+// when not 0), Metadata; skips attachments, indexes and unknown opcodes as
+// the specification asks. A chunk is decompressed into exactly the size it
+// announces (more or less data is refused), and the announced sizes of all
+// chunks together may not pass kMaxUncompressedBytes; another compression
+// is refused naming it. The summary
 // is only framed (the data section holds everything it repeats). A file
 // cut short is accepted with `warning` (the records before the cut); a
 // file cut inside its Header, or any malformed record, is refused:

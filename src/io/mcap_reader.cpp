@@ -3,13 +3,18 @@
 #include "io/mcap.h"
 
 #include <fcntl.h>
+#include <lz4frame.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <zlib.h>
+#include <zstd.h>
 
 #include <algorithm>
 #include <array>
 #include <cerrno>
 #include <cstring>
+#include <memory>
+#include <new>
 
 namespace cdm::mcap {
 
@@ -24,9 +29,15 @@ struct Cursor {
     size_t pos, end;
     const std::string &name;
     std::string &err;
+    // A decompressed chunk's records: errors name the Chunk record's byte in
+    // the file, and the offset in the decompressed records after it.
+    size_t packed_at = std::string::npos;
 
     bool fail(size_t at, const std::string &what) {
-        err = name + ": byte " + std::to_string(at) + ": " + what;
+        if (packed_at == std::string::npos) err = name + ": byte " + std::to_string(at) + ": " + what;
+        else
+            err = name + ": byte " + std::to_string(packed_at) + ": " + what + " (byte " + std::to_string(at) +
+                  " of the chunk's decompressed records)";
         return false;
     }
     size_t left() const { return end - pos; }
@@ -54,7 +65,7 @@ struct Cursor {
     bool map(StringMap &m, const char *what) {
         uint32_t n = 0;
         if (!u32(n, what) || !need(n, what)) return false;
-        Cursor in{base, pos, pos + n, name, err};
+        Cursor in{base, pos, pos + n, name, err, packed_at};
         while (in.left() > 0) {
             std::string k, v;
             if (!in.str(k, what) || !in.str(v, what)) return false;
@@ -92,6 +103,7 @@ struct Parser {
     const std::string &name;
     std::string &err;
     File &f;
+    uint64_t unpacked_ = 0; // decompressed bytes so far
 
     bool fail(size_t at, const std::string &what) {
         err = name + ": byte " + std::to_string(at) + ": " + what;
@@ -131,7 +143,7 @@ struct Parser {
         return true;
     }
 
-    bool message(Cursor c, size_t at) {
+    bool message(Cursor c, size_t at, bool packed = false) {
         Message m;
         if (!c.u16(m.channel, "Message channel id") || !c.u32(m.sequence, "Message sequence") ||
             !c.u64(m.log_time, "Message log time") || !c.u64(m.publish_time, "Message publish time"))
@@ -140,8 +152,9 @@ struct Parser {
             return fail(at, "message on channel " + std::to_string(m.channel) + ", not declared before it");
         if (f.messages.size() >= kMaxMessages)
             return fail(at, "more than " + std::to_string(kMaxMessages) + " messages");
-        m.offset = c.pos;
+        m.data = c.base + c.pos;
         m.length = c.left();
+        m.offset = packed ? at : c.pos;
         f.messages.push_back(m);
         return true;
     }
@@ -153,6 +166,41 @@ struct Parser {
         return true;
     }
 
+    // Decompresses `csize` bytes at `src` into exactly `usize` bytes of `out`.
+    bool decompress(const std::string &compression, const uint8_t *src, size_t csize, uint8_t *out, size_t usize,
+                    size_t at) {
+        if (compression == "zstd") {
+            const size_t n = ZSTD_decompress(out, usize, src, csize);
+            if (ZSTD_isError(n))
+                return fail(at, std::string("zstd chunk does not decompress into the ") + std::to_string(usize) +
+                                    " bytes it announces: " + ZSTD_getErrorName(n));
+            if (n != usize)
+                return fail(at, "zstd chunk decompresses to " + std::to_string(n) + " bytes, not the " +
+                                    std::to_string(usize) + " it announces");
+            return true;
+        }
+        LZ4F_dctx *d = nullptr;
+        if (LZ4F_isError(LZ4F_createDecompressionContext(&d, LZ4F_VERSION))) return fail(at, "lz4: out of memory");
+        std::unique_ptr<LZ4F_dctx, decltype(&LZ4F_freeDecompressionContext)> owned(d, LZ4F_freeDecompressionContext);
+        size_t in = 0, done = 0, hint = 1;
+        while (in < csize) {
+            size_t dn = usize - done, sn = csize - in;
+            hint = LZ4F_decompress(d, out + done, &dn, src + in, &sn, nullptr);
+            if (LZ4F_isError(hint))
+                return fail(at, std::string("lz4 chunk does not decompress: ") + LZ4F_getErrorName(hint));
+            in += sn;
+            done += dn;
+            if (sn == 0 && dn == 0)
+                return fail(at, "lz4 chunk decompresses to more than the " + std::to_string(usize) +
+                                    " bytes it announces");
+        }
+        if (hint != 0) return fail(at, "lz4 chunk ends inside its frame");
+        if (done != usize)
+            return fail(at, "lz4 chunk decompresses to " + std::to_string(done) + " bytes, not the " +
+                                std::to_string(usize) + " it announces");
+        return true;
+    }
+
     bool chunk(Cursor c, size_t at) {
         uint64_t t0, t1, usize, csize;
         uint32_t crc;
@@ -161,32 +209,69 @@ struct Parser {
             !c.u64(usize, "Chunk uncompressed size") || !c.u32(crc, "Chunk CRC") ||
             !c.str(compression, "Chunk compression") || !c.u64(csize, "Chunk records length"))
             return false;
-        if (!compression.empty())
+        if (!compression.empty() && compression != "zstd" && compression != "lz4")
             return fail(at, "chunk compressed with \"" + compression.substr(0, 32) +
-                                "\": this reader takes uncompressed chunks (cdm writes them; `mcap convert "
-                                "--compression none` makes them)");
+                                "\": this reader takes zstd, lz4 and uncompressed chunks");
         if (csize > c.left())
             return fail(c.pos - 8, "chunk records length " + std::to_string(csize) + " runs past the chunk (" +
                                        std::to_string(c.left()) + " bytes left)");
-        if (csize != usize)
-            return fail(at, "uncompressed chunk of " + std::to_string(csize) + " bytes announces " +
-                                std::to_string(usize) + " uncompressed");
-        const size_t begin = c.pos, end = c.pos + size_t(csize);
-        if (crc != 0 && crc32(data + begin, end - begin) != crc) return fail(at, "chunk CRC mismatch");
+        const uint8_t *records = data;
+        size_t base = c.pos, end = c.pos + size_t(csize);
+        if (compression.empty()) {
+            if (csize != usize)
+                return fail(at, "uncompressed chunk of " + std::to_string(csize) + " bytes announces " +
+                                    std::to_string(usize) + " uncompressed");
+        } else {
+            if (usize > kMaxUncompressedBytes - unpacked_)
+                return fail(at, "chunk announces " + std::to_string(usize) + " bytes uncompressed, past the " +
+                                    std::to_string(kMaxUncompressedBytes) + " bytes a recording may hold");
+            // No format makes more than this from so few bytes: zstd's
+            // smallest block (RLE, 4 bytes) stands for at most 128 KiB, an
+            // LZ4 sequence's length byte for at most 255 bytes.
+            const uint64_t ratio = compression == "zstd" ? 32768 : 256;
+            if (usize / ratio > csize)
+                return fail(at, "chunk announces " + std::to_string(usize) + " bytes uncompressed from " +
+                                    std::to_string(csize) + " " + compression + " bytes, more than " +
+                                    compression + " can make (" + std::to_string(ratio) + " to 1)");
+            // A zstd frame that states its size must state the chunk's.
+            const unsigned long long framed = compression == "zstd" ? ZSTD_getFrameContentSize(data + c.pos, csize)
+                                                                    : ZSTD_CONTENTSIZE_UNKNOWN;
+            if (framed != ZSTD_CONTENTSIZE_UNKNOWN && framed != usize)
+                return fail(at, "zstd chunk announces " + std::to_string(usize) + " bytes uncompressed, its frame " +
+                                    (framed == ZSTD_CONTENTSIZE_ERROR ? std::string("is not a zstd frame")
+                                                                      : std::to_string(framed)));
+            unpacked_ += usize;
+            std::unique_ptr<uint8_t[]> out(new (std::nothrow) uint8_t[size_t(usize) + 1]); // +1: never empty
+            if (!out) return fail(at, "no memory for a chunk of " + std::to_string(usize) + " bytes uncompressed");
+            if (!decompress(compression, data + c.pos, size_t(csize), out.get(), size_t(usize), at)) return false;
+            f.chunk_data.push_back({std::move(out), size_t(usize)});
+            records = f.chunk_data.back().bytes.get();
+            base = 0;
+            end = size_t(usize);
+        }
+        if (crc != 0 && uint32_t(::crc32_z(0, records + base, end - base)) != crc)
+            return fail(at, "chunk CRC mismatch");
+        return chunk_records(records, base, end, compression.empty() ? std::string::npos : at);
+    }
+
+    // The records of one chunk, [begin, end) of `buf` (the file's bytes, or a
+    // decompressed chunk whose errors point at the chunk's byte `packed_at`).
+    bool chunk_records(const uint8_t *buf, size_t begin, size_t end, size_t packed_at) {
+        const auto where = [&](size_t p) { return packed_at == std::string::npos ? p : packed_at; };
         size_t pos = begin;
         while (pos < end) {
-            if (end - pos < 9) return fail(pos, "record header runs past the end of its chunk");
-            const uint8_t op = data[pos];
-            Cursor h{data, pos + 1, end, name, err};
+            Cursor h{buf, pos + 1, end, name, err, packed_at};
+            if (end - pos < 9) return h.fail(pos, "record header runs past the end of its chunk");
+            const uint8_t op = buf[pos];
             const uint64_t len = h.le(8);
             if (len > end - pos - 9)
-                return fail(pos, std::string(op_name(op)) + " record of " + std::to_string(len) +
-                                     " bytes runs past the end of its chunk");
-            Cursor rc{data, pos + 9, pos + 9 + size_t(len), name, err};
+                return h.fail(pos, std::string(op_name(op)) + " record of " + std::to_string(len) +
+                                       " bytes runs past the end of its chunk");
+            Cursor rc{buf, pos + 9, pos + 9 + size_t(len), name, err, packed_at};
             bool ok = true;
-            if (op == kSchema) ok = schema(rc, pos);
-            else if (op == kChannel) ok = channel(rc, pos);
-            else if (op == kMessage) ok = message(rc, pos);
+            if (op == kSchema) ok = schema(rc, where(pos));
+            else if (op == kChannel) ok = channel(rc, where(pos));
+            else if (op == kMessage) ok = message(rc, where(pos), packed_at != std::string::npos);
             // Anything else in a chunk is not for a chunk; skipped like an unknown record.
             if (!ok) return false;
             pos += 9 + size_t(len);

@@ -135,7 +135,7 @@ static int run_latency(dds_entity_t pp, const char *base, int n, double timeout_
 static int run_check(dds_entity_t pp, const char *base, const char *frame_id, int n, double timeout_s) {
     const dds_entity_t pose_r = make_reader(pp, &geometry_msgs_msg_dds__PoseStamped__desc, base, "pose", 0, 1);
     const dds_entity_t joy_r = make_reader(pp, &sensor_msgs_msg_dds__Joy__desc, base, "joy", 0, 1);
-    const dds_entity_t grip_r = make_reader(pp, &std_msgs_msg_dds__Float64__desc, base, "gripper", 0, 1);
+    const dds_entity_t grip_r = make_reader(pp, &sensor_msgs_msg_dds__JointState__desc, base, "gripper", 0, 1);
     const dds_entity_t status_r = make_reader(pp, &cdm_msgs_msg_dds__Status__desc, base, "status", 1, 10);
     const int64_t t_start = realtime_ns();
     const int64_t end = t_start + (int64_t)(timeout_s * 1e9);
@@ -186,9 +186,18 @@ static int run_check(dds_entity_t pp, const char *base, const char *frame_id, in
         k = dds_take(grip_r, buf, info, 16, 16);
         for (dds_return_t i = 0; i < k; ++i) {
             if (!info[i].valid_data) continue;
-            const std_msgs_msg_dds__Float64_ *m = buf[i];
-            /* the jaw: 0 (closed) .. 0.6 rad (open) in the simulation, plus Hall noise */
-            CHECK(isfinite(m->data) && m->data > -0.05 && m->data < 0.7, "gripper %g rad", m->data);
+            const sensor_msgs_msg_dds__JointState_ *m = buf[i];
+            CHECK(m->name._length == 1 && m->position._length == 1 && m->velocity._length == 0 &&
+                      m->effort._length == 0,
+                  "gripper joint state with %u names, %u positions", (unsigned)m->name._length,
+                  (unsigned)m->position._length);
+            if (m->name._length == 1 && m->position._length == 1) {
+                const double g = m->position._buffer[0];
+                CHECK(strcmp(m->name._buffer[0], "grip") == 0, "gripper joint \"%s\"", m->name._buffer[0]);
+                /* the jaw: 0 (closed) .. 0.6 rad (open) in the simulation, plus Hall noise */
+                CHECK(isfinite(g) && g > -0.05 && g < 0.7, "gripper %g rad", g);
+            }
+            CHECK(strcmp(m->header.frame_id, frame_id) == 0, "gripper frame_id \"%s\"", m->header.frame_id);
             ++grips;
         }
         if (k > 0) dds_return_loan(grip_r, buf, k);
@@ -211,7 +220,7 @@ static int run_check(dds_entity_t pp, const char *base, const char *frame_id, in
     CHECK(joys > 0 && grips > 0 && statuses > 0, "joy %d, gripper %d, status %d", joys, grips, statuses);
     check_matched_type(pose_r, "geometry_msgs::msg::dds_::PoseStamped_");
     check_matched_type(joy_r, "sensor_msgs::msg::dds_::Joy_");
-    check_matched_type(grip_r, "std_msgs::msg::dds_::Float64_");
+    check_matched_type(grip_r, "sensor_msgs::msg::dds_::JointState_");
     check_matched_type(status_r, "cdm_msgs::msg::dds_::Status_");
     printf("dds_sub: %d poses, %d joy, %d gripper, %d status; %d failures\n", poses, joys, grips, statuses, failures);
     return failures ? 1 : 0;

@@ -14,6 +14,12 @@ subscribers read it as a ROS 2 node would see it.
   N-1 and the status turns stale, reliably delivered.
 - test_disconnect_and_reconnect: sim:?disconnect=500:400: disconnected, then
   back, the lost reports counted.
+- types and hashes: every writer's USER_DATA is "typehash=RIHS01_...;" as
+  rmw_cyclonedds writes it, checked against REP-2011's hashing done here
+  from the .msg definitions, itself checked against the hashes ROS 2's
+  generated code carries; the gripper is a sensor_msgs/JointState and the
+  health goes to /diagnostics (diagnostic_msgs/DiagnosticArray) too.
+- domains: ROS_DOMAIN_ID alone, --domain overriding it, a bad value refused.
 - usage errors: no --dds, a bad --prefix; the status type agrees in the IDL,
   the ROS .msg and the Python type.
 """
@@ -46,9 +52,12 @@ import cdm  # noqa: E402
 from cdm import _native  # noqa: E402
 import cdm_dds_types as T  # noqa: E402
 
-TYPES = {"pose": T.PoseStamped, "joy": T.Joy, "gripper": T.Float64, "status": T.Status}
+TYPES = {"pose": T.PoseStamped, "joy": T.Joy, "gripper": T.JointState, "status": T.Status,
+         "diagnostics": T.DiagnosticArray}
 TYPE_NAMES = {"pose": "geometry_msgs::msg::dds_::PoseStamped_", "joy": "sensor_msgs::msg::dds_::Joy_",
-              "gripper": "std_msgs::msg::dds_::Float64_", "status": "cdm_msgs::msg::dds_::Status_"}
+              "gripper": "sensor_msgs::msg::dds_::JointState_", "status": "cdm_msgs::msg::dds_::Status_",
+              "diagnostics": "diagnostic_msgs::msg::dds_::DiagnosticArray_"}
+ROS_TYPES = {leaf: n.replace("::dds_::", "::").replace("::", "/")[:-1] for leaf, n in TYPE_NAMES.items()}
 _counter = itertools.count()
 
 
@@ -60,15 +69,26 @@ class Bridge:
     """`cdm bridge URI --dds` on a domain and prefix of its own, so that runs
     on the same machine never see each other's topics."""
 
-    def __init__(self, uri, seconds, *extra):
-        self.domain = random.Random(os.getpid() * 7919 + next(_counter)).randint(1, 200)
+    def __init__(self, uri, seconds, *extra, domain_from="option"):
+        """domain_from: "option" (--domain), "env" (ROS_DOMAIN_ID only) or
+        "both" (ROS_DOMAIN_ID set to another domain, --domain overriding it)."""
+        rng = random.Random(os.getpid() * 7919 + next(_counter))
+        self.domain = rng.randint(1, 200)
         self.prefix = "cdmtest_%d_%d" % (os.getpid(), next(_counter))
         self.serial = "CDMSIM0001"
         self.topics = T.topic_names(self.serial, self.prefix)
+        self.topics["diagnostics"] = T.DIAGNOSTICS_TOPIC
         self.base = "rt/%s/%s/" % (self.prefix, self.serial)
-        argv = [CLI, "bridge", uri, "--dds", "--domain", str(self.domain), "--prefix", self.prefix,
-                "--seconds", str(seconds), *extra]
-        self.proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        env = dict(os.environ)
+        env.pop("ROS_DOMAIN_ID", None)
+        argv = [CLI, "bridge", uri, "--dds", "--prefix", self.prefix, "--seconds", str(seconds), *extra]
+        if domain_from in ("option", "both"):
+            argv += ["--domain", str(self.domain)]
+        if domain_from == "env":
+            env["ROS_DOMAIN_ID"] = str(self.domain)
+        if domain_from == "both":
+            env["ROS_DOMAIN_ID"] = str(self.domain + 1)
+        self.proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
 
     def finish(self, timeout=30):
         out, err = self.proc.communicate(timeout=timeout)
@@ -87,12 +107,17 @@ class Subscriber:
         self.readers = {}
         for leaf, cls in TYPES.items():
             topic = Topic(self.dp, bridge.topics[leaf], cls)
+            # status: what the bridge offers; diagnostics: ROS 2's default
+            # subscription (reliable, volatile), as its tools subscribe.
             qos = (Qos(Policy.Reliability.Reliable(0), Policy.History.KeepLast(1000), Policy.Durability.TransientLocal)
-                   if leaf == "status" else Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1000)))
+                   if leaf == "status" else
+                   Qos(Policy.Reliability.Reliable(0), Policy.History.KeepLast(1000), Policy.Durability.Volatile)
+                   if leaf == "diagnostics" else Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1000)))
             self.readers[leaf] = DataReader(self.dp, topic, qos=qos)
         self.got = {leaf: [] for leaf in TYPES}
         self.publications = BuiltinDataReader(self.dp, BuiltinTopicDcpsPublication)
         self.type_names = {}
+        self.user_data = {}
 
     def collect(self, until, timeout):
         end = time.monotonic() + timeout
@@ -104,6 +129,8 @@ class Subscriber:
             for ep in self.publications.take(N=100):
                 if hasattr(ep, "topic_name"):
                     self.type_names[ep.topic_name] = ep.type_name
+                    ud = ep.qos[Policy.Userdata] if Policy.Userdata in ep.qos else None
+                    self.user_data[ep.topic_name] = ud.data if ud is not None else b""
             if until(self):
                 return True
             time.sleep(0.002)
@@ -195,7 +222,20 @@ def test_poses_match_the_simulation():
     lat = sorted(t - T.stamp_ns(p.header) for p, t in sub.got["pose"])
     assert lat[0] > 0, "a pose stamped after it was received"
     for g, _ in sub.got["gripper"]:
-        assert 0.0 - 0.05 < g.data < 0.6 + 0.05  # the simulated jaw: 0..0.6 rad, plus Hall noise
+        # One joint, its opening: the simulated jaw, 0..0.6 rad, plus Hall noise.
+        assert list(g.name) == ["grip"] and len(g.position) == 1 and not g.velocity and not g.effort, g
+        assert 0.0 - 0.05 < g.position[0] < 0.6 + 0.05 and g.header.frame_id == "master_base"
+    # Every writer carries its ROS 2 type hash the way rmw_cyclonedds writes it.
+    for leaf, ros_type in ROS_TYPES.items():
+        assert sub.user_data.get(bridge.topics[leaf]) == b"typehash=%s;" % rihs01(ros_type).encode(), \
+            (leaf, sub.user_data.get(bridge.topics[leaf]))
+    # /diagnostics: the device's entry, OK while the simulation runs.
+    mine = [st for a, _ in sub.got["diagnostics"] for st in a.status if st.hardware_id == bridge.serial]
+    assert mine, "no /diagnostics entry for %s" % bridge.serial
+    for st in mine:
+        assert st.level == 0 and st.message == "ok" and st.name == "cdm bridge: " + bridge.serial, st
+        values = {kv.key: kv.value for kv in st.values}
+        assert int(values["reports"]) >= int(values["published"]) > 0 and values["compensated"] == "false", values
 
 
 def test_stale_when_the_device_stalls():
@@ -213,6 +253,12 @@ def test_stale_when_the_device_stalls():
     assert st.report_sequence == 399 and st.reports == 400, st
     assert not st.disconnected and not st.end_of_stream
     assert all(s.stale for s in statuses[first_stale:]), "a stalled device turned fresh again"
+    # /diagnostics says the same: WARN, stale, once the reports stop.
+    # (Volatile, as ROS 2 publishes it: a late subscriber sees only what follows.)
+    levels = [(st.level, st.message) for a, _ in sub.got["diagnostics"] for st in a.status]
+    first = next(i for i, lv in enumerate(levels) if lv[0] != 0)
+    assert all(lv == (0, "ok") for lv in levels[:first]), levels[:first]
+    assert all(lv[0] == 1 and lv[1].startswith("stale") for lv in levels[first:]), levels[first:]
     # No pose after the stall: the newest one received is report 399's.
     newest = max(sub.got["pose"], key=lambda pt: T.stamp_ns(pt[0].header))[0]
     assert T.stamp_ns(newest.header) == T.stamp_ns(st.header)
@@ -235,6 +281,99 @@ def test_disconnect_and_reconnect():
     # The device samples on while unplugged: ~400 reports at 1 kHz are lost.
     assert statuses[j].report_sequence > 499 and statuses[j].dropped > 300, statuses[j]
     assert max(T.stamp_ns(p.header) for p, _ in sub.got["pose"]) > T.stamp_ns(statuses[i].header)  # poses resumed
+
+def rihs01(ros_type):
+    """REP-2011's type hash, computed here from the .msg definitions (field
+    names and types; default values are not hashed): the JSON of the type's
+    description and those it refers to, sorted by name, as
+    rosidl_generator_type_description serialises it, through SHA-256."""
+    import hashlib
+    import json
+    prim = {"int32": 6, "uint32": 7, "uint64": 9, "float32": 10, "float64": 11, "bool": 15, "byte": 16,
+            "string": 17}
+    msgs = {
+        "builtin_interfaces/msg/Time": "int32 sec; uint32 nanosec",
+        "std_msgs/msg/Header": "builtin_interfaces/msg/Time stamp; string frame_id",
+        "std_msgs/msg/String": "string data",
+        "geometry_msgs/msg/Point": "float64 x; float64 y; float64 z",
+        "geometry_msgs/msg/Quaternion": "float64 x; float64 y; float64 z; float64 w",
+        "geometry_msgs/msg/Pose": "geometry_msgs/msg/Point position; geometry_msgs/msg/Quaternion orientation",
+        "geometry_msgs/msg/PoseStamped": "std_msgs/msg/Header header; geometry_msgs/msg/Pose pose",
+        "sensor_msgs/msg/Joy": "std_msgs/msg/Header header; float32[] axes; int32[] buttons",
+        "sensor_msgs/msg/JointState": "std_msgs/msg/Header header; string[] name; float64[] position; "
+                                      "float64[] velocity; float64[] effort",
+        "diagnostic_msgs/msg/KeyValue": "string key; string value",
+        "diagnostic_msgs/msg/DiagnosticStatus": "byte level; string name; string message; string hardware_id; "
+                                                "diagnostic_msgs/msg/KeyValue[] values",
+        "diagnostic_msgs/msg/DiagnosticArray": "std_msgs/msg/Header header; "
+                                               "diagnostic_msgs/msg/DiagnosticStatus[] status",
+    }
+    status = open(os.path.join(SRC, "examples", "ros2", "cdm_msgs", "msg", "Status.msg")).read()
+    msgs["cdm_msgs/msg/Status"] = "; ".join(
+        line.replace("std_msgs/Header", "std_msgs/msg/Header") for line in status.splitlines()
+        if line.strip() and not line.startswith("#"))
+
+    def fields(name):
+        out = []
+        for decl in msgs[name].split("; "):
+            t, n = decl.split()
+            seq = t.endswith("[]")
+            t = t[:-2] if seq else t
+            out.append((n, prim.get(t, 1) + (144 if seq else 0), "" if t in prim else t))
+        return out
+
+    def desc(name):
+        return {"type_name": name, "fields": [
+            {"name": n, "type": {"type_id": i, "capacity": 0, "string_capacity": 0, "nested_type_name": nested}}
+            for n, i, nested in fields(name)]}
+
+    refs, todo = set(), [ros_type]
+    while todo:
+        for _, _, nested in fields(todo.pop()):
+            if nested and nested not in refs:
+                refs.add(nested)
+                todo.append(nested)
+    text = json.dumps({"type_description": desc(ros_type),
+                       "referenced_type_descriptions": [desc(r) for r in sorted(refs)]}, separators=(", ", ": "))
+    return "RIHS01_" + hashlib.sha256(text.encode()).hexdigest()
+
+
+def test_type_hash_matches_ros2():
+    """The hashing above gives the hashes ROS 2's generated code carries
+    (rosidl's *__get_type_hash of std_msgs, geometry_msgs, sensor_msgs,
+    diagnostic_msgs): the reference the bridge's USER_DATA is checked with."""
+    assert rihs01("std_msgs/msg/String") == \
+        "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
+    assert rihs01("geometry_msgs/msg/PoseStamped") == \
+        "RIHS01_10f3786d7d40fd2b54367835614bff85d4ad3b5dab62bf8bca0cc232d73b4cd8"
+    assert rihs01("diagnostic_msgs/msg/DiagnosticArray") == \
+        "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e"
+    assert rihs01("sensor_msgs/msg/JointState").startswith(
+        "RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179")
+
+
+@pytest.mark.parametrize("domain_from", ["env", "both"])
+def test_domain_from_ros_domain_id(domain_from):
+    """ROS_DOMAIN_ID alone picks the domain; --domain overrides it (the
+    environment then names another domain, where nothing may arrive)."""
+    bridge = Bridge("sim:", 3, domain_from=domain_from)
+    sub = Subscriber(bridge)
+    other = DomainParticipant(bridge.domain + 1)
+    stray = DataReader(other, Topic(other, bridge.topics["pose"], T.PoseStamped),
+                       qos=Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(100)))
+    assert sub.collect(lambda s: len(s.got["pose"]) > 50, 10), "no poses on domain %d" % bridge.domain
+    out = bridge.finish()
+    assert "DDS domain %d:" % bridge.domain in out, out
+    assert not stray.take(N=100), "poses on domain %d as well" % (bridge.domain + 1)
+
+
+def test_bad_ros_domain_id():
+    for bad in ("seven", "233", "-1", "7x"):
+        env = dict(os.environ, ROS_DOMAIN_ID=bad)
+        r = subprocess.run([CLI, "bridge", "sim:", "--dds", "--seconds", "1"], capture_output=True, text=True,
+                           timeout=30, env=env)
+        assert r.returncode == 2 and "ROS_DOMAIN_ID=\"%s\"" % bad in r.stderr, (bad, r)
+
 
 def test_usage_errors():
     r = subprocess.run([CLI, "bridge", "sim:"], capture_output=True, text=True, timeout=30)

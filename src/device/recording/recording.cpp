@@ -135,16 +135,21 @@ Format format_for_path(const std::string &path) {
     return Format::Replay;
 }
 
-bool parse_format(const std::string &name, Format &out) {
+bool parse_format(const std::string &name, Format &out, std::string *compression) {
+    if (compression) compression->clear();
     if (name == "cdmrec") out = Format::Replay;
     else if (name == "mcap") out = Format::Mcap;
+    else if (name == "mcap:zstd" || name == "mcap:lz4" || name == "mcap:none") {
+        out = Format::Mcap;
+        if (compression) *compression = name.substr(5);
+    }
     else if (name == "csv") out = Format::Csv;
     else return false;
     return true;
 }
 
 int open_writer(const std::string &path, Format format, const uint8_t *info, size_t info_len,
-                std::unique_ptr<Writer> &out, std::string &err) {
+                std::unique_ptr<Writer> &out, std::string &err, const std::string &compression) {
     if (!info || info_len == 0 || info_len > replay::kMaxReport) {
         err = "device-info report of " + std::to_string(info_len) + " bytes (1..1024)";
         return CDM_ERR_INVALID_ARG;
@@ -159,7 +164,7 @@ int open_writer(const std::string &path, Format format, const uint8_t *info, siz
               (detail.empty() ? "" : ": " + detail);
         return CDM_ERR_INVALID_ARG;
     }
-    if (format == Format::Mcap) return open_mcap_writer(path, info, info_len, di, out, err);
+    if (format == Format::Mcap) return open_mcap_writer(path, info, info_len, di, compression, out, err);
     if (format == Format::Csv) {
         auto w = std::make_unique<CsvWriter>();
         if (int rc = w->open(path, err); rc != CDM_OK) return rc;

@@ -18,15 +18,18 @@ enum class Format { Replay, Mcap, Csv };
 // By the file name's extension: ".mcap" MCAP, ".csv" the pose CSV,
 // anything else the replay format (".cdmrec" by convention).
 Format format_for_path(const std::string &path);
-// "cdmrec", "mcap", "csv" (what cdm_recorder_open_ex takes); false if none.
-bool parse_format(const std::string &name, Format &out);
+// "cdmrec", "mcap", "csv" (what cdm_recorder_open_ex takes), and MCAP
+// with its chunks' compression named: "mcap:zstd" (what "mcap" means),
+// "mcap:lz4", "mcap:none"; false if none. `compression` gets the name after
+// "mcap:" ("" without one).
+bool parse_format(const std::string &name, Format &out, std::string *compression = nullptr);
 
 // Not thread-safe: the caller serialises (the C API's recorder says so).
 class Writer {
 public:
     virtual ~Writer() = default;
     // One input report as received, its host time (ns, CLOCK_MONOTONIC of
-    // the recording machine) and, when known, the pose libcdm decoded from
+    // the recording machine; MCAP logs it shifted to wall-clock time) and, when known, the pose libcdm decoded from
     // it (MCAP and CSV keep it; the replay format keeps only the bytes).
     // Returns CDM_OK or a cdm_error with err set. A host time before the
     // previous report's is refused (CDM_ERR_INVALID_ARG, nothing written,
@@ -43,8 +46,9 @@ public:
 // starting with the device-info feature report (report ID first; checked
 // by the protocol parser before the file is created, whatever the format,
 // since every replay needs it: CDM_ERR_INVALID_ARG naming what is wrong).
+// `compression`: MCAP's chunks ("zstd" or "" the default, "lz4", "none").
 int open_writer(const std::string &path, Format format, const uint8_t *info, size_t info_len,
-                std::unique_ptr<Writer> &out, std::string &err);
+                std::unique_ptr<Writer> &out, std::string &err, const std::string &compression = "");
 
 // The CSV's header line (docs/recording.md lists the columns and units).
 extern const char *const kCsvHeader;

@@ -19,31 +19,49 @@ namespace cdm::recording {
 constexpr const char *kReportTopic = "/cdm/report";
 constexpr const char *kReportEncoding = "cdm.report.v1"; // the raw input report bytes, report ID first
 constexpr const char *kPoseTopic = "/cdm/pose";
-constexpr const char *kPoseSchema = "foxglove.PoseInFrame"; // metres, quaternion x,y,z,w: Foxglove's 3D panel
+constexpr const char *kPoseSchema = "geometry_msgs/msg/PoseStamped"; // metres, quaternion x,y,z,w
 constexpr const char *kStateTopic = "/cdm/state";
-constexpr const char *kStateSchema = "cdm.State"; // the whole cdm_pose in the library's units
+constexpr const char *kStateSchema = "cdm_msgs/msg/State"; // examples/ros2/cdm_msgs/msg/State.msg
+// A state every 10 ms of device time (100 Hz), and at every report where
+// buttons, flags or dropped change: the grip and velocity of a human hand
+// move well below 50 Hz, and 1 kHz of them would take a third of the file
+// (docs/recording.md, "Size"); the raw reports keep every sample.
+constexpr uint64_t kStatePeriodUs = 10000;
 constexpr const char *kDeviceMetadata = "cdm.device";
 constexpr const char *kPoseFrame = "cdm";
+// cdm.device metadata: CLOCK_REALTIME - CLOCK_MONOTONIC (ns, decimal) when
+// the file was opened. Log time = host time (CLOCK_MONOTONIC) + this, so
+// log times are wall-clock and never go back; a replay subtracts it again.
+constexpr const char *kClockOffsetKey = "clock_offset_ns";
 
 // A double with 17 significant digits (read back, it is the one written),
 // '.' as the decimal point whatever the process's locale (std::to_chars).
 void append_number(std::string &s, double v);
 
-// The two JSON messages of one pose (exact: doubles with 17 significant
-// digits, so a reader gets the library's numbers bit for bit).
-std::string pose_json(uint64_t host_ns, const cdm_pose &p);
-std::string state_json(uint64_t host_ns, const cdm_pose &p);
+// The ros2msg definitions (ROS 2's .msg text with its dependencies, as
+// rosbag2 stores them) of the pose and state channels.
+extern const char *const kPoseDefinition;
+extern const char *const kStateDefinition;
+
+// The CDR messages (little-endian, ROS 2's encoding) of one pose stamped
+// `wall_ns` (ns since the epoch): geometry_msgs/PoseStamped in metres, and
+// cdm_msgs/State with the rest of cdm_pose.
+std::string pose_cdr(uint64_t wall_ns, const cdm_pose &p);
+std::string state_cdr(uint64_t wall_ns, const cdm_pose &p);
 
 // Creates an MCAP recording (recording.h's open_writer, format Mcap):
-// `info` the device-info report, `di` what the protocol parser read in it.
+// `info` the device-info report, `di` what the protocol parser read in it,
+// `compression` the chunks' ("zstd", "lz4", "none"; "" is zstd).
 int open_mcap_writer(const std::string &path, const uint8_t *info, size_t info_len, const proto::DeviceInfoReport &di,
-                     std::unique_ptr<Writer> &out, std::string &err);
+                     const std::string &compression, std::unique_ptr<Writer> &out, std::string &err);
 
 // An MCAP recording as the replay transport reads it: the device-info report
-// from the cdm.device metadata, the /cdm/report messages in file order as
-// records pointing into the file's bytes (uncompressed chunks keep each
-// message's bytes contiguous). A file cut short keeps its complete chunks,
-// with the warning. Errors: CDM_ERR_PARSE, "NAME: byte OFFSET: what".
+// from the cdm.device metadata, the /cdm/report messages in file order
+// (copied out of their chunks, compressed or not) with their host times
+// (log time - clock_offset_ns; files without it: the log time). Pose and
+// state channels, in any encoding, are not read. A file cut short keeps its
+// complete chunks, with the warning. Errors: CDM_ERR_PARSE, "NAME: byte
+// OFFSET: what".
 int parse_mcap(std::vector<uint8_t> bytes, const std::string &name, replay::File &out, std::string &err);
 
 } // namespace cdm::recording

@@ -171,11 +171,10 @@ private:
 
 } // namespace
 
-int open_sim(const Uri &u, TransportPtr &out, std::string &err) {
-    if (!u.path.empty()) {
-        err = "URI \"" + u.text + "\": sim: takes options after '?', e.g. sim:?rate=500&noise=0.1";
-        return CDM_ERR_INVALID_ARG;
-    }
+namespace {
+
+// A sim: URI's options.
+struct SimOptions {
     sim::SensorOptions so;
     std::string motion = "random", effects, device_path, truth_path, serial = "CDMSIM0001";
     bool realtime = true, have_effect_seed = false;
@@ -183,59 +182,73 @@ int open_sim(const Uri &u, TransportPtr &out, std::string &err) {
     sim::FaultPlan faults;
     sim::JigMotionOptions jig;
     bool any_jig_option = false;
+};
+
+// One jig_* option into o.jig; false + err when its value is refused.
+bool jig_option(const Uri &u, const std::string &k, const std::string &v, SimOptions &o, std::string &err) {
+    uint64_t n = 0;
+    bool ok = true;
+    o.any_jig_option = true;
+    if (k == "jig_n") {
+        ok = option_u64(u, k, v, 1, 1000, n, err);
+        o.jig.plan.n = int(n);
+    } else if (k == "jig_pitch") {
+        ok = option_double(u, k, v, 1e-3, 1000.0, o.jig.plan.pitch_mm, err);
+    } else if (k == "jig_heights") {
+        std::string herr;
+        ok = parse_heights(v, o.jig.plan.heights_mm, herr);
+        if (!ok) err = "URI \"" + u.text + "\": option " + herr;
+    } else if (k == "jig_samples") {
+        ok = option_u64(u, k, v, 1, 1000000, n, err);
+        o.jig.plan.samples = int(n);
+    } else if (k == "jig_tolerance") {
+        ok = option_double(u, k, v, 0.0, 10.0, o.jig.tolerance_mm, err);
+    } else { // jig_transit
+        ok = option_u64(u, k, v, 1, 100000, n, err);
+        o.jig.transit = int(n);
+    }
+    return ok;
+}
+
+// The URI's options into o: CDM_OK, or an error code and err naming the
+// option and what is wrong with it.
+int parse_sim_options(const Uri &u, SimOptions &o, std::string &err) {
+    if (!u.path.empty()) {
+        err = "URI \"" + u.text + "\": sim: takes options after '?', e.g. sim:?rate=500&noise=0.1";
+        return CDM_ERR_INVALID_ARG;
+    }
     for (const auto &kv : u.options) {
         const std::string &k = kv.first, &v = kv.second;
-        uint64_t n = 0;
         bool ok = true;
-        if (k == "rate") ok = option_double(u, k, v, 1.0, 100000.0, so.rate_hz, err);
-        else if (k == "noise") ok = option_double(u, k, v, 0.0, 100.0, so.noise_mm, err);
-        else if (k == "imu_noise") ok = option_double(u, k, v, 0.0, 1.0, so.imu_noise_rad, err);
-        else if (k == "hall_noise") ok = option_double(u, k, v, 0.0, 4095.0, so.hall_noise, err);
-        else if (k == "seed") ok = option_u64(u, k, v, 0, UINT64_MAX, so.seed, err);
-        else if (k == "effect_seed") ok = have_effect_seed = option_u64(u, k, v, 0, UINT64_MAX, effect_seed, err);
-        else if (k == "stall_after") ok = option_u64(u, k, v, 1, UINT64_MAX, stall_after, err);
+        if (k == "rate") ok = option_double(u, k, v, 1.0, 100000.0, o.so.rate_hz, err);
+        else if (k == "noise") ok = option_double(u, k, v, 0.0, 100.0, o.so.noise_mm, err);
+        else if (k == "imu_noise") ok = option_double(u, k, v, 0.0, 1.0, o.so.imu_noise_rad, err);
+        else if (k == "hall_noise") ok = option_double(u, k, v, 0.0, 4095.0, o.so.hall_noise, err);
+        else if (k == "seed") ok = option_u64(u, k, v, 0, UINT64_MAX, o.so.seed, err);
+        else if (k == "effect_seed") ok = o.have_effect_seed = option_u64(u, k, v, 0, UINT64_MAX, o.effect_seed, err);
+        else if (k == "stall_after") ok = option_u64(u, k, v, 1, UINT64_MAX, o.stall_after, err);
         else if (k == "realtime") {
             ok = v == "0" || v == "1";
-            realtime = v == "1";
+            o.realtime = v == "1";
             if (!ok) err = "URI \"" + u.text + "\": option realtime=\"" + v + "\" must be 0 or 1";
         } else if (k == "motion") {
             ok = v == "random" || v == "still" || v == "circle" || v == "jig";
-            motion = v;
+            o.motion = v;
             if (!ok) err = "URI \"" + u.text + "\": option motion=\"" + v + "\" must be random, still, circle or jig";
-        } else if (k == "effects") effects = v;
-        else if (k == "device") device_path = v;
-        else if (k == "truth") truth_path = v;
+        } else if (k == "effects") o.effects = v;
+        else if (k == "device") o.device_path = v;
+        else if (k == "truth") o.truth_path = v;
         else if (k == "serial") {
             ok = !v.empty() && v.size() <= 16 && v.find_first_not_of(
                 "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_.") == std::string::npos;
-            serial = v;
+            o.serial = v;
             if (!ok) err = "URI \"" + u.text + "\": option serial=\"" + v + "\" must be 1..16 of [A-Za-z0-9-_.]";
-        } else if (k == "jig_n") {
-            ok = option_u64(u, k, v, 1, 1000, n, err);
-            jig.plan.n = int(n);
-            any_jig_option = true;
-        } else if (k == "jig_pitch") {
-            ok = option_double(u, k, v, 1e-3, 1000.0, jig.plan.pitch_mm, err);
-            any_jig_option = true;
-        } else if (k == "jig_heights") {
-            std::string herr;
-            ok = parse_heights(v, jig.plan.heights_mm, herr);
-            if (!ok) err = "URI \"" + u.text + "\": option " + herr;
-            any_jig_option = true;
-        } else if (k == "jig_samples") {
-            ok = option_u64(u, k, v, 1, 1000000, n, err);
-            jig.plan.samples = int(n);
-            any_jig_option = true;
-        } else if (k == "jig_tolerance") {
-            ok = option_double(u, k, v, 0.0, 10.0, jig.tolerance_mm, err);
-            any_jig_option = true;
-        } else if (k == "jig_transit") {
-            ok = option_u64(u, k, v, 1, 100000, n, err);
-            jig.transit = int(n);
-            any_jig_option = true;
+        } else if (k == "jig_n" || k == "jig_pitch" || k == "jig_heights" || k == "jig_samples" ||
+                   k == "jig_tolerance" || k == "jig_transit") {
+            ok = jig_option(u, k, v, o, err);
         } else {
             bool known = false;
-            ok = sim::parse_fault_option(u, k, v, faults, known, err);
+            ok = sim::parse_fault_option(u, k, v, o.faults, known, err);
             if (!known) {
                 err = unknown_option(u, k, (std::string(kSimOptions) + ", " + sim::kFaultOptions).c_str());
                 return CDM_ERR_INVALID_ARG;
@@ -243,102 +256,116 @@ int open_sim(const Uri &u, TransportPtr &out, std::string &err) {
         }
         if (!ok) return CDM_ERR_INVALID_ARG;
     }
-    if (any_jig_option && motion != "jig") {
+    if (o.any_jig_option && o.motion != "jig") {
         err = "URI \"" + u.text + "\": jig_* options need motion=jig";
         return CDM_ERR_INVALID_ARG;
     }
-    if (!device_path.empty() && !truth_path.empty()) {
+    if (!o.device_path.empty() && !o.truth_path.empty()) {
         err = "URI \"" + u.text + "\": give device= or truth= (which carries its own geometry), not both";
         return CDM_ERR_INVALID_ARG;
     }
+    return CDM_OK;
+}
 
-    // The physical truth: nominal geometry, or a calibration's model, plus
-    // any hidden effects.
+// The physical truth: nominal geometry, or a calibration's model, plus
+// any hidden effects. CDM_OK, or an error code and err.
+int load_truth(const Uri &u, const SimOptions &o, std::shared_ptr<Model> &model, std::string &err) {
     DeviceGeometry g;
-    std::shared_ptr<Model> model;
-    if (!device_path.empty()) {
+    if (!o.device_path.empty()) {
         std::string text;
-        if (!io::read_file(device_path, io::kJsonMaxBytes, text, err, "device description")) {
+        if (!io::read_file(o.device_path, io::kJsonMaxBytes, text, err, "device description")) {
             err = "URI \"" + u.text + "\": option device: " + err;
             return CDM_ERR_INVALID_ARG;
         }
-        if (!io::parse_device_json(text, device_path, g, err)) {
+        if (!io::parse_device_json(text, o.device_path, g, err)) {
             err = "URI \"" + u.text + "\": option device: " + err;
             return CDM_ERR_PARSE;
         }
         model = std::make_shared<Model>(g);
-    } else if (!truth_path.empty()) {
+    } else if (!o.truth_path.empty()) {
         model = std::make_shared<Model>(g);
         std::string text;
-        if (!io::read_file(truth_path, io::kJsonMaxBytes, text, err, "calibration")) {
+        if (!io::read_file(o.truth_path, io::kJsonMaxBytes, text, err, "calibration")) {
             err = "URI \"" + u.text + "\": option truth: " + err;
             return CDM_ERR_INVALID_ARG;
         }
-        if (!io::parse_calibration_json(text, truth_path, *model, err)) {
+        if (!io::parse_calibration_json(text, o.truth_path, *model, err)) {
             err = "URI \"" + u.text + "\": option truth: " + err;
             return CDM_ERR_PARSE;
         }
     } else {
         model = std::make_shared<Model>(g);
     }
-    if (!effects.empty()) {
-        if (!have_effect_seed) effect_seed = so.seed;
-        size_t start = 0, index = 0;
-        while (start <= effects.size()) {
-            size_t end = effects.find(',', start);
-            if (end == std::string::npos) end = effects.size();
-            const std::string name = effects.substr(start, end - start);
-            std::string eerr;
-            if (name.empty() || !model->add_effect_random(name, effect_seed + index, eerr)) {
-                err = "URI \"" + u.text + "\": option effects: \"" + name + "\": " +
-                      (eerr.empty() ? "empty effect name" : eerr);
-                return CDM_ERR_INVALID_ARG;
-            }
-            ++index;
-            start = end + 1;
+    if (o.effects.empty()) return CDM_OK;
+    const uint64_t effect_seed = o.have_effect_seed ? o.effect_seed : o.so.seed;
+    size_t start = 0, index = 0;
+    while (start <= o.effects.size()) {
+        size_t end = o.effects.find(',', start);
+        if (end == std::string::npos) end = o.effects.size();
+        const std::string name = o.effects.substr(start, end - start);
+        std::string eerr;
+        if (name.empty() || !model->add_effect_random(name, effect_seed + index, eerr)) {
+            err = "URI \"" + u.text + "\": option effects: \"" + name + "\": " +
+                  (eerr.empty() ? "empty effect name" : eerr);
+            return CDM_ERR_INVALID_ARG;
         }
+        ++index;
+        start = end + 1;
     }
-    ModelPtr truth = model;
+    return CDM_OK;
+}
 
-    // What the firmware says about itself: the 16-bit ADC at 0.01 mm per
-    // count from 0 mm (0..655.35 mm covers every cable length of the
-    // default frame), a 12-bit Hall sensor whose field falls as the jaw
-    // opens, and the nominal geometry (hidden effects are, by definition,
-    // not in the device info).
+// What the firmware says about itself: the 16-bit ADC at 0.01 mm per
+// count from 0 mm (0..655.35 mm covers every cable length of the
+// default frame), a 12-bit Hall sensor whose field falls as the jaw
+// opens, and the nominal geometry (hidden effects are, by definition,
+// not in the device info).
+proto::DeviceInfoReport sim_device_info(const SimOptions &o, const DeviceGeometry &tg) {
     proto::DeviceInfoReport info;
     info.fw_major = 1;
     info.fw_minor = 0;
     info.fw_patch = 0;
     info.adc_bits = 16;
-    std::snprintf(info.serial, sizeof info.serial, "%s", serial.c_str());
-    info.report_rate_hz = float(so.rate_hz);
+    std::snprintf(info.serial, sizeof info.serial, "%s", o.serial.c_str());
+    info.report_rate_hz = float(o.so.rate_hz);
     for (int i = 0; i < 4; ++i) {
         info.pot_scale_mm[i] = 0.01f;
         info.pot_offset_mm[i] = 0.0f;
     }
-    const DeviceGeometry &tg = truth->geometry();
     info.a_mm = float(tg.a_mm);
     info.b_mm = float(tg.b_mm);
     info.m_mm = float(tg.m_mm);
     info.hall_closed = 2600;
     info.hall_open = 1400;
     info.grip_open_rad = 0.6f;
+    return info;
+}
 
+} // namespace
+
+int open_sim(const Uri &u, TransportPtr &out, std::string &err) {
+    SimOptions o;
+    if (const int rc = parse_sim_options(u, o, err); rc != CDM_OK) return rc;
+    std::shared_ptr<Model> model;
+    if (const int rc = load_truth(u, o, model, err); rc != CDM_OK) return rc;
+    ModelPtr truth = model;
+    const proto::DeviceInfoReport info = sim_device_info(o, truth->geometry());
     std::unique_ptr<sim::Motion> m;
-    if (motion == "random") m = sim::make_random_motion(so.seed ^ 0x9E3779B97F4A7C15ull, info.grip_open_rad);
-    else if (motion == "still") m = sim::make_still_motion();
-    else if (motion == "circle") m = sim::make_circle_motion(info.grip_open_rad);
+    if (o.motion == "random") m = sim::make_random_motion(o.so.seed ^ 0x9E3779B97F4A7C15ull, info.grip_open_rad);
+    else if (o.motion == "still") m = sim::make_still_motion();
+    else if (o.motion == "circle") m = sim::make_circle_motion(info.grip_open_rad);
     else {
         std::string jerr;
-        if (!check_jig_options(jig.plan, jerr)) {
+        if (!check_jig_options(o.jig.plan, jerr)) {
             err = "URI \"" + u.text + "\": " + jerr;
             return CDM_ERR_INVALID_ARG;
         }
-        jig.seed = so.seed ^ 0x6A09E667F3BCC909ull;
+        sim::JigMotionOptions jig = o.jig;
+        jig.seed = o.so.seed ^ 0x6A09E667F3BCC909ull;
         m = sim::make_jig_motion(truth, jig);
     }
-    out = std::make_unique<SimTransport>(u.text, truth, info, std::move(m), so, realtime, stall_after,
-                                         std::move(faults));
+    out = std::make_unique<SimTransport>(u.text, truth, info, std::move(m), o.so, o.realtime, o.stall_after,
+                                         std::move(o.faults));
     return CDM_OK;
 }
 

@@ -83,6 +83,73 @@ bool fit_not_worse_than_nested(Model &model, const std::vector<PreparedPos> &pos
     return true;
 }
 
+// The plate's holes and fixture heights in out.grid and out.fit_options.
+void lay_out_jig(const Dataset &data, CalibrationFit &out) {
+    out.grid = diag::make_grid(out.pos, data.heights);
+    out.fit_options.hole = out.grid.hole_index; // weighed by FitOptions::hole_sigma, estimated below
+    // The jig as it is (calib/evaluation/jig.h): each fixture height's own x
+    // error is fitted beside the model, so that no device effect is bent to
+    // follow a spacer's error.
+    if (out.grid.layered && data.heights.size() >= 2) {
+        out.fit_options.fixture = out.grid.height_index;
+        out.fit_options.fixture_count = int(data.heights.size());
+    }
+}
+
+// Each reading's own white error beyond the pots' noise of the mean (a
+// pot's hysteresis, a wiper's offset per approach, a seat that tilts),
+// from the cables' misclosure, which no position error moves: weighing
+// the four readings as one block trusts that direction to the pots'
+// noise alone, and an unseen per-reading error of 0.02 mm made a
+// ripple of the noise and was recommended. Estimated from this model: a
+// model error that is not smooth across the plate (a short ripple left
+// unmodelled) leaks into it, and the diagnosis estimates it again on the
+// model it recommends (opt.reading_noise then set; calib/diagnosis/diagnose.cpp). It
+// is part of every position's noise from here on (var_mean, cov_mean):
+// the fits' weights, the positions' own tests, the noise floor, and
+// what the jig's tolerance is estimated beyond.
+// Returns whether the model is to be fitted again with it.
+bool weigh_reading_noise(const FitCalibrationOptions &opt, const Model &model, CalibrationFit &out) {
+    out.reading = diag::estimate_reading_noise(out.fitted, out.grid);
+    if (opt.reading_noise) {
+        const diag::ReadingNoise first = out.reading;
+        out.reading = *opt.reading_noise;
+        out.reading.source = "re-estimated";
+        out.reading.first_variance = first.variance;
+        out.reading.first_se = first.se;
+    }
+    bool refit = false;
+    if (out.reading.sigma > 0) {
+        const double t2 = out.reading.sigma * out.reading.sigma;
+        for (auto &p : out.pos) {
+            p.var_mean.array() += t2;
+            p.cov_mean.diagonal().array() += t2;
+            p.reading_var = t2;
+        }
+        out.fitted = diag::evaluate(model, out.pos);
+        refit = model.effect_count() > 0;
+    }
+    return refit;
+}
+
+// The seed's ellipsoid fitted in position space on top of out.model.
+// The Position-stage effect `name`, fitted in closed form to what the
+// physical model leaves (fit_ellipsoid, eq. 4-5), its three parameters in
+// their declared order.
+bool add_ellipsoid(const std::string &name, CalibrationFit &out, std::string &err) {
+    Ellipsoid e2 = diag::ellipsoid_on(out.fitted, out.pos);
+    const auto &ps = find_effect(name)->params;
+    if (ps.size() != 3) {
+        err = "effect \"" + name + "\": a Position-stage effect is the seed's ellipsoid, of 3 parameters";
+        return false;
+    }
+    if (!out.model.add_effect(name, ParamValues{{ps[0].name, e2.L}, {ps[1].name, e2.M}, {ps[2].name, e2.N}}, err))
+        return false;
+    out.fitted = diag::evaluate(out.model, out.pos);
+    out.report.n_free += 3;
+    return true;
+}
+
 } // namespace
 
 bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCalibrationOptions &opt,
@@ -94,15 +161,7 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
         err = data.path + ": " + std::to_string(pos.size()) + " jig positions; a fit needs at least 4";
         return false;
     }
-    out.grid = diag::make_grid(pos, data.heights);
-    out.fit_options.hole = out.grid.hole_index; // weighed by FitOptions::hole_sigma, estimated below
-    // The jig as it is (diag_jig.h): each fixture height's own x error is
-    // fitted beside the model, so that no device effect is bent to follow
-    // a spacer's error.
-    if (out.grid.layered && data.heights.size() >= 2) {
-        out.fit_options.fixture = out.grid.height_index;
-        out.fit_options.fixture_count = int(data.heights.size());
-    }
+    lay_out_jig(data, out);
     // A machined plate is within ~0.05 mm: white scatter beyond that is not
     // the jig's and must not hide an effect. Without repeated samples the
     // pots' noise is white scatter too, and there is nothing to cap against.
@@ -155,37 +214,7 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
         return false;
     }
     out.fitted = diag::evaluate(model, pos);
-    // Each reading's own white error beyond the pots' noise of the mean (a
-    // pot's hysteresis, a wiper's offset per approach, a seat that tilts),
-    // from the cables' misclosure, which no position error moves: weighing
-    // the four readings as one block trusts that direction to the pots'
-    // noise alone, and an unseen per-reading error of 0.02 mm made a
-    // ripple of the noise and was recommended. Estimated from this model: a
-    // model error that is not smooth across the plate (a short ripple left
-    // unmodelled) leaks into it, and the diagnosis estimates it again on the
-    // model it recommends (opt.reading_noise then set; diagnose.cpp). It
-    // is part of every position's noise from here on (var_mean, cov_mean):
-    // the fits' weights, the positions' own tests, the noise floor, and
-    // what the jig's tolerance is estimated beyond.
-    out.reading = diag::estimate_reading_noise(out.fitted, out.grid);
-    if (opt.reading_noise) {
-        const diag::ReadingNoise first = out.reading;
-        out.reading = *opt.reading_noise;
-        out.reading.source = "re-estimated";
-        out.reading.first_variance = first.variance;
-        out.reading.first_se = first.se;
-    }
-    bool refit = false;
-    if (out.reading.sigma > 0) {
-        const double t2 = out.reading.sigma * out.reading.sigma;
-        for (auto &p : out.pos) {
-            p.var_mean.array() += t2;
-            p.cov_mean.diagonal().array() += t2;
-            p.reading_var = t2;
-        }
-        out.fitted = diag::evaluate(model, pos);
-        refit = model.effect_count() > 0;
-    }
+    bool refit = weigh_reading_noise(opt, model, out);
     // Jig tolerance from the white part of the residual, and the part of it
     // the plate's holes share at every height; then refit with them.
     if (!user_jig) {
@@ -202,22 +231,9 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
         out.fitted = diag::evaluate(model, pos);
     }
     // The Position-stage effect (the seed's ellipsoid) on top of the
-    // physical model, when asked for: fitted in closed form to what the
-    // physical model leaves (fit_ellipsoid, eq. 4-5), its three parameters
-    // in their declared order.
+    // physical model, when asked for.
     const auto pe = std::find_if(opt.effects.begin(), opt.effects.end(), on_position);
-    if (pe != opt.effects.end()) {
-        Ellipsoid e2 = diag::ellipsoid_on(out.fitted, pos);
-        const auto &ps = find_effect(*pe)->params;
-        if (ps.size() != 3) {
-            err = "effect \"" + *pe + "\": a Position-stage effect is the seed's ellipsoid, of 3 parameters";
-            return false;
-        }
-        if (!model.add_effect(*pe, ParamValues{{ps[0].name, e2.L}, {ps[1].name, e2.M}, {ps[2].name, e2.N}}, err))
-            return false;
-        out.fitted = diag::evaluate(model, pos);
-        out.report.n_free += 3;
-    }
+    if (pe != opt.effects.end() && !add_ellipsoid(*pe, out, err)) return false;
     if (opt.fitted_maxima && !diag::sample_pass(data, pos, {&out.fitted}, {{&g, nullptr, &out.nominal}}, err))
         return false;
     if (!opt.nominal_pending && seed.valid() && !seed.get()) {

@@ -1,9 +1,10 @@
-// See dataset_parser.h: a byte source fed to a Parser in blocks of lines.
+// See parser.h: a byte source fed to a Parser in blocks of lines.
 #include "calib/dataset/parser.h"
 
 #include <algorithm>
 #include <condition_variable>
 #include <deque>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <system_error>
@@ -90,42 +91,26 @@ bool block_rows(Parser &p, const Block &bk, std::string &err) {
     return true;
 }
 
-} // namespace
+constexpr size_t kBlock = size_t(1) << 18, kAhead = 4;
 
-// Feeds `read(buf, n)` (bytes read, 0 at the end, < 0 on error) to the
-// parser line by line, in blocks of whole lines of about kBlock bytes (a
-// line longer than that is held whole), with at most kAhead blocks read
-// ahead: memory stays bounded by the file's own bound (io::kDatasetMaxBytes;
-// five blocks of very long lines may hold most of it) and otherwise by the
-// blocks. Once the header is read and two blocks wait, a second thread
-// finds the values of blocks ahead while this one takes the rows of the
-// block in turn (Block); in turn on this thread alone when the input is
-// shorter, the machine has one processor, or no thread can be started.
-// read_error (optional): set when the failure returned is read's (a fault
-// in the lines read before it is returned first, as in turn).
-bool stream_lines(const std::function<long(char *, size_t)> &read, Parser &p, std::string &err, bool *read_error) {
-    constexpr size_t kBlock = size_t(1) << 18, kAhead = 4;
-    std::vector<char> carry; // bytes read after the last block's last '\n'
-    bool eof = false, failed = false;
-    // A read that failed (err says why) ends the reading; the lines read
-    // before it are still taken first, as a reading in turn would have
-    // taken them, and a fault among them is the error.
-    auto read_failed = [&] {
-        if (read_error) *read_error = true;
-        return false;
-    };
-    // The next block: 1, or 0 at the end, or -1 once a read failed.
-    auto next = [&](Block &bk) -> int {
-        if (failed) return -1;
-        bk.text.swap(carry);
-        carry.clear();
+// The input in blocks of whole lines of about kBlock bytes (a line longer
+// than that is held whole).
+class BlockSource {
+public:
+    explicit BlockSource(const std::function<long(char *, size_t)> &read) : read_(read) {}
+    // The next block: 1, or 0 at the end, or -1 once a read failed (its
+    // whole lines before the failure come first, as a block: 1).
+    int next(Block &bk) {
+        if (failed_) return -1;
+        bk.text.swap(carry_);
+        carry_.clear();
         for (;;) {
-            if (eof) return bk.text.empty() ? 0 : 1;
+            if (eof_) return bk.text.empty() ? 0 : 1;
             const size_t have = bk.text.size();
             bk.text.resize(have + kBlock);
-            const long n = read(bk.text.data() + have, kBlock);
+            const long n = read_(bk.text.data() + have, kBlock);
             if (n < 0) {
-                failed = true;
+                failed_ = true;
                 bk.text.resize(have);
                 const void *nl = memrchr(bk.text.data(), '\n', have);
                 if (!nl) return -1;
@@ -134,65 +119,79 @@ bool stream_lines(const std::function<long(char *, size_t)> &read, Parser &p, st
             }
             bk.text.resize(have + size_t(n));
             if (n == 0) {
-                eof = true;
+                eof_ = true;
                 continue;
             }
             const void *nl = memrchr(bk.text.data() + have, '\n', size_t(n));
             if (!nl) continue; // no line ends yet: one longer than a block is held whole
             const size_t cut = size_t(static_cast<const char *>(nl) - bk.text.data()) + 1;
-            carry.assign(bk.text.begin() + long(cut), bk.text.end());
+            carry_.assign(bk.text.begin() + long(cut), bk.text.end());
             bk.text.resize(cut);
             return 1;
         }
-    };
-    std::vector<std::pair<const char *, const char *>> f;
-    std::vector<std::unique_ptr<Block>> pool;
-    for (size_t k = 0; k <= kAhead; ++k) pool.push_back(std::make_unique<Block>());
-    // In turn until the header is read (every line to Parser::line).
-    Block *first = pool[0].get();
-    while (!p.have_header()) {
-        const int r = next(*first);
-        if (r < 0) return read_failed();
-        if (r == 0) return p.finish(err);
-        first->rows.clear();
-        first->slow = 0;
-        first->slow_rel = 0;
-        if (!block_rows(p, *first, err)) return false;
     }
+
+private:
+    const std::function<long(char *, size_t)> &read_;
+    std::vector<char> carry_; // bytes read after the last block's last '\n'
+    bool eof_ = false, failed_ = false;
+};
+
+// The blocks read and waiting, in file order (the parser's thread pushes
+// and pops), and the helper thread that finds their values ahead. The
+// helper ends however the reading does (an error, a tap that throws).
+struct ValueStage {
     std::mutex mu;
     std::condition_variable cv;
-    std::deque<Block *> queue; // read, in file order (this thread pushes and pops)
+    std::deque<Block *> queue;
     bool stop = false;
-    auto claim = [&]() -> Block * { // under mu
+    std::thread helper;
+
+    ~ValueStage() {
+        if (!helper.joinable()) return;
+        {
+            std::lock_guard<std::mutex> lk(mu);
+            stop = true;
+        }
+        cv.notify_all();
+        helper.join();
+    }
+    bool any_read() const {
+        return std::any_of(queue.begin(), queue.end(), [](Block *q) { return q->state == Block::Read; });
+    }
+    Block *claim() { // under mu
         for (Block *b : queue)
             if (b->state == Block::Read) {
                 b->state = Block::Claimed;
                 return b;
             }
         return nullptr;
-    };
-    auto done = [&](Block *b) {
+    }
+    void done(Block *b) {
         {
             std::lock_guard<std::mutex> lk(mu);
             b->state = Block::Done;
         }
         cv.notify_all();
-    };
-    std::thread helper;
-    // Started once two blocks wait (a shorter input is read in turn).
-    bool helper_tried = std::thread::hardware_concurrency() <= 1;
-    auto start_helper = [&] {
-        helper_tried = true;
+    }
+    void push(Block *b) {
+        {
+            std::lock_guard<std::mutex> lk(mu);
+            b->state = Block::Read;
+            queue.push_back(b);
+        }
+        cv.notify_all();
+    }
+    // The helper: claims the first block waiting, finds its values.
+    void start_helper(const Parser &p) {
         try {
-            helper = std::thread([&] {
+            helper = std::thread([this, &p] {
                 std::vector<std::pair<const char *, const char *>> fields;
                 for (;;) {
                     Block *b;
                     {
                         std::unique_lock<std::mutex> lk(mu);
-                        cv.wait(lk, [&] { return stop || std::any_of(queue.begin(), queue.end(), [](Block *q) {
-                                                     return q->state == Block::Read;
-                                                 }); });
+                        cv.wait(lk, [&] { return stop || any_read(); });
                         if (stop) return;
                         b = claim();
                     }
@@ -209,60 +208,86 @@ bool stream_lines(const std::function<long(char *, size_t)> &read, Parser &p, st
         } catch (const std::system_error &) {
             // in turn, on this thread
         }
-    };
-    // The helper ends however this does (an error, a tap that throws).
-    struct Join {
-        std::thread &t;
-        std::mutex &mu;
-        std::condition_variable &cv;
-        bool &stop;
-        ~Join() {
-            if (!t.joinable()) return;
-            {
-                std::lock_guard<std::mutex> lk(mu);
-                stop = true;
-            }
-            cv.notify_all();
-            t.join();
-        }
-    } join{helper, mu, cv, stop};
-    std::vector<Block *> spare;
-    for (auto &b : pool) spare.push_back(b.get());
-    for (;;) {
-        while (queue.size() < kAhead && !spare.empty()) {
-            Block *b = spare.back();
-            const int r = next(*b);
-            if (r < 0 && queue.empty()) return read_failed();
-            if (r <= 0) break;
-            spare.pop_back();
-            {
-                std::lock_guard<std::mutex> lk(mu);
-                b->state = Block::Read;
-                queue.push_back(b);
-            }
-            cv.notify_all();
-        }
-        if (queue.empty()) break;
-        if (!helper_tried && queue.size() >= 2) start_helper();
-        Block *front = queue.front();
-        for (;;) { // front's values: found here, or by the helper (this thread meanwhile finds another's)
+    }
+    // front's values: found here, or by the helper (this thread meanwhile
+    // finds another's).
+    void wait_values(const Parser &p, Block *front, std::vector<std::pair<const char *, const char *>> &f) {
+        for (;;) {
             Block *mine;
             {
                 std::unique_lock<std::mutex> lk(mu);
-                cv.wait(lk, [&] { return front->state != Block::Claimed || std::any_of(queue.begin(), queue.end(), [](Block *q) {
-                                             return q->state == Block::Read;
-                                         }); });
-                if (front->state == Block::Done) break;
+                cv.wait(lk, [&] { return front->state != Block::Claimed || any_read(); });
+                if (front->state == Block::Done) return;
                 mine = front->state == Block::Read ? front : claim();
                 mine->state = Block::Claimed;
             }
             block_values(p, *mine, f);
             done(mine);
         }
+    }
+};
+
+} // namespace
+
+// Feeds `read(buf, n)` (bytes read, 0 at the end, < 0 on error) to the
+// parser line by line, in blocks of whole lines of about kBlock bytes (a
+// line longer than that is held whole), with at most kAhead blocks read
+// ahead: memory stays bounded by the file's own bound (io::kDatasetMaxBytes;
+// five blocks of very long lines may hold most of it) and otherwise by the
+// blocks. Once the header is read and two blocks wait, a second thread
+// finds the values of blocks ahead while this one takes the rows of the
+// block in turn (Block); in turn on this thread alone when the input is
+// shorter, the machine has one processor, or no thread can be started.
+// read_error (optional): set when the failure returned is read's (a fault
+// in the lines read before it is returned first, as in turn).
+bool stream_lines(const std::function<long(char *, size_t)> &read, Parser &p, std::string &err, bool *read_error) {
+    BlockSource source(read);
+    // A read that failed (err says why) ends the reading; the lines read
+    // before it are still taken first, as a reading in turn would have
+    // taken them, and a fault among them is the error.
+    auto read_failed = [&] {
+        if (read_error) *read_error = true;
+        return false;
+    };
+    std::vector<std::pair<const char *, const char *>> f;
+    std::vector<std::unique_ptr<Block>> pool;
+    for (size_t k = 0; k <= kAhead; ++k) pool.push_back(std::make_unique<Block>());
+    // In turn until the header is read (every line to Parser::line).
+    Block *first = pool[0].get();
+    while (!p.have_header()) {
+        const int r = source.next(*first);
+        if (r < 0) return read_failed();
+        if (r == 0) return p.finish(err);
+        first->rows.clear();
+        first->slow = 0;
+        first->slow_rel = 0;
+        if (!block_rows(p, *first, err)) return false;
+    }
+    ValueStage stage;
+    // The helper is started once two blocks wait (a shorter input is read in turn).
+    bool helper_tried = std::thread::hardware_concurrency() <= 1;
+    std::vector<Block *> spare;
+    for (auto &b : pool) spare.push_back(b.get());
+    for (;;) {
+        while (stage.queue.size() < kAhead && !spare.empty()) {
+            Block *b = spare.back();
+            const int r = source.next(*b);
+            if (r < 0 && stage.queue.empty()) return read_failed();
+            if (r <= 0) break;
+            spare.pop_back();
+            stage.push(b);
+        }
+        if (stage.queue.empty()) break;
+        if (!helper_tried && stage.queue.size() >= 2) {
+            helper_tried = true;
+            stage.start_helper(p);
+        }
+        Block *front = stage.queue.front();
+        stage.wait_values(p, front, f);
         if (!block_rows(p, *front, err)) return false;
         {
-            std::lock_guard<std::mutex> lk(mu);
-            queue.pop_front();
+            std::lock_guard<std::mutex> lk(stage.mu);
+            stage.queue.pop_front();
         }
         spare.push_back(front);
     }

@@ -1,4 +1,4 @@
-// See diag_eval.h.
+// See eval.h.
 #include "calib/evaluation/eval.h"
 
 #include <algorithm>
@@ -142,6 +142,22 @@ bool for_each_sample_piped(const Dataset &d, const ChunkVisit &visit, std::strin
     return ok;
 }
 
+// The direction the columns of a reading Jacobian J leave out: the four
+// signed 3 x 3 minors of J (the cross product's four-dimensional kin), unit
+// length; none when the columns are not independent.
+Eigen::Vector4d left_out_direction(const Eigen::Matrix<double, 4, 3, Eigen::RowMajor> &J) {
+    Eigen::Vector4d dir;
+    for (int i = 0; i < 4; ++i) {
+        Eigen::Matrix3d M;
+        for (int r = 0, k = 0; r < 4; ++r)
+            if (r != i) M.row(k++) = J.row(r);
+        dir(i) = (i % 2 ? -1.0 : 1.0) * M.determinant();
+    }
+    const double nd = dir.norm();
+    dir = nd > 0 ? Eigen::Vector4d(dir / nd) : Eigen::Vector4d::Zero();
+    return dir;
+}
+
 Eval init_eval(size_t P) {
     Eval E;
     E.res.assign(P, V3::Zero());
@@ -229,18 +245,7 @@ Eval evaluate(const Model &m, const std::vector<PreparedPos> &pos, int threads) 
         const Eigen::Matrix3d C = E.Jp[j] * Cl * E.Jp[j].transpose();
         for (int a = 0; a < 3; ++a) E.var_mean[j](a) = std::max(C(a, a), 1e-10);
         if (J.allFinite()) {
-            // The direction J's columns leave out: the four signed 3 x 3
-            // minors of J (the cross product's four-dimensional kin), unit
-            // length; none when the columns are not independent.
-            Eigen::Vector4d dir;
-            for (int i = 0; i < 4; ++i) {
-                Eigen::Matrix3d M;
-                for (int r = 0, k = 0; r < 4; ++r)
-                    if (r != i) M.row(k++) = J.row(r);
-                dir(i) = (i % 2 ? -1.0 : 1.0) * M.determinant();
-            }
-            const double nd = dir.norm();
-            dir = nd > 0 ? Eigen::Vector4d(dir / nd) : Eigen::Vector4d::Zero();
+            const Eigen::Vector4d dir = left_out_direction(J);
             const Eigen::Vector4d r = pos[j].mean - Eigen::Map<const Eigen::Vector4d>(&y[4 * slot[j]]);
             E.mis[j] = dir.dot(r);
             E.mis_var[j] = dir.dot(Cl * dir);

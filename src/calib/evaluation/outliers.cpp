@@ -1,4 +1,4 @@
-// See diag_outliers.h. docs/calibration.md, "Outliers", explains the rules.
+// See outliers.h. docs/calibration.md, "Outliers", explains the rules.
 #include "calib/evaluation/outliers.h"
 
 #include <algorithm>
@@ -77,29 +77,13 @@ double join_count_p(const Grid &G, const std::vector<char> &ok, const std::vecto
     return (1.0 + at_least) / (1.0 + kRelabelings);
 }
 
-std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, size_t already, size_t read,
-                                   Declined *declined) {
-    const size_t P = E.res.size();
-    size_t used = 0;
-    for (size_t j = 0; j < P; ++j)
-        if (E.ok[j]) ++used;
+// The positions whose chi-square chi2[j] is above q and whose residual,
+// against the mean of their neighbours' (at least two), is above q too:
+// those the model and their neighbours both disown.
+static std::vector<Outlier> disowned(const Eval &E, const Grid &G, const V3 &jig, const std::vector<double> &chi2,
+                                     double q) {
     std::vector<Outlier> out;
-    if (used < 3) return out;
-    const double q = chi2_isf(0.01 / double(used), 3); // 1 % family-wise, as judge()
-    std::vector<double> chi2(P, 0.0), typical;
-    for (size_t j = 0; j < P; ++j) {
-        if (!E.ok[j]) continue;
-        for (int a = 0; a < 3; ++a) chi2[j] += E.res[j](a) * E.res[j](a) / (E.var_mean[j](a) + jig(a) * jig(a));
-        typical.push_back(chi2[j]);
-    }
-    // Only against a model that fits the bulk: the median position's
-    // chi-square at most kOutlierBulkRatio times chi2(3)'s median (2.366).
-    // A model far from the data leaves a large smooth residual whose
-    // curvature no neighbour average follows (edges and corners would look
-    // isolated); that is the verdict's to judge, not outliers.
-    std::nth_element(typical.begin(), typical.begin() + std::ptrdiff_t(typical.size() / 2), typical.end());
-    if (typical[typical.size() / 2] > kOutlierBulkRatio * chi2_isf(0.5, 3)) return out;
-    for (size_t j = 0; j < P; ++j) {
+    for (size_t j = 0; j < E.res.size(); ++j) {
         if (!E.ok[j]) continue;
         V3 s2;
         for (int a = 0; a < 3; ++a) s2(a) = E.var_mean[j](a) + jig(a) * jig(a);
@@ -122,6 +106,32 @@ std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, 
         o.j = j, o.chi2 = c, o.chi2_nb = cn, o.res = E.res[j], o.nb = mean, o.var = s2 + var;
         out.push_back(o);
     }
+    return out;
+}
+
+std::vector<Outlier> find_outliers(const Eval &E, const Grid &G, const V3 &jig, size_t already, size_t read,
+                                   Declined *declined) {
+    const size_t P = E.res.size();
+    size_t used = 0;
+    for (size_t j = 0; j < P; ++j)
+        if (E.ok[j]) ++used;
+    std::vector<Outlier> out;
+    if (used < 3) return out;
+    const double q = chi2_isf(0.01 / double(used), 3); // 1 % family-wise, as judge()
+    std::vector<double> chi2(P, 0.0), typical;
+    for (size_t j = 0; j < P; ++j) {
+        if (!E.ok[j]) continue;
+        for (int a = 0; a < 3; ++a) chi2[j] += E.res[j](a) * E.res[j](a) / (E.var_mean[j](a) + jig(a) * jig(a));
+        typical.push_back(chi2[j]);
+    }
+    // Only against a model that fits the bulk: the median position's
+    // chi-square at most kOutlierBulkRatio times chi2(3)'s median (2.366).
+    // A model far from the data leaves a large smooth residual whose
+    // curvature no neighbour average follows (edges and corners would look
+    // isolated); that is the verdict's to judge, not outliers.
+    std::nth_element(typical.begin(), typical.begin() + std::ptrdiff_t(typical.size() / 2), typical.end());
+    if (typical[typical.size() / 2] > kOutlierBulkRatio * chi2_isf(0.5, 3)) return out;
+    out = disowned(E, G, jig, chi2, q);
     // A few: set aside, unless more than a quarter of them deviate as one
     // cable's reading error would, counting only cables that two or more
     // of them do so on: a reading effect local in cable length (a worn

@@ -1,4 +1,4 @@
-// See diag_spatial.h. docs/calibration.md explains each statistic.
+// See spatial.h. docs/calibration.md explains each statistic.
 #include "calib/evaluation/spatial.h"
 
 #include <algorithm>
@@ -30,6 +30,27 @@ FixtureOffsets fixture_offsets(const Eval &E, const Grid &G, const V3 &jig) {
     return f;
 }
 
+// The smallest positive spacing between the plate's columns, the y values
+// that two positions or more share (a column of holes, at every height). A
+// position whose reference is off the plate's grid (a misplaced probe: the
+// outliers) has a y of its own and must not set the pitch (0.57 mm instead
+// of 5, and no position would find its neighbours). Scattered positions
+// share none: then every y counts. 5 mm when there is no spacing at all.
+static double plate_pitch(const std::vector<PreparedPos> &pos) {
+    double pitch = INFINITY;
+    std::vector<double> ys;
+    for (auto &p : pos) ys.push_back(p.ref(1));
+    std::sort(ys.begin(), ys.end());
+    std::vector<double> shared;
+    for (size_t k = 1; k < ys.size(); ++k)
+        if (ys[k] - ys[k - 1] <= 1e-6 && (shared.empty() || ys[k] - shared.back() > 1e-6)) shared.push_back(ys[k]);
+    const std::vector<double> &cols = shared.size() >= 2 ? shared : ys;
+    for (size_t k = 1; k < cols.size(); ++k)
+        if (cols[k] - cols[k - 1] > 1e-6) pitch = std::min(pitch, cols[k] - cols[k - 1]);
+    if (!std::isfinite(pitch)) pitch = 5;
+    return pitch;
+}
+
 Grid make_grid(const std::vector<PreparedPos> &pos, const std::vector<double> &heights) {
     Grid G;
     const size_t P = pos.size();
@@ -47,23 +68,7 @@ Grid make_grid(const std::vector<PreparedPos> &pos, const std::vector<double> &h
                     best = int(h);
             G.height_index[j] = best;
         }
-    // pitch: the smallest positive spacing between the plate's columns, the
-    // y values that two positions or more share (a column of holes, at every
-    // height). A position whose reference is off the plate's grid (a
-    // misplaced probe: the outliers below) has a y of its own and must not
-    // set the pitch (0.57 mm instead of 5, and no position would find its
-    // neighbours). Scattered positions share none: then every y counts.
-    double pitch = INFINITY;
-    std::vector<double> ys;
-    for (auto &p : pos) ys.push_back(p.ref(1));
-    std::sort(ys.begin(), ys.end());
-    std::vector<double> shared;
-    for (size_t k = 1; k < ys.size(); ++k)
-        if (ys[k] - ys[k - 1] <= 1e-6 && (shared.empty() || ys[k] - shared.back() > 1e-6)) shared.push_back(ys[k]);
-    const std::vector<double> &cols = shared.size() >= 2 ? shared : ys;
-    for (size_t k = 1; k < cols.size(); ++k)
-        if (cols[k] - cols[k - 1] > 1e-6) pitch = std::min(pitch, cols[k] - cols[k - 1]);
-    if (!std::isfinite(pitch)) pitch = 5;
+    const double pitch = plate_pitch(pos);
     G.pitch = pitch;
     G.cell.resize(P);
     for (size_t j = 0; j < P; ++j) G.cell[j] = {std::lround(pos[j].ref(1) / pitch), std::lround(pos[j].ref(2) / pitch)};
@@ -276,7 +281,7 @@ Verdict judge(const Eval &E, const Grid &G, const V3 &jig, int n_free, const V3 
     const double q = chi2_isf(0.01 / double(std::max<size_t>(1, used)), 3); // 1 % family-wise
     // The height fixture's own error: one constant per height (the same at
     // every hole), like the holes' error a property of the jig, not of the
-    // model (diag_jig.h). Per-height mean residuals up to kFixtureMaxMm are
+    // model (jig.h). Per-height mean residuals up to kFixtureMaxMm are
     // taken as the fixture's and removed before the chi-square, at the cost
     // of their degrees of freedom; what lies past that bound stays.
     const FixtureOffsets fixture = fixture_offsets(E, G, jig);

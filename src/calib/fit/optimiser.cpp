@@ -24,7 +24,7 @@
 // and each cable's own parameters and scattered into the full Jacobian;
 // central differences through user-defined effects).
 //
-// Gauge (built in fit_problem.h, with the residuals, weights and prior):
+// Gauge (built in problem.h, with the residuals, weights and prior):
 // parameters that change nothing measurable are fixed, not left to wander
 // (each effect's gauge() in its file says which): with jig_misalignment on,
 // the anchors' common rigid motion (3
@@ -207,36 +207,23 @@ Eigen::MatrixXd free_hessian(const Problem &pb, const Eigen::MatrixXd &J) {
     return pb.Q.transpose() * JtJ.selfadjointView<Eigen::Lower>() * pb.Q;
 }
 
-} // namespace
+// One fit_model call: the problem, the report, and what the passes carry
+// from one to the next.
+struct FitRun {
+    FitRun(Model &m_, const std::vector<PreparedPos> &pos, const FitOptions &opt_, FitReport &rep_)
+        : m(m_), opt(opt_), rep(rep_), pb(m_, pos, opt_) {}
 
-bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt, FitReport &rep) {
-    auto t0 = std::chrono::steady_clock::now();
-    Problem pb(m, pos, opt);
-    rep = FitReport{};
-    rep.algorithm = "Gauss-Newton within the bounds, then NLOPT_LD_SLSQP (whitened by the Gauss-Newton Hessian)";
-    const int nfree = int(pb.Q.cols());
-    rep.n_free = nfree - pb.n_fixture_free();
-    rep.n_fixture = pb.n_fixture_free();
-    rep.n_obs = 4 * int(pb.rows.size());
-    auto fail = [&] {
-        rep.message = "fit failed: " + pb.failure;
-        rep.converged = false;
-        rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        return false;
-    };
-    if (!pb.failure.empty()) return fail(); // while weighting
-    if (opt.profile_fixture_start && !pb.profile_fixture()) return fail();
-    if (nfree == 0) {
-        Eigen::VectorXd res;
-        if (!pb.residuals(res, nullptr)) return fail();
-        rep.chi2 = res.squaredNorm();
-        rep.converged = true;
-        for (size_t e = 0; e < m.effect_count(); ++e) rep.std.emplace_back(m.effect_params(e).size(), 0.0);
-        return true;
-    }
+    // What a stage of a pass leaves the passes to do.
+    enum class Next { Fail, Stop, Again, Slsqp, NextPass };
+
+    Model &m;
+    const FitOptions &opt;
+    FitReport &rep;
+    const std::chrono::steady_clock::time_point t0 = std::chrono::steady_clock::now();
+    Problem pb;
+    int nfree = 0;
     double prev = INFINITY;
     bool ok = true;
-    Eigen::MatrixXd Hfree;
     // The last residual and Jacobian evaluated, and where: a pass starts at
     // the previous pass's best point, whose evaluation SLSQP already made
     // (with the gradient), and the statistics below are taken at the point
@@ -244,15 +231,6 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
     // bit for bit (the evaluation is a pure function of the parameters).
     Eigen::VectorXd have_at, have_res;
     Eigen::MatrixXd have_J;
-    auto take = [&](const Eigen::VectorXd &at, Eigen::VectorXd &res, Eigen::MatrixXd &J) {
-        if (have_at.size() != at.size() || have_at.size() == 0 || have_J.size() == 0 ||
-            std::memcmp(have_at.data(), at.data(), sizeof(double) * size_t(at.size())) != 0)
-            return pb.residuals(res, &J);
-        res = std::move(have_res);
-        J = std::move(have_J);
-        have_at.resize(0);
-        return true;
-    };
     // Gauss-Newton steps (within the bounds) go first: on a problem that is
     // nearly linear in its parameters (most of a search's fits) each lands
     // almost on the minimum, where an SLSQP pass spends 5-20 evaluations. They
@@ -264,6 +242,53 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
     bool gauss_newton = true;
     double last_pred = INFINITY;
     double mu = 0; // the Gauss-Newton steps' damping (0: none)
+
+    bool fail() {
+        rep.message = "fit failed: " + pb.failure;
+        rep.converged = false;
+        rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        return false;
+    }
+    bool take(const Eigen::VectorXd &at, Eigen::VectorXd &res, Eigen::MatrixXd &J) {
+        if (have_at.size() != at.size() || have_at.size() == 0 || have_J.size() == 0 ||
+            std::memcmp(have_at.data(), at.data(), sizeof(double) * size_t(at.size())) != 0)
+            return pb.residuals(res, &J);
+        res = std::move(have_res);
+        J = std::move(have_J);
+        have_at.resize(0);
+        return true;
+    }
+    void keep(const Eigen::VectorXd &at, Eigen::VectorXd &res, Eigen::MatrixXd &J) {
+        have_at = at;
+        have_res = std::move(res);
+        have_J = std::move(J);
+    }
+
+    bool run();
+    bool nothing_free();
+    Next gauss_newton_pass(Whitened &W, const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> &es,
+                           const Eigen::VectorXd &lam, const Eigen::MatrixXd &QD, const Eigen::VectorXd &full,
+                           Eigen::VectorXd &res, Eigen::MatrixXd &J, int &steps);
+    bool single_step(const BoundedStep &st0, double f0, const Eigen::MatrixXd &QD, const Eigen::VectorXd &full);
+    Next damped_steps(const Whitened &W, const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> &es,
+                      const Eigen::VectorXd &lam, const BoundedStep &st0, double f0, const Eigen::VectorXd &gu,
+                      const Eigen::MatrixXd &H, const Eigen::MatrixXd &QD, const Eigen::VectorXd &full, int &steps);
+    bool at_minimum(const Whitened &W, const Eigen::VectorXd &full, Eigen::VectorXd &res, Eigen::MatrixXd &J);
+    Next slsqp_pass(Whitened &W, const Eigen::VectorXd &full, Eigen::VectorXd &res, Eigen::MatrixXd &J);
+    bool finish();
+};
+
+bool FitRun::run() {
+    rep = FitReport{};
+    rep.algorithm = "Gauss-Newton within the bounds, then NLOPT_LD_SLSQP (whitened by the Gauss-Newton Hessian)";
+    nfree = int(pb.Q.cols());
+    rep.n_free = nfree - pb.n_fixture_free();
+    rep.n_fixture = pb.n_fixture_free();
+    rep.n_obs = 4 * int(pb.rows.size());
+    if (!pb.failure.empty()) return fail(); // while weighting
+    if (opt.profile_fixture_start && !pb.profile_fixture()) return fail();
+    if (nfree == 0) return nothing_free();
+    Eigen::MatrixXd Hfree;
     for (int pass = 0, steps = 0; pass < 4 && pb.evals < opt.max_evals;) {
         Eigen::VectorXd full = pb.get_full();
         pb.set_full(full);
@@ -292,182 +317,212 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
             if (at.first < m.effect_count() && pb.ev.offset(at.first) >= 0 && at.second < m.effect_params(at.first).size())
                 W.abandon.emplace_back(pb.ev.offset(at.first) + int(at.second), v);
         if (gauss_newton && steps < kGaussNewtonSteps) {
-            Eigen::VectorXd pg;
-            const double f0 = 0.5 * (res.squaredNorm() + pb.prior(full, &pg));
-            // In the scaled free coordinates (QD).
-            const Eigen::VectorXd gu = QD.transpose() * (-J.transpose() * res + 0.5 * pg);
-            const Eigen::MatrixXd H = es.eigenvectors() * lam.asDiagonal() * es.eigenvectors().transpose();
-            const BoundedStep st0 = bounded_gauss_newton(H, gu, full, QD, pb.lo, pb.hi);
-            bool taken = false, stop = false;
-            if (st0.kkt && std::isfinite(f0) && st0.pred <= std::max(1e-12 * std::fabs(f0), kConvergedF)) {
-                // At the minimum of the linearised problem within the
-                // bounds: nothing left that a pass could gain.
-                rep.converged = true;
-                have_at = full;
-                have_res = std::move(res);
-                have_J = std::move(J);
-                break;
-            }
-            if (opt.single_step) {
-                // One step, its chi-square without a Jacobian (FitOptions::
-                // single_step): kept when it lowers the objective.
-                if (st0.kkt && std::isfinite(f0)) {
-                    const Eigen::VectorXd full1 = full + QD * st0.u;
-                    pb.set_full(full1);
-                    Eigen::VectorXd r1;
-                    if (!pb.residuals(r1, nullptr)) return fail();
-                    ++pb.evals;
-                    if (0.5 * (r1.squaredNorm() + pb.prior(full1, nullptr)) < f0) {
-                        have_at = full1;
-                        have_res = std::move(r1);
-                        have_J.resize(0, 0);
-                    } else {
-                        pb.set_full(full);
-                    }
-                }
-                rep.converged = true;
-                break;
-            }
-            // A step that falls short of its promise is retried shorter,
-            // Levenberg-Marquardt's way (H + mu I in the scaled coordinates,
-            // whose diagonal is one; mu from 1e-3, ten times larger at each
-            // refusal, a third at each success), from the same pass start and
-            // its Jacobian, within the Gauss-Newton budget. A period that
-            // the linearised problem sends far past where its sines still
-            // look alike (a ripple's joint fit on a model far from the data)
-            // made the first step raise the objective 10-80 fold; handed to
-            // SLSQP from there, such a fit took 190-230 evaluations.
-            while (!stop && st0.kkt && std::isfinite(f0) && steps < kGaussNewtonSteps) {
-                const BoundedStep st =
-                    mu > 0 ? bounded_gauss_newton(H + mu * Eigen::MatrixXd::Identity(H.rows(), H.cols()), gu, full,
-                                                  QD, pb.lo, pb.hi)
-                           : st0;
-                if (!st.kkt) break;
-                // What the (undamped) quadratic model promises for this step.
-                const double pred = -(gu.dot(st.u) + 0.5 * st.u.dot(H * st.u));
-                Whitened G = W; // the trial's own bookkeeping; W stays for SLSQP
-                G.best = f0;
-                const Eigen::VectorXd zeta = lam.cwiseSqrt().asDiagonal() * (es.eigenvectors().transpose() * st.u);
-                Eigen::VectorXd grad(nfree);
-                const double f1 = objective(unsigned(nfree), zeta.data(), grad.data(), &G);
-                ++steps;
-                if (!pb.failure.empty()) return fail();
-                const bool take_step = f1 < f0 && f0 - f1 >= 0.25 * pred && G.best_has_J && !pb.cancelled;
-                // objective() left the problem at the trial point: back to
-                // the pass start unless the step is taken, the point the
-                // rest of the pass holds the residuals of, so that neither a
-                // cancel nor the convergence check below commits a trial
-                // that was refused.
-                if (!take_step) pb.set_full(full);
-                if (pb.cancelled) {
-                    rep.message = "fit cancelled";
-                    ok = false;
-                    stop = true;
-                    break;
-                }
-                if (!take_step) {
-                    if (mu >= kMaxDamping) break;
-                    mu = mu > 0 ? 10 * mu : kMinDamping;
-                    continue;
-                }
-                pb.set_full(G.best_full);
-                have_at = G.best_full;
-                have_res = std::move(G.best_res);
-                have_J = std::move(G.best_J);
-                if (G.abandoned) {
-                    rep.abandoned = true;
-                    rep.message = "abandoned: a parameter went past the value its result was wanted for";
-                    stop = true;
-                    break;
-                }
-                // Slow convergence (a full step that leaves more than a tenth
-                // of its promise for the next) goes to SLSQP, whose updated
-                // Hessian handles it better.
-                if (mu == 0 && st.pred > 0.1 * last_pred) gauss_newton = false;
-                if (mu == 0) last_pred = st.pred;
-                mu = mu > 3 * kMinDamping ? mu / 3 : 0.0;
-                prev = f1;
-                taken = true;
-                break;
-            }
-            if (stop) break;
-            if (taken) continue;
-            gauss_newton = false; // the pass goes to SLSQP from this point
+            const Next n = gauss_newton_pass(W, es, lam, QD, full, res, J, steps);
+            if (n == Next::Fail) return fail();
+            if (n == Next::Stop) break;
+            if (n == Next::Again) continue;
         }
-        {
-            // Already at the minimum? In the whitened coordinates the
-            // Gauss-Newton Hessian is the identity, so a Gauss-Newton step
-            // would lower the objective by |g|^2 / 2. When that is below
-            // SLSQP's own relative tolerance (1e-12), or kConvergedF, a pass
-            // can only confirm the point, spending 15-20 evaluations on
-            // round-off-level changes (after every converged pass, a quarter
-            // of a search's evaluations), so the fit stops here. A point on a
-            // bound has a gradient and is polished by SLSQP.
-            Eigen::VectorXd pg;
-            const double f0 = 0.5 * (res.squaredNorm() + pb.prior(full, &pg));
-            const Eigen::VectorXd gz = W.T.transpose() * (-J.transpose() * res + 0.5 * pg);
-            if (std::isfinite(f0) && 0.5 * gz.squaredNorm() <= std::max(1e-12 * std::fabs(f0), kConvergedF)) {
-                rep.converged = true;
-                have_at = full;
-                have_res = std::move(res);
-                have_J = std::move(J);
-                break;
-            }
+        if (at_minimum(W, full, res, J)) break;
+        const Next n = slsqp_pass(W, full, res, J);
+        if (n == Next::Fail) return fail();
+        if (n == Next::Stop) break;
+        ++pass;
+    }
+    return finish();
+}
+
+bool FitRun::nothing_free() {
+    Eigen::VectorXd res;
+    if (!pb.residuals(res, nullptr)) return fail();
+    rep.chi2 = res.squaredNorm();
+    rep.converged = true;
+    for (size_t e = 0; e < m.effect_count(); ++e) rep.std.emplace_back(m.effect_params(e).size(), 0.0);
+    return true;
+}
+
+FitRun::Next FitRun::gauss_newton_pass(Whitened &W, const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> &es,
+                                       const Eigen::VectorXd &lam, const Eigen::MatrixXd &QD,
+                                       const Eigen::VectorXd &full, Eigen::VectorXd &res, Eigen::MatrixXd &J,
+                                       int &steps) {
+    Eigen::VectorXd pg;
+    const double f0 = 0.5 * (res.squaredNorm() + pb.prior(full, &pg));
+    // In the scaled free coordinates (QD).
+    const Eigen::VectorXd gu = QD.transpose() * (-J.transpose() * res + 0.5 * pg);
+    const Eigen::MatrixXd H = es.eigenvectors() * lam.asDiagonal() * es.eigenvectors().transpose();
+    const BoundedStep st0 = bounded_gauss_newton(H, gu, full, QD, pb.lo, pb.hi);
+    if (st0.kkt && std::isfinite(f0) && st0.pred <= std::max(1e-12 * std::fabs(f0), kConvergedF)) {
+        // At the minimum of the linearised problem within the
+        // bounds: nothing left that a pass could gain.
+        rep.converged = true;
+        keep(full, res, J);
+        return Next::Stop;
+    }
+    if (opt.single_step) return single_step(st0, f0, QD, full) ? Next::Stop : Next::Fail;
+    return damped_steps(W, es, lam, st0, f0, gu, H, QD, full, steps);
+}
+
+// One step, its chi-square without a Jacobian (FitOptions::single_step):
+// kept when it lowers the objective.
+bool FitRun::single_step(const BoundedStep &st0, double f0, const Eigen::MatrixXd &QD, const Eigen::VectorXd &full) {
+    if (st0.kkt && std::isfinite(f0)) {
+        const Eigen::VectorXd full1 = full + QD * st0.u;
+        pb.set_full(full1);
+        Eigen::VectorXd r1;
+        if (!pb.residuals(r1, nullptr)) return false;
+        ++pb.evals;
+        if (0.5 * (r1.squaredNorm() + pb.prior(full1, nullptr)) < f0) {
+            have_at = full1;
+            have_res = std::move(r1);
+            have_J.resize(0, 0);
+        } else {
+            pb.set_full(full);
         }
-        W.seed_res = std::move(res);
-        W.seed_J = std::move(J);
-        W.seeded = true;
-        nlopt_opt o = nlopt_create(NLOPT_LD_SLSQP, unsigned(nfree));
-        W.opt = o;
-        nlopt_set_min_objective(o, objective, &W);
-        BoundData B{&W, {}, {}, {}};
-        for (int a = 0; a < int(full.size()); ++a) {
-            if (pb.Q.row(a).norm() == 0) continue; // fixed by the gauge
-            B.idx.push_back(a);
-            B.sign.push_back(-1);
-            B.bound.push_back(pb.lo(a));
-            B.idx.push_back(a);
-            B.sign.push_back(+1);
-            B.bound.push_back(pb.hi(a));
-        }
-        std::vector<double> tol(B.idx.size(), 1e-9);
-        nlopt_add_inequality_mconstraint(o, unsigned(B.idx.size()), bounds_constraint, &B, tol.data());
-        nlopt_set_ftol_rel(o, 1e-12);
-        nlopt_set_xtol_abs1(o, 1e-7);
-        nlopt_set_maxeval(o, std::max(10, opt.max_evals - pb.evals));
-        std::vector<double> z(size_t(nfree), 0.0);
-        double f = 0;
-        nlopt_result r = nlopt_optimize(o, z.data(), &f);
-        nlopt_destroy(o);
-        pb.set_full(W.best_full);
-        if (!pb.failure.empty()) return fail();
-        if (W.best_has_J) {
-            have_at = W.best_full;
-            have_res = std::move(W.best_res);
-            have_J = std::move(W.best_J);
-        }
+    }
+    rep.converged = true;
+    return true;
+}
+
+// A step that falls short of its promise is retried shorter,
+// Levenberg-Marquardt's way (H + mu I in the scaled coordinates,
+// whose diagonal is one; mu from 1e-3, ten times larger at each
+// refusal, a third at each success), from the same pass start and
+// its Jacobian, within the Gauss-Newton budget. A period that
+// the linearised problem sends far past where its sines still
+// look alike (a ripple's joint fit on a model far from the data)
+// made the first step raise the objective 10-80 fold; handed to
+// SLSQP from there, such a fit took 190-230 evaluations.
+FitRun::Next FitRun::damped_steps(const Whitened &W, const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> &es,
+                                  const Eigen::VectorXd &lam, const BoundedStep &st0, double f0,
+                                  const Eigen::VectorXd &gu, const Eigen::MatrixXd &H, const Eigen::MatrixXd &QD,
+                                  const Eigen::VectorXd &full, int &steps) {
+    while (st0.kkt && std::isfinite(f0) && steps < kGaussNewtonSteps) {
+        const BoundedStep st =
+            mu > 0 ? bounded_gauss_newton(H + mu * Eigen::MatrixXd::Identity(H.rows(), H.cols()), gu, full, QD,
+                                          pb.lo, pb.hi)
+                   : st0;
+        if (!st.kkt) break;
+        // What the (undamped) quadratic model promises for this step.
+        const double pred = -(gu.dot(st.u) + 0.5 * st.u.dot(H * st.u));
+        Whitened G = W; // the trial's own bookkeeping; W stays for SLSQP
+        G.best = f0;
+        const Eigen::VectorXd zeta = lam.cwiseSqrt().asDiagonal() * (es.eigenvectors().transpose() * st.u);
+        Eigen::VectorXd grad(nfree);
+        const double f1 = objective(unsigned(nfree), zeta.data(), grad.data(), &G);
+        ++steps;
+        if (!pb.failure.empty()) return Next::Fail;
+        const bool take_step = f1 < f0 && f0 - f1 >= 0.25 * pred && G.best_has_J && !pb.cancelled;
+        // objective() left the problem at the trial point: back to
+        // the pass start unless the step is taken, the point the
+        // rest of the pass holds the residuals of, so that neither a
+        // cancel nor the convergence check below commits a trial
+        // that was refused.
+        if (!take_step) pb.set_full(full);
         if (pb.cancelled) {
             rep.message = "fit cancelled";
             ok = false;
-            break;
+            return Next::Stop;
         }
-        if (W.abandoned) {
+        if (!take_step) {
+            if (mu >= kMaxDamping) break;
+            mu = mu > 0 ? 10 * mu : kMinDamping;
+            continue;
+        }
+        pb.set_full(G.best_full);
+        keep(G.best_full, G.best_res, G.best_J);
+        if (G.abandoned) {
             rep.abandoned = true;
             rep.message = "abandoned: a parameter went past the value its result was wanted for";
-            break;
+            return Next::Stop;
         }
-        if (r < 0 && r != NLOPT_ROUNDOFF_LIMITED && !(r == NLOPT_FORCED_STOP && W.stalled)) {
-            rep.message = std::string("NLopt stopped: ") + nlopt_result_to_string(r);
-        }
-        // Converged when the pass gained nothing, or, for a pass ended by the
-        // stall stop, no more than the stop's own resolution.
-        if (prev - W.best <= 1e-9 * std::fabs(W.best) + 1e-9 || (W.stalled && prev - W.best <= kStallF)) {
-            rep.converged = true;
-            break;
-        }
-        prev = W.best;
-        ++pass;
+        // Slow convergence (a full step that leaves more than a tenth
+        // of its promise for the next) goes to SLSQP, whose updated
+        // Hessian handles it better.
+        if (mu == 0 && st.pred > 0.1 * last_pred) gauss_newton = false;
+        if (mu == 0) last_pred = st.pred;
+        mu = mu > 3 * kMinDamping ? mu / 3 : 0.0;
+        prev = f1;
+        return Next::Again;
     }
+    gauss_newton = false; // the pass goes to SLSQP from this point
+    return Next::Slsqp;
+}
+
+// Already at the minimum? In the whitened coordinates the
+// Gauss-Newton Hessian is the identity, so a Gauss-Newton step
+// would lower the objective by |g|^2 / 2. When that is below
+// SLSQP's own relative tolerance (1e-12), or kConvergedF, a pass
+// can only confirm the point, spending 15-20 evaluations on
+// round-off-level changes (after every converged pass, a quarter
+// of a search's evaluations), so the fit stops here. A point on a
+// bound has a gradient and is polished by SLSQP.
+bool FitRun::at_minimum(const Whitened &W, const Eigen::VectorXd &full, Eigen::VectorXd &res, Eigen::MatrixXd &J) {
+    Eigen::VectorXd pg;
+    const double f0 = 0.5 * (res.squaredNorm() + pb.prior(full, &pg));
+    const Eigen::VectorXd gz = W.T.transpose() * (-J.transpose() * res + 0.5 * pg);
+    if (std::isfinite(f0) && 0.5 * gz.squaredNorm() <= std::max(1e-12 * std::fabs(f0), kConvergedF)) {
+        rep.converged = true;
+        keep(full, res, J);
+        return true;
+    }
+    return false;
+}
+
+// An SLSQP pass from the whitening point, bounds as linear constraints.
+FitRun::Next FitRun::slsqp_pass(Whitened &W, const Eigen::VectorXd &full, Eigen::VectorXd &res, Eigen::MatrixXd &J) {
+    W.seed_res = std::move(res);
+    W.seed_J = std::move(J);
+    W.seeded = true;
+    nlopt_opt o = nlopt_create(NLOPT_LD_SLSQP, unsigned(nfree));
+    W.opt = o;
+    nlopt_set_min_objective(o, objective, &W);
+    BoundData B{&W, {}, {}, {}};
+    for (int a = 0; a < int(full.size()); ++a) {
+        if (pb.Q.row(a).norm() == 0) continue; // fixed by the gauge
+        B.idx.push_back(a);
+        B.sign.push_back(-1);
+        B.bound.push_back(pb.lo(a));
+        B.idx.push_back(a);
+        B.sign.push_back(+1);
+        B.bound.push_back(pb.hi(a));
+    }
+    std::vector<double> tol(B.idx.size(), 1e-9);
+    nlopt_add_inequality_mconstraint(o, unsigned(B.idx.size()), bounds_constraint, &B, tol.data());
+    nlopt_set_ftol_rel(o, 1e-12);
+    nlopt_set_xtol_abs1(o, 1e-7);
+    nlopt_set_maxeval(o, std::max(10, opt.max_evals - pb.evals));
+    std::vector<double> z(size_t(nfree), 0.0);
+    double f = 0;
+    nlopt_result r = nlopt_optimize(o, z.data(), &f);
+    nlopt_destroy(o);
+    pb.set_full(W.best_full);
+    if (!pb.failure.empty()) return Next::Fail;
+    if (W.best_has_J) keep(W.best_full, W.best_res, W.best_J);
+    if (pb.cancelled) {
+        rep.message = "fit cancelled";
+        ok = false;
+        return Next::Stop;
+    }
+    if (W.abandoned) {
+        rep.abandoned = true;
+        rep.message = "abandoned: a parameter went past the value its result was wanted for";
+        return Next::Stop;
+    }
+    if (r < 0 && r != NLOPT_ROUNDOFF_LIMITED && !(r == NLOPT_FORCED_STOP && W.stalled)) {
+        rep.message = std::string("NLopt stopped: ") + nlopt_result_to_string(r);
+    }
+    // Converged when the pass gained nothing, or, for a pass ended by the
+    // stall stop, no more than the stop's own resolution.
+    if (prev - W.best <= 1e-9 * std::fabs(W.best) + 1e-9 || (W.stalled && prev - W.best <= kStallF)) {
+        rep.converged = true;
+        return Next::Stop;
+    }
+    prev = W.best;
+    return Next::NextPass;
+}
+
+// The fitted values committed (clamped to the bounds), the chi-square at
+// them, and the parameters' standard errors.
+bool FitRun::finish() {
     pb.commit();
     pb.cur = pb.ev.current(); // as committed: clamped to the bounds
     pb.fx = pb.fx.cwiseMax(-kFixtureMaxMm).cwiseMin(kFixtureMaxMm);
@@ -509,6 +564,13 @@ bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &
     }
     rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return ok;
+}
+
+} // namespace
+
+bool fit_model(Model &m, const std::vector<PreparedPos> &pos, const FitOptions &opt, FitReport &rep) {
+    FitRun run(m, pos, opt, rep);
+    return run.run();
 }
 
 } // namespace cdm

@@ -1,4 +1,4 @@
-// See diag_candidates.h.
+// See candidates.h.
 #include "calib/search/candidates.h"
 
 #include <algorithm>
@@ -94,6 +94,47 @@ static double searched_periods(const std::string &effect, const std::vector<Prep
     return 1;
 }
 
+// A candidate contains the model it extends (its effect at the neutral
+// start), so its chi-square cannot honestly end above base_chi2. (A
+// profile of the fixture offsets that leaves the fit's own constraints
+// on them puts base_chi2 below any fit's reach, and rows then read down
+// to delta chi2 -629485: calib/fit/problem.h, profile_fixture, keeps to them.)
+// A fit that still ends
+// above its base, in another basin, is fitted again from that very
+// start, the fixture offsets profiled as base_chi2's are, and the
+// better of the two is kept. Below one unit of chi-square the
+// difference is the base fit's own convergence and moves no test: not
+// refitted.
+static bool refit_above_base(const DiagContext &ctx, const Model &base, double base_chi2,
+                             const std::vector<EffectDescPtr> &list,
+                             const std::vector<std::pair<size_t, size_t>> &span, std::vector<FitJob> &jobs,
+                             std::string &err) {
+    std::vector<FitJob> again;
+    std::vector<size_t> of;
+    std::vector<std::string> list_of;
+    for (size_t i = 0; i < list.size(); ++i)
+        for (size_t q = span[i].first; q < span[i].second; ++q)
+            if (jobs[q].ok && !jobs[q].one_step && jobs[q].rep.chi2 > base_chi2 + 1) {
+                again.push_back(start_job(base, reading_effects(base), list[i]->name,
+                                          effect_starts(base, list[i]->name, ctx.pos), jobs[q].stage + " again"));
+                of.push_back(q);
+                list_of.push_back(list[i]->name);
+            }
+    if (!again.empty()) {
+        DiagContext pc = ctx;
+        pc.fo.profile_fixture_start = true;
+        if (!fit_all(pc, again, err)) return false;
+        for (size_t a = 0; a < again.size(); ++a)
+            // (A period the first fit showed is not traded for one the
+            // data do not show: that candidate would drop from the table.)
+            if (again[a].ok && again[a].rep.chi2 < jobs[of[a]].rep.chi2 &&
+                (fit_shown(again[a].m, again[a].rep, list_of[a], ctx.pos) ||
+                 !fit_shown(jobs[of[a]].m, jobs[of[a]].rep, list_of[a], ctx.pos)))
+                jobs[of[a]] = std::move(again[a]);
+    }
+    return true;
+}
+
 bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, double base_chi2,
                       const Eval &base_eval, const std::string &stage, std::vector<Candidate> &out,
                       std::string &err, bool details, bool screen, const std::vector<std::string> &in_full) {
@@ -115,42 +156,7 @@ bool score_candidates(const DiagContext &ctx, const Model &base, int base_free, 
         span[i].second = jobs.size();
     }
     if (!fit_all(ctx, jobs, err)) return false;
-    // A candidate contains the model it extends (its effect at the neutral
-    // start), so its chi-square cannot honestly end above base_chi2. (A
-    // profile of the fixture offsets that leaves the fit's own constraints
-    // on them puts base_chi2 below any fit's reach, and rows then read down
-    // to delta chi2 -629485: fit_problem.h, profile_fixture, keeps to them.)
-    // A fit that still ends
-    // above its base, in another basin, is fitted again from that very
-    // start, the fixture offsets profiled as base_chi2's are, and the
-    // better of the two is kept. Below one unit of chi-square the
-    // difference is the base fit's own convergence and moves no test: not
-    // refitted.
-    {
-        std::vector<FitJob> again;
-        std::vector<size_t> of;
-        std::vector<std::string> list_of;
-        for (size_t i = 0; i < list.size(); ++i)
-            for (size_t q = span[i].first; q < span[i].second; ++q)
-                if (jobs[q].ok && !jobs[q].one_step && jobs[q].rep.chi2 > base_chi2 + 1) {
-                    again.push_back(start_job(base, reading_effects(base), list[i]->name,
-                                              effect_starts(base, list[i]->name, ctx.pos), jobs[q].stage + " again"));
-                    of.push_back(q);
-                    list_of.push_back(list[i]->name);
-                }
-        if (!again.empty()) {
-            DiagContext pc = ctx;
-            pc.fo.profile_fixture_start = true;
-            if (!fit_all(pc, again, err)) return false;
-            for (size_t a = 0; a < again.size(); ++a)
-                // (A period the first fit showed is not traded for one the
-                // data do not show: that candidate would drop from the table.)
-                if (again[a].ok && again[a].rep.chi2 < jobs[of[a]].rep.chi2 &&
-                    (fit_shown(again[a].m, again[a].rep, list_of[a], ctx.pos) ||
-                     !fit_shown(jobs[of[a]].m, jobs[of[a]].rep, list_of[a], ctx.pos)))
-                    jobs[of[a]] = std::move(again[a]);
-        }
-    }
+    if (!refit_above_base(ctx, base, base_chi2, list, span, jobs, err)) return false;
     // Each candidate's best start and its tests, in the catalogue's order;
     // with details, complete_candidates then adds what it overlaps in the
     // model, its position errors and its verdict (in the BIC order the

@@ -33,7 +33,7 @@ def _claim(out):
         os.makedirs(out)
         return set()
     if not os.path.isdir(out):
-        raise ReportDirError(f"{out} exists and is not a directory")
+        raise NotADirectoryError(f"{out} exists and is not a directory")
     marker = os.path.join(out, MARKER)
     if os.path.isfile(marker) and not os.path.islink(marker):
         with open(marker, encoding="utf-8") as f:

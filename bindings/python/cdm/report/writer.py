@@ -26,9 +26,11 @@ class ReportDirError(Exception):
     """The output directory is not the report's to write into."""
 
 
-def _claim(out):
+def _claim(out, inputs=()):
     """Makes `out` the report's directory or refuses it; returns the names an
-    earlier report wrote there (empty for a new or empty directory)."""
+    earlier report wrote there (empty for a new or empty directory). The
+    report's own inputs inside `out` (the diagnosis `cdm calib diagnose
+    --report` writes there) do not make it someone else's."""
     if not os.path.lexists(out):
         os.makedirs(out)
         return set()
@@ -39,7 +41,8 @@ def _claim(out):
         with open(marker, encoding="utf-8") as f:
             # Plain names only: a marker edited to name ../x or a path removes nothing outside.
             return {n for n in f.read().splitlines() if n and n == os.path.basename(n) and n not in (".", "..")}
-    if os.listdir(out):
+    own = {os.path.realpath(p) for p in inputs}
+    if [n for n in os.listdir(out) if os.path.realpath(os.path.join(out, n)) not in own]:
         raise ReportDirError(f"{out} is not empty and holds no report ({MARKER} is missing): the report writes "
                              "only into a new or empty directory, or one an earlier report wrote; give another "
                              "--out/--report directory")
@@ -99,10 +102,11 @@ def write_report(runs, out):
     """
     if isinstance(runs, (str, os.PathLike, dict)):
         runs = [runs]
+    inputs = [r for r in runs if isinstance(r, (str, os.PathLike))]
     runs = [_run(r, i) for i, r in enumerate(runs)]
     if not runs:
         raise DiagnosisError("no diagnosis given")
-    earlier = _claim(out)
+    earlier = _claim(out, inputs)
     tmp = tempfile.mkdtemp(prefix="tmp-report-", dir=out)
     try:
         doc, figs = _render(runs, tmp)

@@ -76,7 +76,8 @@ typedef enum cdm_error {
     CDM_ERR_END_OF_STREAM = -13, /**< a replay or a scripted simulation has ended */
     CDM_ERR_CRC = -14,           /**< stored calibration failed its CRC */
     CDM_ERR_INTERNAL = -15,      /**< a bug in libcdm: please report it */
-    CDM_ERROR_COUNT = 16         /**< number of codes above, CDM_OK included */
+    CDM_ERR_CLOSED = -16,        /**< since 1.2: a wait ended by cdm_close or cdm_shutdown (no pose) */
+    CDM_ERROR_COUNT = 17         /**< number of codes above, CDM_OK included */
 } cdm_error;
 
 /** Static English text for a code (unknown codes get "unknown error"). Any thread. */
@@ -103,10 +104,14 @@ typedef void (*cdm_log_fn)(void *user, int level, const char *message);
 /**
  * since 1.1. Routes libcdm's messages into the application's log: one
  * process-wide function (NULL: none, the default), called from whichever
- * thread the message arises on (reader threads, the caller's), never
- * concurrently, never from cdm_get_pose. It may call cdm_* functions. A
- * flood of malformed reports is logged at the 1st, 10th, 100th, ... only.
- * The message is valid only during the call.
+ * thread the message arises on (reader threads, the caller's), never from
+ * cdm_get_pose. Since 1.2 no library lock is held while it runs, so it may
+ * be called concurrently from several threads (it must be thread-safe) and
+ * may call any cdm_* function, cdm_close included (on a device's reader
+ * thread that close is deferred, see cdm_close). A flood of malformed
+ * reports is logged at the 1st, 10th, 100th, ... only. The message is
+ * valid only during the call. cdm_set_log_fn returns once no call of the
+ * previous function is running on another thread.
  */
 CDM_API void cdm_set_log_fn(cdm_log_fn fn, void *user);
 
@@ -231,8 +236,8 @@ typedef struct cdm_sample {
  * It must return quickly at real-time rates; with `sim:?realtime=0` or
  * `replay:FILE?speed=0` it paces the stream (nothing is dropped).
  * The pointers are valid only during the call. The same rules as
- * cdm_event_fn for what it may call (no cdm_close of its own device; a
- * cdm_wait_pose* on it returns CDM_ERR_INVALID_ARG at once).
+ * cdm_event_fn for what it may call (cdm_close of its own device is
+ * deferred; a cdm_wait_pose* on it returns CDM_ERR_INVALID_ARG at once).
  */
 typedef void (*cdm_sample_fn)(void *user, const cdm_sample *sample);
 
@@ -257,9 +262,12 @@ typedef struct cdm_event {
  * since 1.1. Called on the device's reader thread when the device's state
  * changes (cdm_open_options.on_event). STALE is noticed within the stale
  * timeout plus 50 ms (the reader's poll). Keep it short; it may call any
- * cdm_* function except cdm_close on its own device. cdm_wait_pose and
- * cdm_wait_pose_after on its own device return CDM_ERR_INVALID_ARG at once
- * (no pose can arrive while the reader thread waits; use cdm_get_pose).
+ * cdm_* function. cdm_close of its own device is deferred (see cdm_close):
+ * the handle is freed when the callback returns, and no callback of that
+ * device starts after the cdm_close. cdm_wait_pose and cdm_wait_pose_after
+ * on its own device return CDM_ERR_INVALID_ARG at once (no pose can arrive
+ * while the reader thread waits; use cdm_get_pose). docs/reliability.md,
+ * "Callbacks", has the table of what each callback may call.
  */
 typedef void (*cdm_event_fn)(void *user, const cdm_event *event);
 
@@ -287,10 +295,34 @@ CDM_API int cdm_open(const char *uri, cdm_device **out);
 CDM_API int cdm_open_ex(const char *uri, const cdm_open_options *options, cdm_device **out);
 
 /**
- * Stops the reader thread and frees the handle. NULL is fine. Must not run
- * concurrently with any other call on the same handle, nor from its callback.
+ * Stops the reader thread and frees the handle. NULL is fine.
+ * - Calls of cdm_wait_pose / cdm_wait_pose_after on this handle already in
+ *   progress on other threads return CDM_ERR_CLOSED (no pose: *out zeroed,
+ *   orientation the identity) and cdm_close frees the handle only once
+ *   they have returned. Any other call must not run concurrently with it,
+ *   and none may start once it has begun (a binding serialises this: see
+ *   cdm_shutdown).
+ * - From the device's own reader thread (its on_sample or on_event
+ *   callback, or the log sink called there) the close is deferred, never a
+ *   self-join: the waits in progress are woken as above, no further
+ *   callback of this device starts, and the reader thread frees the handle
+ *   as soon as the running callback returns. The call then leaves
+ *   cdm_thread_error() reading "cdm_close: deferred: ..." (cdm_close
+ *   returns no code: its 1.0 signature is void). The handle must not be
+ *   used after the call, there as anywhere.
  */
 CDM_API void cdm_close(cdm_device *dev);
+
+/**
+ * since 1.2. The first half of cdm_close, for bindings whose handles stay
+ * valid while a call is in progress (C#'s SafeHandle, Python's reference
+ * count): every cdm_wait_pose / cdm_wait_pose_after in progress on the
+ * handle, and every later one, returns CDM_ERR_CLOSED at once with no pose.
+ * The handle stays valid (cdm_get_pose and the other calls keep working)
+ * until cdm_close frees it. Idempotent. Any thread, callbacks included.
+ * CDM_ERR_INVALID_ARG for NULL.
+ */
+CDM_API int cdm_shutdown(cdm_device *dev);
 
 /**
  * Copies the newest pose. Real-time safe: no allocation, no blocking, no lock
@@ -315,7 +347,8 @@ CDM_API int cdm_get_pose(cdm_device *dev, cdm_pose *out);
  * or timeout_ms passes (CDM_ERR_TIMEOUT; *out then holds the newest pose).
  * timeout_ms < 0 waits without limit. Same returns as cdm_get_pose. Any
  * thread but the device's own reader thread (its callbacks), where it
- * returns CDM_ERR_INVALID_ARG at once.
+ * returns CDM_ERR_INVALID_ARG at once. CDM_ERR_CLOSED (no pose) when
+ * cdm_close or cdm_shutdown ends the wait or came before it (since 1.2).
  */
 CDM_API int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out);
 
@@ -328,7 +361,7 @@ CDM_API int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out);
  * at once with CDM_ERR_END_OF_STREAM once a replay has ended. Same other
  * returns as cdm_get_pose. out->struct_size must cover host_sequence (112).
  * Any thread but the device's own reader thread (its callbacks), where it
- * returns CDM_ERR_INVALID_ARG at once.
+ * returns CDM_ERR_INVALID_ARG at once. CDM_ERR_CLOSED as cdm_wait_pose.
  */
 CDM_API int cdm_wait_pose_after(cdm_device *dev, uint64_t after_host_sequence, int timeout_ms, cdm_pose *out);
 
@@ -381,7 +414,16 @@ CDM_API int cdm_device_error(cdm_device *dev, char *buf, size_t len);
  */
 typedef struct cdm_calibration cdm_calibration;
 
-/** Loads a calibration JSON file. Errors name the file, line and column. Any thread. */
+/**
+ * Loads a calibration JSON file. Errors name the file, line and column. Any
+ * thread. Checked on load (docs/calibration.md, "Checks on load"): the
+ * schema (cdm-calibration version 1: unknown keys are refused, at any level,
+ * with a "did you mean"), each parameter within its effect's bounds, and
+ * the calibrated model over the workspace: at 27 points of it every
+ * position the model gives for the nominal cable lengths must be finite and
+ * within 20 % of min(a_mm, b_mm) of the point, whatever the parameters
+ * (CDM_ERR_PARSE naming the point and the shift otherwise).
+ */
 CDM_API int cdm_calibration_load(const char *path, cdm_calibration **out);
 /** The same from text in memory. */
 CDM_API int cdm_calibration_parse(const char *json, size_t len, cdm_calibration **out);
@@ -408,7 +450,9 @@ CDM_API const char *cdm_calibration_effect_name(const cdm_calibration *cal, size
  * Applies a calibration to the device's poses from the next report on (the
  * library keeps its own copy; cal may be freed after). NULL returns to the
  * nominal model. Poses computed with a calibration carry CDM_POSE_COMPENSATED.
- * Any thread.
+ * A calibration for another frame is refused (CDM_ERR_INVALID_ARG, the
+ * text gives both values): its a_mm, b_mm and m_mm must each be the
+ * device's (cdm_device_info) within 1 mm. Any thread.
  */
 CDM_API int cdm_set_calibration(cdm_device *dev, const cdm_calibration *cal);
 

@@ -124,12 +124,30 @@ int cdm_open_ex(const char *uri, const cdm_open_options *options, cdm_device **o
 int cdm_open(const char *uri, cdm_device **out) { return cdm_open_ex(uri, nullptr, out); }
 
 void cdm_close(cdm_device *dev) {
+    if (!dev) return;
     try {
+        if (dev->on_reader_thread()) {
+            // From a callback (or the log sink) on the device's own reader
+            // thread: joining it would be a self-join. The reader frees the
+            // handle once the callback returns. No log message: a sink that
+            // closes on every message would be called again from here.
+            dev->close_from_callback();
+            cdm::fail_static(CDM_OK, "cdm_close: deferred: called on the device's own reader thread (a callback "
+                                     "or the log sink); the handle is freed when the callback returns");
+            return;
+        }
         delete dev;
     } catch (...) {
         // A destructor that throws has nowhere to report to: swallow, the
         // handle is gone either way.
     }
+}
+
+int cdm_shutdown(cdm_device *dev) {
+    if (!dev) return cdm::fail_static(CDM_ERR_INVALID_ARG, "cdm_shutdown: dev is NULL");
+    cdm::clear_thread_error_rt();
+    dev->shutdown();
+    return CDM_OK;
 }
 
 // No allocation, no lock: this is the 1 kHz call. The thread error is
@@ -138,7 +156,8 @@ void cdm_close(cdm_device *dev) {
 // a failing call says why, never what an earlier call said.
 namespace {
 struct PoseTexts {
-    const char *null_arg, *small, *no_report, *no_position, *stale, *disconnected, *end, *timeout, *own_thread;
+    const char *null_arg, *small, *no_report, *no_position, *stale, *disconnected, *end, *timeout, *own_thread,
+        *closed;
 };
 #define CDM_POSE_TEXTS(fn)                                                                                          \
     PoseTexts {                                                                                                      \
@@ -150,7 +169,8 @@ struct PoseTexts {
             fn ": the device is disconnected; the last pose, if any, is held (cdm_device_error says why)",          \
             fn ": the stream has ended (flag END_OF_STREAM)", fn ": no newer pose within the timeout",              \
             fn ": called on the device's own reader thread (from its callback), where no pose can arrive while "    \
-               "it waits; use cdm_get_pose there"                                                                    \
+               "it waits; use cdm_get_pose there",                                                                   \
+            fn ": the handle was closed (cdm_close or cdm_shutdown): no pose"                                        \
     }
 constexpr PoseTexts kGetPose = CDM_POSE_TEXTS("cdm_get_pose");
 constexpr PoseTexts kGetRaw = CDM_POSE_TEXTS("cdm_get_raw");
@@ -167,6 +187,7 @@ int pose_status(int rc, uint32_t flags, const PoseTexts &t) noexcept {
     case CDM_ERR_END_OF_STREAM: return cdm::fail_static(rc, t.end);
     case CDM_ERR_TIMEOUT: return cdm::fail_static(rc, t.timeout);
     case CDM_ERR_INVALID_ARG: return cdm::fail_static(rc, t.own_thread);
+    case CDM_ERR_CLOSED: return cdm::fail_static(rc, t.closed);
     default: return rc;
     }
 }
@@ -259,6 +280,10 @@ int cdm_set_calibration(cdm_device *dev, const cdm_calibration *cal) {
     return guarded([&] {
         if (!dev) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_set_calibration: dev is NULL");
         if (cal && !cal->model) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_set_calibration: empty calibration");
+        if (cal) {
+            const std::string why = dev->geometry_mismatch(*cal->model);
+            if (!why.empty()) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_set_calibration: " + why);
+        }
         // The model is immutable and shared: the device keeps its own
         // reference, so the caller may free cal right away.
         dev->set_model(cal ? cal->model : cdm::ModelPtr());

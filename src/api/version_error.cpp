@@ -73,6 +73,7 @@ const char *cdm_strerror(int code) {
     case CDM_ERR_END_OF_STREAM: return "end of stream";
     case CDM_ERR_CRC: return "CRC mismatch";
     case CDM_ERR_INTERNAL: return "internal error in libcdm";
+    case CDM_ERR_CLOSED: return "the device handle was closed (or shut down) during the call";
     default: return "unknown error";
     }
 }

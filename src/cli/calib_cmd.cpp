@@ -2,6 +2,7 @@
 // (docs/calibration.md). The numbers come from libcdm (cdm_diagnose,
 // cdm_simulate_jig_dataset); the figures from the Python package
 // (python3 -m cdm.report, report_spawn.cpp).
+#include <dirent.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -183,6 +184,21 @@ struct DiagArgs {
     bool quiet = false, no_candidates = false, no_search = false, keep_outliers = false;
 };
 
+// The report writes only into a directory it owns (cdm.report's rule):
+// empty, or holding the list of files an earlier report wrote
+// (.cdm-report). Checked before the diagnosis JSON is written into it.
+bool report_dir_is_ours(const std::string &dir) {
+    struct stat st {};
+    if (stat((dir + "/.cdm-report").c_str(), &st) == 0 && S_ISREG(st.st_mode)) return true;
+    DIR *d = opendir(dir.c_str());
+    if (!d) return false;
+    bool empty = true;
+    while (dirent *e = readdir(d))
+        if (std::strcmp(e->d_name, ".") != 0 && std::strcmp(e->d_name, "..") != 0) empty = false;
+    closedir(d);
+    return empty;
+}
+
 int write_outputs(const DiagArgs &a, const nlohmann::json &r) {
     const std::vector<std::string> inputs{a.data, a.device, a.calib_out};
     if (!a.json_out.empty() && !write_atomic(a.json_out, r.dump(1) + "\n", inputs)) return kExitFailure;
@@ -192,6 +208,14 @@ int write_outputs(const DiagArgs &a, const nlohmann::json &r) {
         if (mkdir(a.report.c_str(), 0755) != 0 && errno != EEXIST) {
             std::fprintf(stderr, "cdm: --report: cannot create %s: %s\n", a.report.c_str(), std::strerror(errno));
             return kExitFailure;
+        }
+        if (!report_dir_is_ours(a.report)) {
+            std::fprintf(stderr,
+                         "cdm: --report: %s is not empty and holds no report (.cdm-report is missing): the report "
+                         "writes only into a new or empty directory, or one an earlier report wrote; give another "
+                         "directory\n",
+                         a.report.c_str());
+            return kExitUsage;
         }
         jp = a.report + "/diagnosis.json";
         if (!write_atomic(jp, r.dump() + "\n", inputs)) return kExitFailure;

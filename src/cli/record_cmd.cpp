@@ -5,6 +5,7 @@
 // the file cleanly; a write error (a full disk) keeps what was written and
 // names the real cause; the output never replaces one of its inputs or a
 // file that is not a regular file.
+#include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -267,8 +268,22 @@ void record_loop(cdm_device *dev, RecordCtx &ctx, double seconds, bool jig) {
     if (tty) std::fprintf(stderr, "\n");
 }
 
-// Completes the file: flush, close, rename into place. A write error keeps
-// what was written (renamed all the same) and fails.
+// fsync of a complete file before its rename: after a crash FILE is the
+// old one or the whole new one, never an empty one. "" or what failed.
+std::string sync_file(const std::string &path) {
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0 || ::fsync(fd) != 0) {
+        const std::string why = path + ": fsync: " + std::strerror(errno);
+        if (fd >= 0) ::close(fd);
+        return why;
+    }
+    ::close(fd);
+    return "";
+}
+
+// Completes the file: flush, close, rename into place. After a write error
+// (a full disk, an I/O error) the target is never replaced: an existing FILE
+// stays as it was, and what was written stays in the temporary, named.
 int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, const cdm_stats &st) {
     std::string err = ctx.write_err;
     if (ctx.jig) {
@@ -286,16 +301,19 @@ int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, cons
         }
     } else {
         if (cdm_recorder_close(ctx.rec) != CDM_OK && err.empty()) err = cdm_thread_error();
+        if (err.empty()) err = sync_file(tmp);
+        if (!err.empty()) {
+            std::fprintf(stderr,
+                         "cdm: record: %s; %s not replaced (left as it was, if it existed); what was written "
+                         "before the error is kept in %s\n",
+                         err.c_str(), file.c_str(), tmp.c_str());
+            return kExitFailure;
+        }
         if (std::rename(tmp.c_str(), file.c_str()) != 0) {
             std::fprintf(stderr, "cdm: record: cannot rename %s to %s: %s\n", tmp.c_str(), file.c_str(),
                          std::strerror(errno));
             return kExitFailure;
         }
-    }
-    if (!err.empty()) {
-        std::fprintf(stderr, "cdm: record: %s; %s keeps what was written before the error\n", err.c_str(),
-                     file.c_str());
-        return kExitFailure;
     }
     if (ctx.refused_samples)
         std::fprintf(stderr, "cdm: record: %llu samples left out: the file could not hold them (first: %s)\n",

@@ -147,11 +147,42 @@ cdm_device::cdm_device(TransportPtr t, const proto::DeviceInfoReport &info, uint
 
 cdm_device::~cdm_device() {
     stop_.store(true);
-    notify_waiters();
+    shutdown();
+    {
+        // The waits woken by shutdown() still read the handle on their way
+        // out: it is freed only once the last one has left.
+        std::unique_lock<std::mutex> lock(wait_mu_);
+        wait_cv_.wait(lock, [&] { return waits_in_progress_ == 0; });
+    }
     if (thread_.joinable()) thread_.join();
 }
 
-void cdm_device::start() { thread_ = std::thread([this] { run(); }); }
+void cdm_device::shutdown() {
+    closing_.store(true);
+    notify_waiters();
+    // A waiter counted in waits_in_progress_ but not yet asleep checks
+    // closing_ under wait_mu_: taking it here orders the two.
+    { std::lock_guard<std::mutex> lock(wait_mu_); }
+    wait_cv_.notify_all();
+}
+
+void cdm_device::close_from_callback() {
+    free_on_exit_ = true;
+    stop_.store(true);
+    shutdown();
+}
+
+void cdm_device::start() {
+    thread_ = std::thread([this] {
+        run();
+        if (free_on_exit_) {
+            // cdm_close was called on this thread (close_from_callback): no
+            // callback is running any more, and nobody else will join it.
+            thread_.detach();
+            delete this;
+        }
+    });
+}
 
 cdm_device::Conversion cdm_device::conversion_from(const proto::DeviceInfoReport &r) {
     Conversion c{};
@@ -177,7 +208,9 @@ void cdm_device::set_error(const std::string &text, int level) {
 
 void cdm_device::emit(uint32_t kind, const std::string &text, int level) {
     log::message(level, std::string(transport_->name()) + " " + transport_->uri() + ": " + text);
-    if (!on_event_) return;
+    // After a cdm_close from a callback or the log sink on this thread, no
+    // callback starts.
+    if (!on_event_ || stop_.load(std::memory_order_relaxed)) return;
     cdm_event e{};
     e.struct_size = sizeof e;
     e.kind = kind;
@@ -219,6 +252,27 @@ void cdm_device::set_state_flag(uint32_t flag, bool on) {
         state_flags_.fetch_or(flag, std::memory_order_release);
     else
         state_flags_.fetch_and(~flag, std::memory_order_release);
+}
+
+std::string cdm_device::geometry_mismatch(const Model &model) const {
+    const DeviceGeometry &g = model.geometry();
+    cdm_device_info i;
+    get_info(i);
+    const double have[3] = {g.a_mm, g.b_mm, g.m_mm}, dev[3] = {i.a_mm, i.b_mm, i.m_mm};
+    const char *names[3] = {"a_mm", "b_mm", "m_mm"};
+    std::string out;
+    for (int k = 0; k < 3; ++k) {
+        if (std::fabs(have[k] - dev[k]) <= kGeometryToleranceMm) continue;
+        char b[160];
+        std::snprintf(b, sizeof b, "%s%s %.6g (calibration) vs %.6g (device %s)", out.empty() ? "" : ", ", names[k],
+                      have[k], dev[k], i.serial);
+        out += b;
+    }
+    if (out.empty()) return out;
+    char tol[32];
+    std::snprintf(tol, sizeof tol, "%g", kGeometryToleranceMm);
+    return "the calibration is for another frame: " + out + " mm differ by more than the " + tol +
+           " mm tolerance; calibrate this device, or load its own calibration";
 }
 
 void cdm_device::set_model(const ModelPtr &model) {
@@ -317,13 +371,34 @@ bool cdm_device::try_reconnect() {
 // beyond twice that (plus 64 for reports queued in the kernel and USB
 // batching) is a reset or a corrupted counter: counted in sequence_jumps,
 // not in dropped, and the count restarts from it. One flipped bit thus costs
-// two jumps (there and back), never 4e9 dropped reports.
+// two jumps (there and back), never 4e9 dropped reports. The elapsed time
+// is the longer of the host's (between receipts) and the device's (between
+// sample times): after a burst the host receives the reports it kept back
+// to back, so its own clock says almost no time passed while the device's
+// says how many it sampled meanwhile; lost reports are then counted as
+// lost, not as a jump. The device's clock is used only where it is
+// trustworthy (device_clock_trusted): a corrupted sample time must not
+// turn a corrupted counter into billions of drops.
+// The device's sample time of a report is trusted for the sequence bound
+// when it moved forward since the last report and has not run ahead of the
+// host's clock since the anchor (the first report, or the first after a
+// reconnection or after the device's clock went back) by more than the
+// kernel queue's 64 reports plus 100 ms of delivery latency, with 0.1 %
+// between the two clocks' rates (a crystal is within 0.01 %).
+bool cdm_device::device_clock_trusted(uint64_t device_us, uint64_t host_ns) const {
+    if (after_reconnect_ || device_us <= last_device_us_ || device_us < anchor_device_us_) return false;
+    const double slack_ns = 64.0 / conv_.rate_hz * 1e9 + 1e8;
+    return double(device_us - anchor_device_us_) * 1e3 <= double(host_ns - anchor_host_ns_) * 1.001 + slack_ns;
+}
+
 bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t host_ns) {
     if (!have_last_) {
         have_last_ = true;
         last_seq_ = seq;
         last_device_us_ = device_us;
         last_host_ns_ = host_ns;
+        anchor_device_us_ = device_us;
+        anchor_host_ns_ = host_ns;
         after_reconnect_ = false;
         return true;
     }
@@ -335,7 +410,11 @@ bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t hos
         n_out_of_order_.fetch_add(1, std::memory_order_relaxed);
         return false;
     }
-    const double elapsed_reports = double(host_ns - last_host_ns_) * 1e-9 * conv_.rate_hz;
+    const double host_reports = double(host_ns - last_host_ns_) * 1e-9 * conv_.rate_hz;
+    const double device_reports = device_clock_trusted(device_us, host_ns)
+                                      ? double(device_us - last_device_us_) * 1e-6 * conv_.rate_hz
+                                      : 0.0;
+    const double elapsed_reports = std::max(host_reports, device_reports);
     const double bound = 2.0 * elapsed_reports + 64.0;
     if (d >= 1 && d < 0x80000000u && double(d - 1) <= bound) {
         n_dropped_.fetch_add(d - 1, std::memory_order_relaxed);
@@ -345,6 +424,11 @@ bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t hos
         // power): what was missed is estimated from the host clock instead.
         if (after_reconnect_ && elapsed_reports > 1.0)
             n_dropped_.fetch_add(uint64_t(std::llround(elapsed_reports - 1.0)), std::memory_order_relaxed);
+    }
+    if (after_reconnect_ || device_us < last_device_us_) {
+        // A new stretch of the device's clock (it restarted, or wrapped).
+        anchor_device_us_ = device_us;
+        anchor_host_ns_ = host_ns;
     }
     after_reconnect_ = false;
     last_seq_ = seq;
@@ -446,7 +530,7 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len, uint64_t host_ns)
     n_reports_.fetch_add(1, std::memory_order_relaxed);
     notify_waiters();
 
-    if (on_sample_) {
+    if (on_sample_ && !stop_.load(std::memory_order_relaxed)) {
         cdm_pose cb_pose = pose;
         cb_pose.flags |= state_flags_.load(std::memory_order_relaxed);
         cdm_sample smp{};

@@ -34,6 +34,12 @@
 namespace cdm {
 
 constexpr uint32_t kDefaultStaleTimeoutUs = 50000;
+// A calibration is for one frame: its a, b and m (mm) may differ from what
+// the device reports by at most this much each. A frame is built to its
+// drawing within a fraction of a millimetre, and the calibration's effects
+// absorb that; a larger difference is another frame (a 150 mm calibration
+// on a 300 mm master put poses 307 mm off, flagged COMPENSATED).
+constexpr double kGeometryToleranceMm = 1.0;
 // Read timeout of the reader thread: bounds how long cdm_close waits.
 constexpr int kReaderPollMs = 50;
 // A report whose sequence number is the last one's or behind it by at most
@@ -63,11 +69,21 @@ public:
     cdm_device(cdm::TransportPtr t, const cdm::proto::DeviceInfoReport &info, uint32_t stale_timeout_us,
                cdm_sample_fn on_sample, void *user,
                cdm_event_fn on_event = nullptr);
-    ~cdm_device(); // stops and joins the reader thread
+    // Stops and joins the reader thread, after waking every cdm_wait_pose*
+    // in progress (CDM_ERR_CLOSED) and waiting for those calls to leave.
+    // On the reader thread itself (close_from_callback) it does not join.
+    ~cdm_device();
     cdm_device(const cdm_device &) = delete;
     cdm_device &operator=(const cdm_device &) = delete;
 
     void start();
+    // cdm_shutdown: every wait in progress, and every later one, returns
+    // CDM_ERR_CLOSED; the handle stays valid (cdm_close frees it).
+    void shutdown();
+    // cdm_close on the reader thread (from a callback or a log sink there):
+    // shuts down, and the reader thread frees the handle once the callback
+    // returns, instead of joining itself.
+    void close_from_callback();
 
     // Full-size (current version) outputs; the API layer trims to the
     // caller's struct_size.
@@ -89,6 +105,9 @@ public:
 
     // NULL model: back to the nominal one built from the device info.
     void set_model(const cdm::ModelPtr &model);
+    // "" when the calibration's frame (a, b, m) is the device's within
+    // kGeometryToleranceMm each, else why not, with the numbers.
+    std::string geometry_mismatch(const cdm::Model &model) const;
 
     int calibration_read(char *buf, size_t cap, size_t *len);
     int calibration_write(const char *data, size_t len);
@@ -117,7 +136,15 @@ private:
     void reject_report(int reason, const uint8_t *buf, size_t len);
     // false: discard (duplicate or late)
     bool account_sequence(uint32_t seq, uint64_t device_us, uint64_t host_ns);
+    bool device_clock_trusted(uint64_t device_us, uint64_t host_ns) const;
     bool wait_until(const std::function<bool()> &ready, int timeout_ms);
+    // Counts a wait in progress for the destructor (RAII).
+    struct WaitScope {
+        explicit WaitScope(cdm_device &d);
+        ~WaitScope();
+        cdm_device &dev;
+    };
+    int closed_wait(cdm_pose &out) const;
     void set_state_flag(uint32_t flag, bool on);
     void notify_waiters();
     int finish(cdm_pose &pose, bool have, uint32_t state_before_snapshot) const;
@@ -177,6 +204,7 @@ private:
     uint32_t last_seq_ = 0;
     uint64_t last_host_ns_ = 0;
     uint64_t last_device_us_ = 0;
+    uint64_t anchor_device_us_ = 0, anchor_host_ns_ = 0; // device_clock_trusted
     bool after_reconnect_ = false;
     double last_good_p_[3] = {0, 0, 0};
     bool have_good_p_ = false;
@@ -184,6 +212,14 @@ private:
     uint64_t malformed_by_kind_[8] = {};
 
     std::atomic<bool> stop_{false};
+    // shutdown() or close: waits return CDM_ERR_CLOSED.
+    std::atomic<bool> closing_{false};
+    // Calls inside wait_pose / wait_pose_after (guarded by wait_mu_): the
+    // destructor waits for them to leave before freeing what they read.
+    int waits_in_progress_ = 0;
+    // Set on the reader thread by close_from_callback: the thread frees the
+    // handle when run() returns.
+    bool free_on_exit_ = false;
     std::thread thread_;
     // The reader thread's id, stored by the thread itself (thread_ may still
     // be being assigned when a first callback runs): on_reader_thread.

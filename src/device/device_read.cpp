@@ -82,7 +82,7 @@ bool cdm_device::wait_until(const std::function<bool()> &ready, int timeout_ms) 
     bool ok;
     {
         std::unique_lock<std::mutex> lock(wait_mu_);
-        auto pred = [&] { return ready() || stop_.load(); };
+        auto pred = [&] { return ready() || closing_.load(); };
         if (timeout_ms < 0) {
             wait_cv_.wait(lock, pred);
             ok = true;
@@ -110,12 +110,36 @@ int refused_on_reader_thread(cdm_pose &out) {
 }
 } // namespace
 
+cdm_device::WaitScope::WaitScope(cdm_device &d) : dev(d) {
+    std::lock_guard<std::mutex> lock(dev.wait_mu_);
+    ++dev.waits_in_progress_;
+}
+
+// Last touch of the handle by a wait: the destructor may free it as soon as
+// the lock is released.
+cdm_device::WaitScope::~WaitScope() {
+    std::lock_guard<std::mutex> lock(dev.wait_mu_);
+    if (--dev.waits_in_progress_ == 0 && dev.closing_.load()) dev.wait_cv_.notify_all();
+}
+
+// A wait that a close (or cdm_shutdown) ended, or that began after one: no
+// pose, CDM_ERR_CLOSED.
+int cdm_device::closed_wait(cdm_pose &out) const {
+    out = cdm_pose{};
+    out.struct_size = sizeof(cdm_pose);
+    out.orientation[0] = 1.0; // identity: never the zero quaternion
+    return CDM_ERR_CLOSED;
+}
+
 int cdm_device::wait_pose(int timeout_ms, cdm_pose &out) {
     if (on_reader_thread()) return refused_on_reader_thread(out);
+    WaitScope scope(*this);
+    if (closing_.load()) return closed_wait(out);
     const uint64_t start = events_.load();
     bool woke = true;
     if (!(state_flags_.load() & CDM_POSE_END_OF_STREAM))
         woke = wait_until([&] { return events_.load() != start; }, timeout_ms);
+    if (closing_.load()) return closed_wait(out);
     const int rc = get_pose(out);
     if (!woke && rc != CDM_ERR_NO_DATA && rc != CDM_ERR_DISCONNECTED) return CDM_ERR_TIMEOUT;
     return rc;
@@ -123,6 +147,8 @@ int cdm_device::wait_pose(int timeout_ms, cdm_pose &out) {
 
 int cdm_device::wait_pose_after(uint64_t after, int timeout_ms, cdm_pose &out) {
     if (on_reader_thread()) return refused_on_reader_thread(out);
+    WaitScope scope(*this);
+    if (closing_.load()) return closed_wait(out);
     // Ready on a newer pose, or once no newer pose can ever come.
     const bool woke = wait_until(
         [&] {
@@ -130,6 +156,7 @@ int cdm_device::wait_pose_after(uint64_t after, int timeout_ms, cdm_pose &out) {
                    (state_flags_.load() & CDM_POSE_END_OF_STREAM);
         },
         timeout_ms);
+    if (closing_.load()) return closed_wait(out);
     const int rc = get_pose(out);
     if (rc == CDM_ERR_END_OF_STREAM) return rc;
     if (!woke || out.host_sequence <= after) return rc == CDM_ERR_DISCONNECTED ? rc : CDM_ERR_TIMEOUT;

@@ -1,6 +1,8 @@
 #include "io/calibration_json.h"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 
 #include "io/device_json.h"
 #include "model/effect.h"
@@ -8,6 +10,13 @@
 namespace cdm::io {
 
 namespace {
+// A length in a message: 4 significant digits (a shift of 2.9e10 mm reads as such).
+std::string fmt_mm(double v) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.4g", v);
+    return b;
+}
+
 // An origin as the calibration gives it: a path the user must read whole
 // (quote_field's 40 characters would cut it), capped against a hostile file.
 std::string shown_origin(const std::string &o) {
@@ -59,6 +68,8 @@ bool effect_from_json(const JsonValue &e, size_t k, const std::string &source, M
         err = where(source, e) + at + " needs a \"name\" string";
         return false;
     }
+    if (!only_keys(e, {"name", "params", "origin", "fingerprint"}, source, at + " (cdm-calibration version 1)", err))
+        return false;
     const EffectDescPtr d = find_effect(name->str);
     const JsonValue *origin = e.find("origin");
     if (!d && origin && origin->type == JsonValue::String && !origin->str.empty()) {
@@ -100,6 +111,46 @@ bool effect_from_json(const JsonValue &e, size_t k, const std::string &source, M
     }
     return true;
 }
+// The calibrated model against the nominal one over the holder's
+// workspace: at each of 27 grid points p (x = 0.25, 0.5, 1 x min(a, b) out
+// of the plane; y, z = -a/2, 0, +a/2 and -b/2, 0, +b/2) the nominal cable
+// lengths at p are solved with the calibrated model; every position it
+// gives must be finite and within kMaxShiftFraction x min(a, b) of p. An effect's
+// parameter bounds cannot catch a combination that moves the workspace by
+// metres (the ellipsoid's L = 1e9 with M = N = 1: x = 2.9e10 mm); this
+// does, whatever the parameters.
+constexpr double kMaxShiftFraction = 0.2;
+
+bool workspace_plausible(const Model &m, const JsonValue &j, const std::string &source, std::string &err) {
+    if (m.is_nominal()) return true;
+    const DeviceGeometry &g = m.geometry();
+    const double scale = std::min(g.a_mm, g.b_mm), bound = kMaxShiftFraction * scale;
+    double worst = -1, worst_at[3] = {0, 0, 0};
+    for (double fx : {0.25, 0.5, 1.0})
+        for (double fy : {-0.5, 0.0, 0.5})
+            for (double fz : {-0.5, 0.0, 0.5}) {
+                const double p[3] = {fx * scale, fy * g.a_mm, fz * g.b_mm};
+                double l[4], q[3];
+                nominal_lengths(g, p, l);
+                // No solution is no wrong pose (the driver flags the report
+                // OUT_OF_WORKSPACE and holds the last one): a point is only
+                // skipped. A solution must be finite and near.
+                if (m.position(l, q) != 0) continue;
+                const double d = std::isfinite(q[0]) && std::isfinite(q[1]) && std::isfinite(q[2])
+                                     ? std::hypot(q[0] - p[0], q[1] - p[1], q[2] - p[2])
+                                     : HUGE_VAL;
+                if (d > worst) {
+                    worst = d;
+                    std::copy(p, p + 3, worst_at);
+                }
+            }
+    if (worst <= bound) return true;
+    err = where(source, j) + "the calibration moves the holder by " + fmt_mm(worst) + " mm at the workspace point (" +
+          fmt_mm(worst_at[0]) + ", " + fmt_mm(worst_at[1]) + ", " + fmt_mm(worst_at[2]) +
+          ") mm; a calibration may move it by at most " + fmt_mm(bound) + " mm (" +
+          std::to_string(int(kMaxShiftFraction * 100)) + " % of min(a_mm, b_mm)) whatever its parameters: refused";
+    return false;
+}
 } // namespace
 
 bool model_from_json(const JsonValue &j, const std::string &source, Model &out, std::string &err) {
@@ -113,6 +164,11 @@ bool model_from_json(const JsonValue &j, const std::string &source, Model &out, 
         err = where(source, ver ? *ver : j) + "unsupported calibration version (this library reads version 1)";
         return false;
     }
+    // Schema cdm-calibration version 1: these keys only ("fit": what the
+    // fit wrote about itself, never read back).
+    if (!only_keys(j, {"format", "version", "device", "effects", "fit"}, source, "a calibration (cdm-calibration version 1)",
+                   err))
+        return false;
     const JsonValue *dev = j.find("device");
     if (!dev) {
         err = where(source, j) + "missing \"device\"";
@@ -129,6 +185,7 @@ bool model_from_json(const JsonValue &j, const std::string &source, Model &out, 
         for (size_t k = 0; k < ef->items.size(); ++k)
             if (!effect_from_json(ef->items[k], k, source, m, err)) return false;
     }
+    if (!workspace_plausible(m, j, source, err)) return false;
     out = m;
     return true;
 }

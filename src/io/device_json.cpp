@@ -65,6 +65,20 @@ bool device_from_json(const JsonValue &j, const std::string &source, DeviceGeome
         err = where(source, j) + "a device description must be a JSON object, got " + j.type_name();
         return false;
     }
+    // Schema of a device description (a file of its own, or a calibration's
+    // "device"), version 1: these keys only. "format" and "version" are
+    // optional and, when given, must say "cdm-device" and 1.
+    if (!only_keys(j, {"format", "version", "a_mm", "b_mm", "m_mm", "pulley_radius_mm", "exit_axis"}, source,
+                   "a device description (cdm-device version 1)", err))
+        return false;
+    if (const JsonValue *f = j.find("format"); f && (f->type != JsonValue::String || f->str != "cdm-device")) {
+        err = where(source, *f) + "\"format\" of a device description must be \"cdm-device\"";
+        return false;
+    }
+    if (const JsonValue *v = j.find("version"); v && (v->type != JsonValue::Number || v->number != 1)) {
+        err = where(source, *v) + "unsupported device description version (this library reads version 1)";
+        return false;
+    }
     DeviceGeometry g;
     // "pulley_radius_mm": files written by cdm 1.0 and 1.1 carry it; the
     // pulley's radius is exit_pulley's own parameter, so the key is checked

@@ -1,5 +1,6 @@
 #include "io/json.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cstdio>
 #include <cstring>
@@ -303,6 +304,50 @@ std::string quote_field(const std::string &s) {
     constexpr size_t kShown = 40;
     if (s.size() <= kShown) return s;
     return s.substr(0, kShown) + "... (" + std::to_string(s.size() - kShown) + " more characters)";
+}
+
+namespace {
+// Edit distance, for "did you mean": only between short keys (a hostile
+// 10^6-character key costs nothing).
+size_t edit_distance(const std::string &a, const std::string &b) {
+    std::vector<size_t> row(b.size() + 1);
+    for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+    for (size_t i = 1; i <= a.size(); ++i) {
+        size_t diag = row[0];
+        row[0] = i;
+        for (size_t j = 1; j <= b.size(); ++j) {
+            const size_t up = row[j];
+            row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] == b[j - 1] ? 0u : 1u)});
+            diag = up;
+        }
+    }
+    return row[b.size()];
+}
+} // namespace
+
+bool only_keys(const JsonValue &obj, std::initializer_list<const char *> allowed, const std::string &source,
+               const std::string &what, std::string &err) {
+    if (obj.type != JsonValue::Object) return true; // the caller says what type it needs
+    for (const auto &m : obj.members) {
+        bool known = false;
+        for (const char *k : allowed) known = known || m.first == k;
+        if (known) continue;
+        std::string list, best;
+        size_t best_d = 3; // at most two edits away
+        for (const char *k : allowed) {
+            list += (list.empty() ? "" : ", ") + std::string(k);
+            if (m.first.size() > 64) continue;
+            const size_t d = edit_distance(m.first, k);
+            if (d < best_d) {
+                best_d = d;
+                best = k;
+            }
+        }
+        err = where(source, m.second) + "unknown key \"" + quote_field(m.first) + "\" in " + what + " (allowed: " +
+              list + ")" + (best.empty() ? "" : "; did you mean \"" + best + "\"?");
+        return false;
+    }
+    return true;
 }
 
 bool parse_json(const std::string &text, const std::string &source, JsonValue &out, std::string &err) {

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstddef>
+#include <initializer_list>
 #include <string>
 #include <utility>
 #include <vector>
@@ -32,6 +33,13 @@ std::string where(const std::string &source, const JsonValue &v);
 // rest replaced by "... (N more characters)", so a 10^6-digit field is not
 // echoed whole.
 std::string quote_field(const std::string &s);
+
+// The schema check of an object: every member's key must be one of
+// `allowed` (a misspelt key would otherwise be ignored and its default
+// used). Errors read "source:line:col: unknown key "effect" in <what>
+// (allowed: ...); did you mean "effects"?", at the member's value.
+bool only_keys(const JsonValue &obj, std::initializer_list<const char *> allowed, const std::string &source,
+               const std::string &what, std::string &err);
 
 // Parses a complete JSON document. Errors read
 // "source:line:col: <what is wrong>" in words.

@@ -88,6 +88,41 @@ bool valid_param_name(const std::string &n) {
         if (!(std::isalnum((unsigned char)c) || c == '_')) return false;
     return true;
 }
+// Well-formed UTF-8 (no overlong form, no surrogate, nothing past
+// U+10FFFF): a name or unit is written into JSON, which must be UTF-8.
+bool valid_utf8(const std::string &s) {
+    size_t i = 0;
+    while (i < s.size()) {
+        const unsigned char c = (unsigned char)s[i];
+        size_t n;
+        uint32_t cp;
+        if (c < 0x80) {
+            ++i;
+            continue;
+        } else if (c >= 0xc2 && c <= 0xdf) {
+            n = 1;
+            cp = c & 0x1fu;
+        } else if (c >= 0xe0 && c <= 0xef) {
+            n = 2;
+            cp = c & 0x0fu;
+        } else if (c >= 0xf0 && c <= 0xf4) {
+            n = 3;
+            cp = c & 0x07u;
+        } else {
+            return false;
+        }
+        if (i + n >= s.size()) return false; // cut short
+        for (size_t k = 1; k <= n; ++k) {
+            const unsigned char d = (unsigned char)s[i + k];
+            if ((d & 0xc0u) != 0x80u) return false;
+            cp = (cp << 6) | (d & 0x3fu);
+        }
+        if ((n == 2 && cp < 0x800) || (n == 3 && (cp < 0x10000 || cp > 0x10ffff)) || (cp >= 0xd800 && cp <= 0xdfff))
+            return false;
+        i += n + 1;
+    }
+    return true;
+}
 bool valid_unit(const std::string &u) {
     for (char c : u)
         if ((unsigned char)c < 0x20 || c == '"' || c == '\\' || c == 0x7f) return false;
@@ -106,6 +141,10 @@ bool user_param(const cdm_effect_def *def, uint32_t k, bool v12, const std::stri
     if (v12 && (!def->param_names[k] || !valid_param_name(p.name))) {
         err = at + std::to_string(k) + ": name must be an identifier ([A-Za-z_][A-Za-z0-9_]*), got \"" +
               (def->param_names[k] ? p.name : "(null)") + "\"";
+        return false;
+    }
+    if (!valid_utf8(p.name) || !valid_utf8(p.unit)) {
+        err = at + std::to_string(k) + ": name or unit is not valid UTF-8";
         return false;
     }
     if (v12 && !valid_unit(p.unit)) {
@@ -217,7 +256,7 @@ int register_user_effect(const cdm_effect_def *def, std::string &err) {
         ParamDesc p;
         if (!user_param(def, k, v12, d->name, p, err)) return CDM_ERR_INVALID_ARG;
         for (const auto &q : d->params)
-            if (v12 && q.name == p.name) {
+            if (q.name == p.name) { // a calibration's "params" object could not hold both
                 err = "cdm_effect_register: effect \"" + d->name + "\" has two parameters named \"" + p.name + "\"";
                 return CDM_ERR_INVALID_ARG;
             }

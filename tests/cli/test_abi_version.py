@@ -19,16 +19,18 @@ def read(*parts):
 
 
 def header_functions():
-    """(name, experimental, since_1_1) of every CDM_API function in cdm.h."""
+    """(name, experimental, since) of every CDM_API function in cdm.h; since
+    is the stable minor version that added it ("1.1", "1.2") or None (1.0)."""
     text = read("include", "cdm", "cdm.h")
     exp_at = text.index("#if defined(CDM_EXPERIMENTAL)")
     out = []
     for m in re.finditer(r"CDM_API\s+[^;(]*?\b(cdm_\w+)\s*\(", text):
         doc = text[max(0, text.rfind("/**", 0, m.start())):m.start()]
-        # A function added in 1.1 says so first thing in its comment
-        # ("since 1.1. ..."); a later mention of 1.1 in the text (a new flag
-        # it may return) does not move it.
-        out.append((m.group(1), m.start() > exp_at, re.match(r"/\*\*\s*(\*\s*)?since 1\.1\b", doc) is not None))
+        # A function added in 1.x says so first thing in its comment
+        # ("since 1.1. ..."); a later mention of a version in the text (a new
+        # flag it may return) does not move it.
+        since = re.match(r"/\*\*\s*(\*\s*)?since (1\.[1-9]\d*)\b", doc)
+        out.append((m.group(1), m.start() > exp_at, since.group(2) if since else None))
     return out
 
 
@@ -50,8 +52,8 @@ def test_version_nodes():
     syms = exported()
     funcs = header_functions()
     assert len(funcs) > 40
-    for name, experimental, since_1_1 in funcs:
-        want = "CDM_EXPERIMENTAL_" + exp_version if experimental else ("CDM_1.1" if since_1_1 else "CDM_1")
+    for name, experimental, since in funcs:
+        want = "CDM_EXPERIMENTAL_" + exp_version if experimental else ("CDM_" + since if since else "CDM_1")
         assert syms.get(name) == want, "%s: node %s, want %s" % (name, syms.get(name), want)
     # Nothing but the header's functions leaves the library.
     assert set(syms) == {n for n, _, _ in funcs}

@@ -140,6 +140,19 @@ def test_report_path_with_quote_and_space(tmp_path, small_dataset):
     assert (out / "index.html").is_file()
 
 
+def test_report_refuses_a_directory_it_does_not_own(tmp_path, small_dataset):
+    """`--report .` in the user's working directory: refused before anything
+    is written there (not even the diagnosis JSON), the user's files kept."""
+    out = tmp_path / "work"
+    out.mkdir()
+    (out / "residual_map_h40.png").write_bytes(b"the user's own")
+    (out / "diagnosis.json").write_text("the user's own")
+    r = cdm("calib", "diagnose", str(small_dataset), "--quiet", "--no-candidates", "--report", str(out))
+    assert r.returncode == 2 and "holds no report" in r.stderr, r.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["diagnosis.json", "residual_map_h40.png"]
+    assert (out / "diagnosis.json").read_text() == "the user's own"
+
+
 def test_report_says_what_to_install(tmp_path, small_dataset):
     env = dict(os.environ, PYTHON="/bin/false")
     r = cdm("calib", "diagnose", str(small_dataset), "--quiet", "--no-candidates", "--report",

@@ -315,7 +315,8 @@ def test_hostile_and_truncated_mcap(tmp_path):
 def test_full_disk_keeps_whole_chunks_that_replay(tmp_path):
     # A file-size limit stands in for a full disk (EFBIG as ENOSPC would):
     # the chunk that does not fit is cut off again, the chunks before it
-    # stay, and replay: plays them, saying the footer is missing.
+    # stay in the temporary (the target is never replaced by a partial
+    # file), and replay: plays them, saying the footer is missing.
     import os
     import resource
 
@@ -327,9 +328,12 @@ def test_full_disk_keeps_whole_chunks_that_replay(tmp_path):
     r = subprocess.run([CLI, "record", "sim:", str(out), "--seconds", "5"], preexec_fn=limit, capture_output=True,
                        text=True, timeout=60)
     assert r.returncode == 1
-    assert os.strerror(27) in r.stderr and "keeps what was written" in r.stderr
+    assert os.strerror(27) in r.stderr and "is kept in " + str(out) + ".tmp" in r.stderr
+    assert not out.exists()
+    kept = tmp_path / "kept.mcap"
+    os.rename(str(out) + ".tmp", kept)
     csv_out = tmp_path / "full.csv"
-    r = cdm("export", str(out), str(csv_out))
+    r = cdm("export", str(kept), str(csv_out))
     assert r.returncode == 0, r.stderr
     assert "without its footer" in r.stderr
     assert len(csv_out.read_text().splitlines()) > 100  # two chunks' worth of reports, not an empty file

@@ -82,22 +82,68 @@ def test_never_writes_over_a_non_regular_file(tmp_path):
     assert r.returncode == 2 and "not a regular file" in r.stderr
 
 
-def test_write_error_keeps_what_was_written_and_names_the_cause(tmp_path):
-    # A file-size limit stands in for a full disk: the write fails with
-    # EFBIG as it would with ENOSPC, without needing a small filesystem.
-    import resource
-
-    def limit():
+def _fsize_limit(limit):
+    def apply():
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-        resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000))
+        import resource
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    return apply
 
-    out = tmp_path / "full.cdmrec"
-    r = subprocess.run([CLI, "record", "sim:", str(out), "--seconds", "5"], preexec_fn=limit, capture_output=True,
+
+@pytest.fixture
+def small_tmpfs(tmp_path):
+    """A 64 KiB tmpfs: a real full disk (ENOSPC). Needs root; skipped
+    otherwise (the RLIMIT_FSIZE variant covers the same path with EFBIG)."""
+    d = tmp_path / "full"
+    d.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(d)],
+                                           capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a small tmpfs (not root, or mount refused)")
+    try:
+        yield d
+    finally:
+        subprocess.run(["umount", str(d)], capture_output=True)
+
+
+OLD = b"the user's earlier recording, which a failed write must not replace\n"
+
+
+def _expect_old_target_kept(r, out, cause):
+    assert r.returncode == 1, r.stderr
+    assert cause in r.stderr, r.stderr  # the real cause (not a stale errno)
+    assert "not replaced" in r.stderr and str(out) + ".tmp" in r.stderr, r.stderr
+    assert out.read_bytes() == OLD
+    tmp = out.parent / (out.name + ".tmp")
+    assert tmp.is_file() and tmp.stat().st_size > 12  # what was written before the error
+
+
+# A file-size limit stands in for a full disk: the write fails with EFBIG
+# as it would with ENOSPC, without needing a small filesystem.
+@pytest.mark.parametrize("name", ["full.cdmrec", "full.csv", "full.mcap"])
+def test_write_error_never_replaces_the_old_file(tmp_path, name):
+    out = tmp_path / name
+    out.write_bytes(OLD)
+    r = subprocess.run([CLI, "record", "sim:?rate=1000", str(out), "--seconds", "5"],
+                       preexec_fn=_fsize_limit(20000), capture_output=True, text=True, timeout=60)
+    _expect_old_target_kept(r, out, os.strerror(27))  # EFBIG
+
+
+@pytest.mark.parametrize("name", ["full.cdmrec", "full.csv", "full.mcap"])
+def test_full_disk_never_replaces_the_old_file(small_tmpfs, tmp_path, name):
+    out = small_tmpfs / name
+    out.write_bytes(OLD)
+    r = subprocess.run([CLI, "record", "sim:?rate=1000", str(out), "--seconds", "5"], capture_output=True,
                        text=True, timeout=60)
-    assert r.returncode == 1
-    assert os.strerror(27) in r.stderr  # EFBIG, the real cause (not a stale errno)
-    assert "keeps what was written" in r.stderr
-    assert out.is_file() and out.stat().st_size > 12  # the header and the reports before the error
+    _expect_old_target_kept(r, out, os.strerror(28))  # ENOSPC
+
+
+def test_export_on_full_disk_never_replaces_the_old_file(small_tmpfs, tmp_path):
+    src = tmp_path / "in.cdmrec"
+    assert cdm("record", "sim:?rate=1000", str(src), "--seconds", "1").returncode == 0
+    out = small_tmpfs / "out.csv"
+    out.write_bytes(OLD)
+    r = subprocess.run([CLI, "export", str(src), str(out)], capture_output=True, text=True, timeout=60)
+    _expect_old_target_kept(r, out, os.strerror(28))
 
 
 def test_jig_record_writes_acquisition_time(tmp_path):

@@ -13,7 +13,7 @@ using System.Text.RegularExpressions;
 using System.Threading;
 using Cdm;
 
-static class CdmTests
+static partial class CdmTests
 {
     static int failures;
     static int checks;
@@ -46,6 +46,12 @@ static class CdmTests
                     Run("bad_uri", BadUri);
                     Run("sample_callback", SampleCallback);
                     Run("events_and_log", EventsAndLog);
+                    Run("dispose_wakes_blocked_waiter", DisposeWakesBlockedWaiter);
+                    Run("dispose_inside_sample_callback", DisposeInsideSampleCallback);
+                    Run("dispose_inside_event_callback", DisposeInsideEventCallback);
+                    Run("dispose_inside_log_sink", DisposeInsideLogSink);
+                    Run("wait_inside_own_callback_refused", WaitInsideOwnCallbackRefused);
+                    Run("callback_may_call_its_device", CallbackMayCallItsDevice);
                     break;
                 case "watch": Run("watch_replug", WatchReplug); break; // under with_master --replug (tests/umockdev)
                 case "calibration":
@@ -224,8 +230,8 @@ static class CdmTests
             Expect(cs == value, m.Groups[1].Value + ": header " + value + ", C# " + e.Name + "." + match + " = " + cs);
             found++;
         }
-        Expect(found == 16 + 6 + 3, "parsed " + found + " constants from the header, expected 25");
-        Expect(Enum.GetValues(typeof(ErrorCode)).Length == 16, "ErrorCode has a member the header lacks");
+        Expect(found == 17 + 6 + 3, "parsed " + found + " constants from the header, expected 26");
+        Expect(Enum.GetValues(typeof(ErrorCode)).Length == 17, "ErrorCode has a member the header lacks");
         Expect(Device.LibraryVersion == "1.0.0" || Device.LibraryVersion.StartsWith("1."), "library version " + Device.LibraryVersion);
     }
 

@@ -84,6 +84,44 @@ def test_stale_figures_removed(tmp_path):
     check_page(out)
 
 
+def test_report_refuses_a_non_empty_directory_it_did_not_create(tmp_path):
+    """`--report .` in a directory of the user's: refused, nothing touched,
+    even files named like the report's figures."""
+    out = tmp_path / "mine"
+    out.mkdir()
+    own = {"residual_map_h30.png": b"the user's picture", "error_summary.png": b"another", "notes.txt": b"x"}
+    for name, data in own.items():
+        (out / name).write_bytes(data)
+    a = _synth.write(tmp_path / "a.json", _synth.make_diag(n=5, heights=(30, 70)))
+    r = run_report(a, "--out", out)
+    assert r.returncode == 2 and "not empty" in r.stderr and str(out) in r.stderr, r.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == own
+
+
+def test_report_never_deletes_a_file_it_did_not_write(tmp_path):
+    """In its own directory, a later report removes the figures an earlier
+    report wrote and it does not redraw, never the user's files added since,
+    whatever their names."""
+    out = tmp_path / "r"
+    a = _synth.write(tmp_path / "a.json", _synth.make_diag(n=5, heights=(30, 70)))
+    assert run_report(a, "--out", out).returncode == 0
+    (out / "residual_map_h99.png").write_bytes(b"the user's own figure")
+    b = _synth.write(tmp_path / "b.json", _synth.make_diag(n=5, heights=(45,)))
+    assert run_report(b, "--out", out).returncode == 0
+    assert not (out / "residual_map_h30.png").exists()  # the earlier report's, not redrawn
+    assert (out / "residual_map_h99.png").read_bytes() == b"the user's own figure"
+    (out / "residual_map_h99.png").unlink()  # the page's own check counts every PNG
+    check_page(out)
+
+
+def test_report_writes_into_an_empty_directory(tmp_path):
+    out = tmp_path / "empty"
+    out.mkdir()
+    a = _synth.write(tmp_path / "a.json", _synth.make_diag(n=5, heights=(40,)))
+    assert run_report(a, "--out", out).returncode == 0
+    check_page(out)
+
+
 def test_self_check_catches_broken_output(tmp_path):
     """The checkers themselves must be able to fail."""
     from conftest import check_png

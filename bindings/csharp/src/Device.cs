@@ -5,8 +5,12 @@ using System.Text;
 namespace Cdm
 {
     /// <summary>An open master. Dispose it (using-block) to stop its reader thread.
-    /// Every method may be called from any thread; Dispose must not run while
-    /// another thread is inside a call on this device (the C library's rule).</summary>
+    /// Every method may be called from any thread, Dispose included, and from the
+    /// device's own callbacks. Dispose wakes the threads blocked in WaitPose /
+    /// WaitPoseAfter (they throw CdmException with ErrorCode.Closed, never return a
+    /// pose); the native handle is freed once the last call using it has returned
+    /// (SafeHandle), and a Dispose from the device's own callback frees it when that
+    /// callback returns (docs/reliability.md, "Callbacks").</summary>
     public sealed class Device : IDisposable
     {
         static readonly uint PoseSize = (uint)Marshal.SizeOf(typeof(NativePose));
@@ -54,6 +58,7 @@ namespace Cdm
                     var p = (NativePose)Marshal.PtrToStructure(s.pose, typeof(NativePose));
                     try { onSample(Pose.From(ref p, 0)); }
                     catch (Exception e) { Console.Error.WriteLine("Cdm.Device on-sample callback: " + e); }
+                    GC.KeepAlive(fn); // alive until the native caller is back, even after a Dispose in onSample
                 };
                 opts.on_sample = Marshal.GetFunctionPointerForDelegate(fn);
             }
@@ -65,6 +70,7 @@ namespace Cdm
                     var e = (NativeEvent)Marshal.PtrToStructure(ev, typeof(NativeEvent));
                     try { onEvent((DeviceEvent)e.kind, Marshal.PtrToStringAnsi(e.text) ?? ""); }
                     catch (Exception x) { Console.Error.WriteLine("Cdm.Device event callback: " + x); }
+                    GC.KeepAlive(efn);
                 };
                 opts.on_event = Marshal.GetFunctionPointerForDelegate(efn);
             }
@@ -104,7 +110,16 @@ namespace Cdm
 
         public bool IsDisposed { get { return _h.IsClosed; } }
 
-        public void Dispose() { _h.Dispose(); }
+        public void Dispose()
+        {
+            if (_h.IsClosed) return;
+            // cdm_shutdown first: a thread inside WaitPoseAfter(..., -1) holds a
+            // reference to the handle, which postpones its release until that call
+            // returns; the shutdown makes it return (ErrorCode.Closed) at once.
+            try { NativeMethods.cdm_shutdown(_h); }
+            catch (ObjectDisposedException) { return; } // a concurrent Dispose won
+            _h.Dispose();
+        }
 
         DeviceHandle H
         {

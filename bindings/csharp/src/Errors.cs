@@ -21,6 +21,8 @@ namespace Cdm
         EndOfStream = -13,
         Crc = -14,
         Internal = -15,
+        /// <summary>since 1.2: a wait ended by Dispose (cdm_close / cdm_shutdown): no pose.</summary>
+        Closed = -16,
     }
 
     /// <summary>cdm_pose_flag bits.</summary>

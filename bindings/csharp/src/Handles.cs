@@ -8,19 +8,22 @@ namespace Cdm
     internal sealed class DeviceHandle : SafeHandle
     {
         // The sample delegate handed to cdm_open_ex: native code calls it from
-        // the reader thread until cdm_close returns, so it lives exactly as long
-        // as this handle.
+        // the reader thread until cdm_close returns (or, for a close from the
+        // callback itself, until that callback has returned), so they are
+        // never dropped here: they live as long as this handle object.
         internal SampleFn SampleCallback;
         internal EventFn EventCallback;
 
         public DeviceHandle() : base(IntPtr.Zero, true) { }
         public override bool IsInvalid { get { return handle == IntPtr.Zero; } }
 
+        // Runs when the last call using the handle has returned. On another
+        // thread cdm_close joins the reader thread; on the reader thread (a
+        // Dispose from the device's own callback) libcdm defers the close
+        // until the callback returns.
         protected override bool ReleaseHandle()
         {
-            NativeMethods.cdm_close(handle); // joins the reader thread: no callback after this
-            SampleCallback = null;
-            EventCallback = null;
+            NativeMethods.cdm_close(handle);
             return true;
         }
     }

@@ -212,6 +212,7 @@ namespace Cdm
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
         internal static extern void cdm_set_log_fn(LogFn fn, IntPtr user);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern void cdm_close(IntPtr dev);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_shutdown(DeviceHandle dev);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_get_pose(DeviceHandle dev, ref NativePose pose);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_wait_pose(DeviceHandle dev, int timeoutMs, ref NativePose pose);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] internal static extern int cdm_wait_pose_after(DeviceHandle dev, ulong afterHostSequence, int timeoutMs, ref NativePose pose);

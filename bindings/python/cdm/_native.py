@@ -211,6 +211,7 @@ PROTOTYPES = {
     "cdm_open": (_int, [_str, _handle_p]),
     "cdm_open_ex": (_int, [_str, ctypes.POINTER(cdm_open_options), _handle_p]),
     "cdm_close": (None, [_handle]),
+    "cdm_shutdown": (_int, [_handle]),  # since 1.2
     "cdm_get_pose": (_int, [_handle, ctypes.POINTER(cdm_pose)]),
     "cdm_wait_pose": (_int, [_handle, _int, ctypes.POINTER(cdm_pose)]),
     "cdm_wait_pose_after": (_int, [_handle, ctypes.c_uint64, _int, ctypes.POINTER(cdm_pose)]),

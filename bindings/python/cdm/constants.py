@@ -31,9 +31,10 @@ class Error(enum.IntEnum):
     CDM_ERR_END_OF_STREAM = -13
     CDM_ERR_CRC = -14
     CDM_ERR_INTERNAL = -15
+    CDM_ERR_CLOSED = -16  # since 1.2: a wait ended by close()
 
 
-CDM_ERROR_COUNT = 16
+CDM_ERROR_COUNT = 17
 
 
 class PoseFlag(enum.IntFlag):

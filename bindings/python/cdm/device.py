@@ -1,6 +1,7 @@
 """Devices: open, poses, raw values, information, counters, stored calibration."""
 import ctypes
 import math
+import threading
 import time
 from dataclasses import dataclass
 from typing import Callable, Optional, Tuple
@@ -153,8 +154,21 @@ class Sample:
     source_time_ns: int = 0
 
 
-def _make_sample_callback(fn):
+class _CallbackState:
+    """Shared by a device and its callbacks: which thread is the reader (the
+    one the callbacks run on), and whether close() began (no user callback
+    runs after it)."""
+
+    def __init__(self):
+        self.reader = None
+        self.closed = False
+
+
+def _make_sample_callback(fn, state):
     def trampoline(_user, sample_p):
+        state.reader = threading.get_ident()
+        if state.closed:
+            return
         s = sample_p.contents
         report = ctypes.string_at(s.report, s.report_len) if s.report else b""
         raw = Raw._from_c(s.raw.contents) if s.raw else None
@@ -166,39 +180,84 @@ def _make_sample_callback(fn):
 class Device(_native.Closing):
     """An open master. Use as a context manager, or call close() (idempotent).
 
-    Methods other than close() may be called from any thread; close() must not
-    run while another thread is inside a call on this device (the C rule)."""
+    Every method may be called from any thread, close() included, and from
+    the device's own callbacks: the native handle stays alive while any call
+    on it is in progress (a count of calls under a lock). close() wakes the
+    threads blocked in wait_pose (they raise CdmError CDM_ERR_CLOSED, never
+    return a pose), waits for the calls in progress to leave, then frees the
+    handle. From the device's own callback, close() returns at once: no
+    callback of this device runs after it, and the handle is freed on a
+    helper thread once the callback has returned (docs/reliability.md,
+    "Callbacks")."""
 
-    def __init__(self, handle, uri, callback=None):
+    def __init__(self, handle, uri, callback=None, state=None):
         self._h = handle
         self.uri = uri
         # The ctypes callback object must outlive the native handle: the reader
         # thread calls it until cdm_close returns.
         self._callback = callback
+        self._state = state or _CallbackState()
+        self._lock = threading.Condition(threading.Lock())
+        self._calls = 0  # native calls in progress on self._h
 
     # -- lifetime
     def close(self):
-        h, self._h = self._h, None
-        if h:
-            _native.lib().cdm_close(h)
+        with self._lock:
+            h = self._h
+            if h is None or self._state.closed:
+                return
+            self._state.closed = True  # refuses new calls, silences the callbacks
+        # Wakes the waiters (CDM_ERR_CLOSED); the handle stays valid.
+        _native.lib().cdm_shutdown(h)
+        if self._state.reader == threading.get_ident():
+            # Inside this device's callback: cdm_close must not run before the
+            # callback has returned into the library (the ctypes callback it
+            # is running in must outlive that), so it runs on a helper thread,
+            # which cdm_close's join makes wait for the callback's end.
+            threading.Thread(target=self._finish_close, args=(h,), name="cdm-close", daemon=True).start()
+            return
+        self._finish_close(h)
+
+    def _finish_close(self, h):
+        with self._lock:
+            while self._calls:
+                self._lock.wait()
+            self._h = None
+        _native.lib().cdm_close(h)
         self._callback = None
 
     @property
     def closed(self):
-        return self._h is None
+        return self._h is None or self._state.closed
 
     def __repr__(self):
         return "<cdm.Device %r%s>" % (self.uri, " closed" if self.closed else "")
 
     def _handle(self, function):
-        if self._h is None:
+        """The native handle, uncounted: for a caller that keeps the device
+        open during its own native call (the package's calls use _enter)."""
+        if self._h is None or self._state.closed:
             raise CdmError(Error.CDM_ERR_INVALID_ARG, "device %r is closed" % (self.uri,), function=function)
         return self._h
+
+    def _enter(self, function):
+        """The handle, counted as in use until _leave(): close() waits for it."""
+        with self._lock:
+            if self._h is None or self._state.closed:
+                raise CdmError(Error.CDM_ERR_INVALID_ARG, "device %r is closed" % (self.uri,), function=function)
+            self._calls += 1
+            return self._h
+
+    def _leave(self):
+        with self._lock:
+            self._calls -= 1
+            if self._calls == 0:
+                self._lock.notify_all()
 
     def _fail(self, code, function):
         L = _native.lib()
         detail = (L.cdm_thread_error() or b"").decode("utf-8", "replace")
-        if not detail and self._h:
+        if not detail and not self.closed:
             detail = self.error_detail()
         return _native.fail(code, function, detail)
 
@@ -210,12 +269,15 @@ class Device(_native.Closing):
         wait_pose first). A stale, disconnected or ended stream is *not* an
         exception: the last pose is returned with its flags and .status set, as
         a control loop wants to hold the last command and look at the flags."""
-        h = self._handle("cdm_get_pose")
-        p = _native.cdm_pose()
-        rc = _native.lib().cdm_get_pose(h, ctypes.byref(p))
-        if rc < 0 and rc not in _FILLED:
-            raise self._fail(rc, "cdm_get_pose")
-        return Pose._from_c(p, rc)
+        h = self._enter("cdm_get_pose")
+        try:
+            p = _native.cdm_pose()
+            rc = _native.lib().cdm_get_pose(h, ctypes.byref(p))
+            if rc < 0 and rc not in _FILLED:
+                raise self._fail(rc, "cdm_get_pose")
+            return Pose._from_c(p, rc)
+        finally:
+            self._leave()
 
     # The C call waits in slices this long, so that Ctrl-C (handled by Python
     # between two foreign calls) interrupts a long wait within 0.1 s.
@@ -228,121 +290,151 @@ class Device(_native.Closing):
         misses one. timeout in seconds (None: no limit). Raises
         CdmError(CDM_ERR_TIMEOUT) when none came in time; otherwise returns
         like get_pose. Ctrl-C interrupts it."""
-        h = self._handle("cdm_wait_pose_after")
-        if timeout is not None and (timeout < 0 or math.isnan(timeout)):
-            raise ValueError("wait_pose: timeout must be >= 0 seconds or None, got %r" % (timeout,))
-        if after is not None and (isinstance(after, bool) or not isinstance(after, int) or not 0 <= after < 2**64):
-            raise ValueError("wait_pose: after must be a Pose.host_sequence (int in 0..2^64-1), got %r" % (after,))
-        if timeout is not None and math.isinf(timeout):
-            timeout = None  # no limit, as None says (a deadline at infinity overflows the clock's arithmetic)
-        L = _native.lib()
-        p = _native.cdm_pose()
-        if after is None:
-            L.cdm_get_pose(h, ctypes.byref(p))
-            after = int(p.host_sequence)
-        deadline = None if timeout is None else time.monotonic() + timeout
-        while True:
-            left_ms = self._WAIT_SLICE_MS
-            if deadline is not None:
-                left_ms = max(0, min(left_ms, int(math.ceil((deadline - time.monotonic()) * 1000.0))))
-            rc = L.cdm_wait_pose_after(h, after, left_ms, ctypes.byref(p))
-            waiting = rc in (Error.CDM_ERR_TIMEOUT, Error.CDM_ERR_DISCONNECTED)
-            if not waiting or (deadline is not None and time.monotonic() >= deadline):
-                break
-        if rc < 0 and rc not in _FILLED:
-            raise self._fail(rc, "cdm_wait_pose_after")
-        return Pose._from_c(p, rc)
+        h = self._enter("cdm_wait_pose_after")
+        try:
+            if timeout is not None and (timeout < 0 or math.isnan(timeout)):
+                raise ValueError("wait_pose: timeout must be >= 0 seconds or None, got %r" % (timeout,))
+            if after is not None and (isinstance(after, bool) or not isinstance(after, int) or not 0 <= after < 2**64):
+                raise ValueError("wait_pose: after must be a Pose.host_sequence (int in 0..2^64-1), got %r" % (after,))
+            if timeout is not None and math.isinf(timeout):
+                timeout = None  # no limit, as None says (a deadline at infinity overflows the clock's arithmetic)
+            L = _native.lib()
+            p = _native.cdm_pose()
+            if after is None:
+                L.cdm_get_pose(h, ctypes.byref(p))
+                after = int(p.host_sequence)
+            deadline = None if timeout is None else time.monotonic() + timeout
+            while True:
+                left_ms = self._WAIT_SLICE_MS
+                if deadline is not None:
+                    left_ms = max(0, min(left_ms, int(math.ceil((deadline - time.monotonic()) * 1000.0))))
+                rc = L.cdm_wait_pose_after(h, after, left_ms, ctypes.byref(p))
+                waiting = rc in (Error.CDM_ERR_TIMEOUT, Error.CDM_ERR_DISCONNECTED)
+                if not waiting or (deadline is not None and time.monotonic() >= deadline):
+                    break
+            if rc < 0 and rc not in _FILLED:
+                raise self._fail(rc, "cdm_wait_pose_after")
+            return Pose._from_c(p, rc)
+        finally:
+            self._leave()
 
     def get_raw(self):
         """Raw values of the newest report (same returns as get_pose)."""
-        h = self._handle("cdm_get_raw")
-        r = _native.cdm_raw()
-        rc = _native.lib().cdm_get_raw(h, ctypes.byref(r))
-        if rc < 0 and rc not in _FILLED:
-            raise self._fail(rc, "cdm_get_raw")
-        return Raw._from_c(r, rc)
+        h = self._enter("cdm_get_raw")
+        try:
+            r = _native.cdm_raw()
+            rc = _native.lib().cdm_get_raw(h, ctypes.byref(r))
+            if rc < 0 and rc not in _FILLED:
+                raise self._fail(rc, "cdm_get_raw")
+            return Raw._from_c(r, rc)
+        finally:
+            self._leave()
 
     # -- information
     def info(self):
-        h = self._handle("cdm_get_info")
-        i = _native.cdm_device_info()
-        rc = _native.lib().cdm_get_info(h, ctypes.byref(i))
-        if rc < 0:
-            raise self._fail(rc, "cdm_get_info")
-        return DeviceInfo._from_c(i)
+        h = self._enter("cdm_get_info")
+        try:
+            i = _native.cdm_device_info()
+            rc = _native.lib().cdm_get_info(h, ctypes.byref(i))
+            if rc < 0:
+                raise self._fail(rc, "cdm_get_info")
+            return DeviceInfo._from_c(i)
+        finally:
+            self._leave()
 
     def stats(self):
-        h = self._handle("cdm_get_stats")
-        s = _native.cdm_stats()
-        rc = _native.lib().cdm_get_stats(h, ctypes.byref(s))
-        if rc < 0:
-            raise self._fail(rc, "cdm_get_stats")
-        return Stats(s.reports, s.malformed, s.dropped, s.out_of_workspace, s.reconnects, s.sequence_jumps,
-                     s.out_of_order, s.replay_truncated_bytes)
+        h = self._enter("cdm_get_stats")
+        try:
+            s = _native.cdm_stats()
+            rc = _native.lib().cdm_get_stats(h, ctypes.byref(s))
+            if rc < 0:
+                raise self._fail(rc, "cdm_get_stats")
+            return Stats(s.reports, s.malformed, s.dropped, s.out_of_workspace, s.reconnects, s.sequence_jumps,
+                         s.out_of_order, s.replay_truncated_bytes)
+        finally:
+            self._leave()
 
     def error_detail(self):
         """The handle's last asynchronous problem (cdm_device_error), "" if none."""
-        h = self._handle("cdm_device_error")
-        buf = ctypes.create_string_buffer(1024)
-        rc = _native.lib().cdm_device_error(h, buf, len(buf))
-        if rc < 0:
-            return ""
-        return buf.value.decode("utf-8", "replace")
+        h = self._enter("cdm_device_error")
+        try:
+            buf = ctypes.create_string_buffer(1024)
+            rc = _native.lib().cdm_device_error(h, buf, len(buf))
+            if rc < 0:
+                return ""
+            return buf.value.decode("utf-8", "replace")
+        finally:
+            self._leave()
 
     def set_stale_timeout(self, seconds):
         """Poses older than this are flagged stale; 0 restores the default (50 ms)."""
         us = int(round(seconds * 1e6))
         if not 0 <= us < 2**32:
             raise ValueError("set_stale_timeout: %r s is outside 0..4294 s" % (seconds,))
-        h = self._handle("cdm_set_stale_timeout")
-        rc = _native.lib().cdm_set_stale_timeout(h, us)
-        if rc < 0:
-            raise self._fail(rc, "cdm_set_stale_timeout")
+        h = self._enter("cdm_set_stale_timeout")
+        try:
+            rc = _native.lib().cdm_set_stale_timeout(h, us)
+            if rc < 0:
+                raise self._fail(rc, "cdm_set_stale_timeout")
+        finally:
+            self._leave()
 
     # -- calibration
     def set_calibration(self, calibration):
         """Applies a cdm.Calibration to the poses from the next report on (the
         library copies it); None returns to the nominal model."""
-        h = self._handle("cdm_set_calibration")
-        ch = None if calibration is None else calibration._handle("cdm_set_calibration")
-        rc = _native.lib().cdm_set_calibration(h, ch)
-        if rc < 0:
-            raise self._fail(rc, "cdm_set_calibration")
+        h = self._enter("cdm_set_calibration")
+        try:
+            ch = None if calibration is None else calibration._handle("cdm_set_calibration")
+            rc = _native.lib().cdm_set_calibration(h, ch)
+            if rc < 0:
+                raise self._fail(rc, "cdm_set_calibration")
+        finally:
+            self._leave()
 
     def read_stored_calibration(self):
         """The calibration bytes stored in the device (CdmError CDM_ERR_CRC when corrupt)."""
-        h = self._handle("cdm_device_calibration_read")
-        L = _native.lib()
-        n = ctypes.c_size_t(0)
-        cap = 4096
-        for _ in range(3):
-            buf = ctypes.create_string_buffer(cap)
-            rc = L.cdm_device_calibration_read(h, buf, cap, ctypes.byref(n))
-            if rc == Error.CDM_ERR_NO_MEM and n.value > cap:
-                cap = n.value
-                continue
-            if rc < 0:
-                raise self._fail(rc, "cdm_device_calibration_read")
-            return buf.raw[:n.value]
-        raise CdmError(Error.CDM_ERR_INTERNAL, "cdm_device_calibration_read kept asking for a bigger buffer",
-                       function="cdm_device_calibration_read")
+        h = self._enter("cdm_device_calibration_read")
+        try:
+            L = _native.lib()
+            n = ctypes.c_size_t(0)
+            cap = 4096
+            for _ in range(3):
+                buf = ctypes.create_string_buffer(cap)
+                rc = L.cdm_device_calibration_read(h, buf, cap, ctypes.byref(n))
+                if rc == Error.CDM_ERR_NO_MEM and n.value > cap:
+                    cap = n.value
+                    continue
+                if rc < 0:
+                    raise self._fail(rc, "cdm_device_calibration_read")
+                return buf.raw[:n.value]
+            raise CdmError(Error.CDM_ERR_INTERNAL, "cdm_device_calibration_read kept asking for a bigger buffer",
+                           function="cdm_device_calibration_read")
+        finally:
+            self._leave()
 
     def write_stored_calibration(self, data):
         """Stores bytes (typically a calibration JSON) in the device."""
         if isinstance(data, str):
             data = data.encode("utf-8")
         data = bytes(data)
-        h = self._handle("cdm_device_calibration_write")
-        rc = _native.lib().cdm_device_calibration_write(h, data, len(data))
-        if rc < 0:
-            raise self._fail(rc, "cdm_device_calibration_write")
+        h = self._enter("cdm_device_calibration_write")
+        try:
+            rc = _native.lib().cdm_device_calibration_write(h, data, len(data))
+            if rc < 0:
+                raise self._fail(rc, "cdm_device_calibration_write")
+        finally:
+            self._leave()
 
 
 EVENT_NAMES = {1: "disconnected", 2: "reconnected", 3: "stale", 4: "fresh", 5: "end_of_stream"}
 
 
-def _make_event_callback(fn):
+def _make_event_callback(fn, state):
     def trampoline(_user, event_p):
+        state.reader = threading.get_ident()
+        if state.closed:
+            return
         e = event_p.contents
         fn(EVENT_NAMES.get(e.kind, "event %d" % e.kind), (e.text or b"").decode("utf-8", "replace"))
     return _native.cdm_event_fn(trampoline)
@@ -372,15 +464,16 @@ def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None, calibratio
         raise ValueError("open: stale_timeout_us %r is outside 0..2^32-1" % (stale_timeout_us,))
     opts.stale_timeout_us = int(stale_timeout_us)
     callback = None
+    state = _CallbackState()
     if on_sample is not None:
         if not callable(on_sample):
             raise TypeError("open: on_sample must be callable, got %r" % (on_sample,))
-        callback = _make_sample_callback(on_sample)
+        callback = _make_sample_callback(on_sample, state)
         opts.on_sample = callback
     if on_event is not None:
         if not callable(on_event):
             raise TypeError("open: on_event must be callable, got %r" % (on_event,))
-        event_callback = _make_event_callback(on_event)
+        event_callback = _make_event_callback(on_event, state)
         opts.on_event = event_callback
         callback = (callback, event_callback)  # both kept alive by the Device
     h = ctypes.c_void_p()
@@ -395,7 +488,7 @@ def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None, calibratio
         raise _native.fail(rc, "cdm_open")
     if not h.value:
         raise CdmError(Error.CDM_ERR_INTERNAL, "cdm_open returned CDM_OK and no handle", function="cdm_open")
-    dev = Device(h, uri, callback)
+    dev = Device(h, uri, callback, state)
     if cal is not None:
         try:
             dev.set_calibration(cal)

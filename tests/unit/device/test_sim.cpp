@@ -297,22 +297,33 @@ void test_set_calibration(void **) {
     assert_int_equal(cdm_wait_pose(dev, 1000, &p), CDM_OK);
     assert_false(p.flags & CDM_POSE_COMPENSATED);
     const double x_nominal = p.position[0];
-    // A calibration whose frame is 10 mm narrower: same readings, another
-    // position, and the pose says a calibration was applied.
+    // A calibration for another frame (10 mm narrower) is refused: it would
+    // put the poses elsewhere and flag them COMPENSATED.
     cdm::DeviceGeometry g;
     g.a_mm = 140;
-    cdm_calibration cal{std::make_shared<const cdm::Model>(g)};
+    cdm_calibration other{std::make_shared<const cdm::Model>(g)};
+    assert_int_equal(cdm_set_calibration(dev, &other), CDM_ERR_INVALID_ARG);
+    assert_non_null(std::strstr(cdm_thread_error(), "a_mm 140 (calibration) vs 150 (device"));
+    // Pots reading 5 mm short (cable_offset -5 mm each): same readings,
+    // another position, and the pose says a calibration was applied.
+    auto with_offsets = [](double o) {
+        cdm::Model m{cdm::DeviceGeometry{}};
+        std::string err;
+        assert_true(m.add_effect("cable_offset", {{"o1", o}, {"o2", o}, {"o3", o}, {"o4", o}}, err));
+        return std::make_shared<const cdm::Model>(m);
+    };
+    cdm_calibration cal{with_offsets(-5.0)};
     assert_int_equal(cdm_set_calibration(dev, &cal), CDM_OK);
     cal.model.reset(); // the device keeps its own reference
     assert_true(cdm_test::wait_until(
         [&] { return cdm_get_pose(dev, &p) == CDM_OK && (p.flags & CDM_POSE_COMPENSATED); }, 2000));
     assert_true(std::fabs(p.position[0] - x_nominal) > 1.0);
-    // 10 mm wider instead: at (50, 0, 0) the four spheres no longer meet
-    // (x^2 = 50^2 + 135^2 - 145^2 < 0). No NaN: the last good position is
-    // held and flagged.
+    // Pots reading 20 mm long instead: at (50, 0, 0) the cables, 197 mm,
+    // would be 177 mm, shorter than the 191 mm from anchor to holder corner
+    // in the plane: no position. No NaN: the last good position is held and
+    // flagged.
     const double held_x = p.position[0];
-    g.a_mm = 160;
-    cdm_calibration wide{std::make_shared<const cdm::Model>(g)};
+    cdm_calibration wide{with_offsets(20.0)};
     assert_int_equal(cdm_set_calibration(dev, &wide), CDM_OK);
     assert_true(cdm_test::wait_until(
         [&] { cdm_get_pose(dev, &p); return (p.flags & CDM_POSE_OUT_OF_WORKSPACE) != 0; }, 2000));

@@ -18,6 +18,7 @@
 // path_effect_jacobian_matches_central_differences.
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <functional>
 #include <random>
 #include <setjmp.h>
@@ -430,7 +431,9 @@ static void registration_checks(void **) {
     d.stage = CDM_EFFECT_STAGE_READING;
     assert_int_equal(register_user_effect(&d, err), CDM_OK);
     assert_string_not_equal(find_effect("test_reg")->fingerprint.c_str(), fp_mm.c_str());
-    // 1.1's struct: duplicate names pass as they always did, no unit.
+    // 1.1's struct: names need not be identifiers and carry no unit, but a
+    // repeated one is refused there too (a calibration's "params" object
+    // cannot hold both: its reload would be another model).
     cdm_effect_def old{};
     old.struct_size = uint32_t(offsetof(cdm_effect_def, apply_batch) + sizeof old.apply_batch);
     old.name = "test_reg_old";
@@ -439,6 +442,10 @@ static void registration_checks(void **) {
     old.param_scale = s2;
     old.apply = [](void *, const double *, const double *, double *) { return 0; };
     old.stage = CDM_EFFECT_STAGE_PATH; // beyond its struct_size: not read
+    assert_int_equal(register_user_effect(&old, err), CDM_ERR_INVALID_ARG);
+    assert_non_null(std::strstr(err.c_str(), "two parameters named \"a\""));
+    static const char *const spaced[] = {"a b", "c"}; // not identifiers: fine for 1.1
+    old.param_names = spaced;
     assert_int_equal(register_user_effect(&old, err), CDM_OK);
     assert_false(find_effect("test_reg_old")->on_path);
     assert_true(find_effect("test_reg_old")->params[0].unit.empty());

@@ -14,10 +14,48 @@ from .drawing import _draw_all
 from .loading import DiagnosisError, Positions, _label, _run
 from .page import Page, _Figure, _e, _img, document
 
-# Every figure this package writes starts with one of these; stale ones from an
-# earlier report in the same DIR are removed when a new report is moved in.
-FIGURE_PREFIXES = ("error_summary", "residual_map_", "residual_cut", "candidates",
-                   "fingerprint_", "vs_cable_length", "vs_variables", "comparison", "search_path")
+# The report's claim on its directory: the names of the files it wrote there,
+# one a line. A directory is the report's when it created it, when it was
+# empty, or when it holds this file; a report removes only files this list
+# names (an earlier report's figures it does not draw again), never a file
+# it did not write, whatever its name.
+MARKER = ".cdm-report"
+
+
+class ReportDirError(Exception):
+    """The output directory is not the report's to write into."""
+
+
+def _claim(out, inputs=()):
+    """Makes `out` the report's directory or refuses it; returns the names an
+    earlier report wrote there (empty for a new or empty directory). The
+    report's own inputs inside `out` (the diagnosis `cdm calib diagnose
+    --report` writes there) do not make it someone else's."""
+    if not os.path.lexists(out):
+        os.makedirs(out)
+        return set()
+    if not os.path.isdir(out):
+        raise NotADirectoryError(f"{out} exists and is not a directory")
+    marker = os.path.join(out, MARKER)
+    if os.path.isfile(marker) and not os.path.islink(marker):
+        with open(marker, encoding="utf-8") as f:
+            # Plain names only: a marker edited to name ../x or a path removes nothing outside.
+            return {n for n in f.read().splitlines() if n and n == os.path.basename(n) and n not in (".", "..")}
+    own = {os.path.realpath(p) for p in inputs}
+    if [n for n in os.listdir(out) if os.path.realpath(os.path.join(out, n)) not in own]:
+        raise ReportDirError(f"{out} is not empty and holds no report ({MARKER} is missing): the report writes "
+                             "only into a new or empty directory, or one an earlier report wrote; give another "
+                             "--out/--report directory")
+    return set()
+
+
+def _write_marker(out, tmp, names):
+    path = os.path.join(tmp, MARKER)
+    with open(path, "w", encoding="utf-8") as f:
+        f.write("".join(n + "\n" for n in sorted(names)))
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(path, os.path.join(out, MARKER))
 
 
 def _render(runs, tmp):
@@ -64,23 +102,29 @@ def write_report(runs, out):
     """
     if isinstance(runs, (str, os.PathLike, dict)):
         runs = [runs]
+    inputs = [r for r in runs if isinstance(r, (str, os.PathLike))]
     runs = [_run(r, i) for i, r in enumerate(runs)]
     if not runs:
         raise DiagnosisError("no diagnosis given")
-    os.makedirs(out, exist_ok=True)
+    earlier = _claim(out, inputs)
     tmp = tempfile.mkdtemp(prefix="tmp-report-", dir=out)
     try:
         doc, figs = _render(runs, tmp)
         with open(os.path.join(tmp, "index.html"), "w", encoding="utf-8") as f:
             f.write(doc)
-        # Move into place: figures first, the page last; remove stale figures.
-        keep = set(figs)
-        for name in os.listdir(out):
-            if (name.endswith(".png") and name.startswith(FIGURE_PREFIXES)
-                    and name not in keep and os.path.isfile(os.path.join(out, name))):
-                os.remove(os.path.join(out, name))
+        new = set(figs + ["index.html"])
+        # The claim first covers both reports' files (a stop half-way leaves
+        # none unclaimed), then the new one's alone.
+        _write_marker(out, tmp, earlier | new)
+        # Move into place: figures first, the page last; then remove the
+        # earlier report's figures this one does not have.
         for name in figs + ["index.html"]:
             os.replace(os.path.join(tmp, name), os.path.join(out, name))
+        for name in sorted(earlier - new):
+            path = os.path.join(out, name)
+            if os.path.isfile(path) and not os.path.islink(path):
+                os.remove(path)
+        _write_marker(out, tmp, new)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         plt.close("all")
@@ -103,7 +147,7 @@ def main(argv=None):
     runs = args.before + args.diagnosis
     try:
         written = write_report(runs, args.out)
-    except DiagnosisError as e:
+    except (DiagnosisError, ReportDirError) as e:
         print(f"cdm.report: error: {e}", file=sys.stderr)
         return 2
     except OSError as e:

@@ -1,165 +1,33 @@
 """Devices: open, poses, raw values, information, counters, stored calibration."""
+from __future__ import annotations
+
 import ctypes
 import math
+import os
 import time
-from dataclasses import dataclass
-from typing import Callable, Optional, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Iterator, List, Optional, Tuple, Union
 
 from . import _native
-from .constants import Button, Error, PoseFlag
+from .constants import Error
 from .errors import CdmError
+from .records import DeviceInfo, Pose, Raw, Sample, Stats, check_units, pose_dtype, pose_record, sample_from_c
+
+if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
+
+    from .calibration import Calibration
+
+__all__ = ["Device", "DeviceInfo", "Pose", "Raw", "Sample", "Stats", "open", "enumerate_devices"]
 
 # Return codes of cdm_get_pose / cdm_wait_pose / cdm_get_raw that come with a
 # filled record: the pose is the last one, and its flags say why it is old.
 _FILLED = (Error.CDM_ERR_STALE, Error.CDM_ERR_DISCONNECTED, Error.CDM_ERR_END_OF_STREAM)
 
 
-@dataclass(frozen=True)
-class Pose:
-    """cdm_pose as Python values. position in mm (device frame: x out of the
-    cable plane), orientation a unit quaternion (w, x, y, z), grip in rad.
-
-    status is what the call returned: CDM_OK, or CDM_ERR_STALE /
-    CDM_ERR_DISCONNECTED / CDM_ERR_END_OF_STREAM for a pose that is still the
-    last one the device gave (see flags)."""
-    position: Tuple[float, float, float]
-    orientation: Tuple[float, float, float, float]
-    grip: float
-    buttons: int
-    sequence: int
-    dropped: int
-    flags: int
-    device_time_us: int
-    host_time_ns: int
-    status: int = 0
-    host_sequence: int = 0  # since 1.1: poses published by this handle so far; pass to wait_pose(after=)
-    # since 1.1: mm/s, device frame; a low-passed difference (50 Hz, ~3.7 ms lag: docs/protocol.md)
-    velocity: Tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-    @classmethod
-    def _from_c(cls, p, status=0):
-        return cls(tuple(p.position), tuple(p.orientation), p.grip, p.buttons, p.sequence, p.dropped,
-                   p.flags, p.device_time_us, p.host_time_ns, int(status), int(p.host_sequence),
-                   tuple(p.velocity))
-
-    @property
-    def is_stale(self):
-        return bool(self.flags & PoseFlag.CDM_POSE_STALE)
-
-    @property
-    def is_disconnected(self):
-        return bool(self.flags & PoseFlag.CDM_POSE_DISCONNECTED)
-
-    @property
-    def is_compensated(self):
-        return bool(self.flags & PoseFlag.CDM_POSE_COMPENSATED)
-
-    @property
-    def is_out_of_workspace(self):
-        return bool(self.flags & PoseFlag.CDM_POSE_OUT_OF_WORKSPACE)
-
-    @property
-    def is_end_of_stream(self):
-        return bool(self.flags & PoseFlag.CDM_POSE_END_OF_STREAM or self.status == Error.CDM_ERR_END_OF_STREAM)
-
-    @property
-    def is_fresh(self):
-        """A current pose: returned with CDM_OK."""
-        return self.status == Error.CDM_OK
-
-    def pressed(self, button):
-        """pose.pressed(cdm.CDM_BUTTON_CLUTCH)"""
-        return bool(self.buttons & int(button))
-
-    @property
-    def clutch(self):
-        return self.pressed(Button.CDM_BUTTON_CLUTCH)
-
-
-@dataclass(frozen=True)
-class Raw:
-    """cdm_raw: the newest report's sensor values."""
-    status: int
-    pot_adc: Tuple[int, int, int, int]
-    hall_adc: int
-    buttons: int
-    quat_q14: Tuple[int, int, int, int]
-    sequence: int
-    lengths_mm: Tuple[float, float, float, float]
-    device_time_us: int
-    host_time_ns: int
-    return_code: int = 0
-
-    @classmethod
-    def _from_c(cls, r, code=0):
-        return cls(r.status, tuple(r.pot_adc), r.hall_adc, r.buttons, tuple(r.quat_q14), r.sequence,
-                   tuple(r.lengths_mm), r.device_time_us, r.host_time_ns, int(code))
-
-    @property
-    def quaternion(self):
-        """quat_q14 scaled to (w, x, y, z)."""
-        return tuple(q / 16384.0 for q in self.quat_q14)
-
-
-@dataclass(frozen=True)
-class DeviceInfo:
-    vendor_id: int
-    product_id: int
-    uri: str
-    serial: str
-    firmware: str
-    transport: str
-    protocol_version: int
-    adc_bits: int
-    pot_scale_mm: Tuple[float, float, float, float]
-    pot_offset_mm: Tuple[float, float, float, float]
-    a_mm: float
-    b_mm: float
-    m_mm: float
-    report_rate_hz: float
-    hall_closed: float
-    hall_open: float
-    grip_open_rad: float
-
-    @classmethod
-    def _from_c(cls, i):
-        def s(b):
-            return b.decode("utf-8", "replace")
-        return cls(i.vendor_id, i.product_id, s(i.uri), s(i.serial), s(i.firmware), s(i.transport),
-                   i.protocol_version, i.adc_bits, tuple(i.pot_scale_mm), tuple(i.pot_offset_mm), i.a_mm,
-                   i.b_mm, i.m_mm, i.report_rate_hz, i.hall_closed, i.hall_open, i.grip_open_rad)
-
-
-@dataclass(frozen=True)
-class Stats:
-    reports: int
-    malformed: int
-    dropped: int
-    out_of_workspace: int
-    reconnects: int
-    sequence_jumps: int = 0  # since 1.1: counter resets or corruptions (not in dropped)
-    out_of_order: int = 0  # since 1.1: duplicated or late reports, discarded
-    replay_truncated_bytes: int = 0  # since 1.1: incomplete tail a replay dropped
-
-
-@dataclass(frozen=True)
-class Sample:
-    """What an on_sample callback receives: one report as it arrived."""
-    report: bytes
-    raw: Raw
-    pose: Pose
-    #: since 1.1: ns when the report was first received (a replay: the time
-    #: recorded with it; otherwise raw.host_time_ns)
-    source_time_ns: int = 0
-
-
-def _make_sample_callback(fn):
-    def trampoline(_user, sample_p):
-        s = sample_p.contents
-        report = ctypes.string_at(s.report, s.report_len) if s.report else b""
-        raw = Raw._from_c(s.raw.contents) if s.raw else None
-        pose = Pose._from_c(s.pose.contents) if s.pose else None
-        fn(Sample(report, raw, pose, s.source_time_ns))
+def _make_sample_callback(fn: Callable[[Sample], Any], units: str = "mm") -> Any:
+    def trampoline(_user: Any, sample_p: Any) -> None:
+        fn(sample_from_c(sample_p.contents, units))
     return _native.cdm_sample_fn(trampoline)
 
 
@@ -169,41 +37,45 @@ class Device(_native.Closing):
     Methods other than close() may be called from any thread; close() must not
     run while another thread is inside a call on this device (the C rule)."""
 
-    def __init__(self, handle, uri, callback=None):
-        self._h = handle
+    def __init__(self, handle: ctypes.c_void_p, uri: Optional[str], callback: Any = None, units: str = "mm") -> None:
+        self._h: Optional[ctypes.c_void_p] = handle
         self.uri = uri
+        #: "mm" or "m": the units of the poses this device returns (cdm.open(units=))
+        self.units = check_units(units, "Device")
         # The ctypes callback object must outlive the native handle: the reader
         # thread calls it until cdm_close returns.
         self._callback = callback
 
     # -- lifetime
-    def close(self):
+    def close(self) -> None:
+        """Closes the device (idempotent); its reader thread has stopped when this returns."""
         h, self._h = self._h, None
         if h:
             _native.lib().cdm_close(h)
         self._callback = None
 
     @property
-    def closed(self):
+    def closed(self) -> bool:
+        """close() was called."""
         return self._h is None
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return "<cdm.Device %r%s>" % (self.uri, " closed" if self.closed else "")
 
-    def _handle(self, function):
+    def _handle(self, function: str) -> ctypes.c_void_p:
         if self._h is None:
             raise CdmError(Error.CDM_ERR_INVALID_ARG, "device %r is closed" % (self.uri,), function=function)
         return self._h
 
-    def _fail(self, code, function):
+    def _fail(self, code: int, function: str) -> CdmError:
         L = _native.lib()
-        detail = (L.cdm_thread_error() or b"").decode("utf-8", "replace")
+        detail = _native.text(L.cdm_thread_error())
         if not detail and self._h:
             detail = self.error_detail()
         return _native.fail(code, function, detail)
 
     # -- poses
-    def get_pose(self):
+    def get_pose(self) -> Pose:
         """The newest pose, without blocking.
 
         Raises CdmError(CDM_ERR_NO_DATA) before the first report (use
@@ -215,13 +87,13 @@ class Device(_native.Closing):
         rc = _native.lib().cdm_get_pose(h, ctypes.byref(p))
         if rc < 0 and rc not in _FILLED:
             raise self._fail(rc, "cdm_get_pose")
-        return Pose._from_c(p, rc)
+        return Pose._from_c(p, rc, self.units)
 
     # The C call waits in slices this long, so that Ctrl-C (handled by Python
     # between two foreign calls) interrupts a long wait within 0.1 s.
     _WAIT_SLICE_MS = 100
 
-    def wait_pose(self, timeout=1.0, after=None):
+    def wait_pose(self, timeout: Optional[float] = 1.0, after: Optional[int] = None) -> Pose:
         """Blocks until a pose newer than `after` (a Pose.host_sequence; None:
         the newest pose at the time of the call) exists; returns at once if one
         already does, so a loop passing the last pose's host_sequence never
@@ -251,9 +123,9 @@ class Device(_native.Closing):
                 break
         if rc < 0 and rc not in _FILLED:
             raise self._fail(rc, "cdm_wait_pose_after")
-        return Pose._from_c(p, rc)
+        return Pose._from_c(p, rc, self.units)
 
-    def get_raw(self):
+    def get_raw(self) -> Raw:
         """Raw values of the newest report (same returns as get_pose)."""
         h = self._handle("cdm_get_raw")
         r = _native.cdm_raw()
@@ -263,7 +135,8 @@ class Device(_native.Closing):
         return Raw._from_c(r, rc)
 
     # -- information
-    def info(self):
+    def info(self) -> DeviceInfo:
+        """What the device says about itself (cdm_get_info)."""
         h = self._handle("cdm_get_info")
         i = _native.cdm_device_info()
         rc = _native.lib().cdm_get_info(h, ctypes.byref(i))
@@ -271,7 +144,8 @@ class Device(_native.Closing):
             raise self._fail(rc, "cdm_get_info")
         return DeviceInfo._from_c(i)
 
-    def stats(self):
+    def stats(self) -> Stats:
+        """The device's counters since it was opened (cdm_get_stats)."""
         h = self._handle("cdm_get_stats")
         s = _native.cdm_stats()
         rc = _native.lib().cdm_get_stats(h, ctypes.byref(s))
@@ -280,7 +154,7 @@ class Device(_native.Closing):
         return Stats(s.reports, s.malformed, s.dropped, s.out_of_workspace, s.reconnects, s.sequence_jumps,
                      s.out_of_order, s.replay_truncated_bytes)
 
-    def error_detail(self):
+    def error_detail(self) -> str:
         """The handle's last asynchronous problem (cdm_device_error), "" if none."""
         h = self._handle("cdm_device_error")
         buf = ctypes.create_string_buffer(1024)
@@ -289,7 +163,7 @@ class Device(_native.Closing):
             return ""
         return buf.value.decode("utf-8", "replace")
 
-    def set_stale_timeout(self, seconds):
+    def set_stale_timeout(self, seconds: float) -> None:
         """Poses older than this are flagged stale; 0 restores the default (50 ms)."""
         us = int(round(seconds * 1e6))
         if not 0 <= us < 2**32:
@@ -300,7 +174,7 @@ class Device(_native.Closing):
             raise self._fail(rc, "cdm_set_stale_timeout")
 
     # -- calibration
-    def set_calibration(self, calibration):
+    def set_calibration(self, calibration: Optional[Calibration]) -> None:
         """Applies a cdm.Calibration to the poses from the next report on (the
         library copies it); None returns to the nominal model."""
         h = self._handle("cdm_set_calibration")
@@ -309,7 +183,7 @@ class Device(_native.Closing):
         if rc < 0:
             raise self._fail(rc, "cdm_set_calibration")
 
-    def read_stored_calibration(self):
+    def read_stored_calibration(self) -> bytes:
         """The calibration bytes stored in the device (CdmError CDM_ERR_CRC when corrupt)."""
         h = self._handle("cdm_device_calibration_read")
         L = _native.lib()
@@ -327,7 +201,7 @@ class Device(_native.Closing):
         raise CdmError(Error.CDM_ERR_INTERNAL, "cdm_device_calibration_read kept asking for a bigger buffer",
                        function="cdm_device_calibration_read")
 
-    def write_stored_calibration(self, data):
+    def write_stored_calibration(self, data: Union[str, bytes]) -> None:
         """Stores bytes (typically a calibration JSON) in the device."""
         if isinstance(data, str):
             data = data.encode("utf-8")
@@ -337,18 +211,67 @@ class Device(_native.Closing):
         if rc < 0:
             raise self._fail(rc, "cdm_device_calibration_write")
 
+    # -- iteration and batches
+    def __iter__(self) -> Iterator[Pose]:
+        """`for pose in dev:` yields every pose newer than the one before
+        (the first: newer than the newest when the loop starts), waiting as
+        long as it takes; it ends at the end of a replay or when the device is
+        closed. A pose the loop was too slow to see is skipped (host_sequence
+        shows the gap): the device keeps the newest pose, not a queue (use
+        on_sample for every report). Ctrl-C interrupts the wait."""
+        after: Optional[int] = None
+        while not self.closed:
+            try:
+                pose = self.wait_pose(None, after)
+            except CdmError:
+                if self.closed:
+                    return
+                raise
+            if pose.status == Error.END_OF_STREAM and after is not None and pose.host_sequence <= after:
+                return
+            yield pose
+            if pose.is_end_of_stream:
+                return
+            after = pose.host_sequence
+
+    def read(self, n: int, timeout: Optional[float] = 1.0) -> npt.NDArray[np.void]:
+        """The next n poses as a numpy structured array (dtype
+        cdm.records.pose_dtype(): position, orientation, velocity, grip,
+        buttons, flags, sequence, dropped, status, host_sequence, device_time,
+        host_time; in the device's units, times in seconds), each newer than
+        the one before, as `for pose in dev` yields them. Shorter than n when
+        a replay ends. timeout: seconds to wait for each pose (None: no
+        limit); CdmTimeoutError when one does not come."""
+        import numpy as np
+        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+            raise ValueError("read: n must be an int >= 0, got %r" % (n,))
+        out = np.zeros(n, dtype=pose_dtype())
+        after: Optional[int] = None
+        for i in range(n):
+            pose = self.wait_pose(timeout, after)
+            if pose.status == Error.END_OF_STREAM and after is not None and pose.host_sequence <= after:
+                return out[:i]
+            out[i] = pose_record(pose)
+            if pose.is_end_of_stream:
+                return out[:i + 1]
+            after = pose.host_sequence
+        return out
+
 
 EVENT_NAMES = {1: "disconnected", 2: "reconnected", 3: "stale", 4: "fresh", 5: "end_of_stream"}
 
 
-def _make_event_callback(fn):
-    def trampoline(_user, event_p):
+def _make_event_callback(fn: Callable[[str, str], Any]) -> Any:
+    def trampoline(_user: Any, event_p: Any) -> None:
         e = event_p.contents
-        fn(EVENT_NAMES.get(e.kind, "event %d" % e.kind), (e.text or b"").decode("utf-8", "replace"))
+        fn(EVENT_NAMES.get(e.kind, "event %d" % e.kind), _native.text(e.text))
     return _native.cdm_event_fn(trampoline)
 
 
-def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None, calibration=None):  # noqa: A001
+def open(uri: Optional[str] = None, stale_timeout_us: int = 0,  # noqa: A001
+         on_sample: Optional[Callable[[Sample], Any]] = None, on_event: Optional[Callable[[str, str], Any]] = None,
+         calibration: Union[Calibration, str, os.PathLike[str], None] = None, units: str = "mm",
+         stale_timeout: Optional[float] = None) -> Device:
     """Opens a master (cdm_open_ex). uri: None or "" ($CDM_DEVICE, else the
     first device), "sim:?...", "replay:FILE", "hid:/dev/hidrawN", "serial:SN".
 
@@ -361,9 +284,21 @@ def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None, calibratio
     calibration JSON, applied from the first pose on (set_calibration). A
     calibration with a user effect needs it registered in this process
     first (cdm.register_effect, cdm.load_plugin); so does a sim: URI that
-    hides one (effects=, truth=)."""
+    hides one (effects=, truth=).
+    units: "mm" (the default: mm, mm/s, quaternions (w, x, y, z), as the C
+    API) or "m" (metres, m/s, quaternions (x, y, z, w), as ROS): the units of
+    every Pose this device returns (cdm.records).
+    stale_timeout: seconds after which a pose is flagged stale (None: the
+    library's default, 50 ms); stale_timeout_us is the same in µs."""
+    check_units(units, "open")
+    if stale_timeout is not None:
+        if stale_timeout_us:
+            raise ValueError("open: give stale_timeout (s) or stale_timeout_us, not both")
+        if not 0 <= stale_timeout < 4294.967296:
+            raise ValueError("open: stale_timeout %r s is outside 0..4294 s" % (stale_timeout,))
+        stale_timeout_us = int(round(stale_timeout * 1e6))
     L = _native.lib()
-    cal = None
+    cal: Optional[Calibration] = None
     if calibration is not None:
         from .calibration import Calibration
         cal = calibration if isinstance(calibration, Calibration) else Calibration.load(calibration)
@@ -371,11 +306,11 @@ def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None, calibratio
     if not 0 <= int(stale_timeout_us) < 2**32:
         raise ValueError("open: stale_timeout_us %r is outside 0..2^32-1" % (stale_timeout_us,))
     opts.stale_timeout_us = int(stale_timeout_us)
-    callback = None
+    callback: Any = None
     if on_sample is not None:
         if not callable(on_sample):
             raise TypeError("open: on_sample must be callable, got %r" % (on_sample,))
-        callback = _make_sample_callback(on_sample)
+        callback = _make_sample_callback(on_sample, units)
         opts.on_sample = callback
     if on_event is not None:
         if not callable(on_event):
@@ -395,7 +330,7 @@ def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None, calibratio
         raise _native.fail(rc, "cdm_open")
     if not h.value:
         raise CdmError(Error.CDM_ERR_INTERNAL, "cdm_open returned CDM_OK and no handle", function="cdm_open")
-    dev = Device(h, uri, callback)
+    dev = Device(h, uri, callback, units)
     if cal is not None:
         try:
             dev.set_calibration(cal)
@@ -408,7 +343,7 @@ def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None, calibratio
     return dev
 
 
-def enumerate_devices():
+def enumerate_devices() -> List[DeviceInfo]:
     """Information about every connected master (an empty list is not an error)."""
     L = _native.lib()
     lst = ctypes.c_void_p()
@@ -416,7 +351,7 @@ def enumerate_devices():
     if rc < 0:
         raise _native.fail(rc, "cdm_enumerate")
     try:
-        out = []
+        out: List[DeviceInfo] = []
         for i in range(L.cdm_device_list_count(lst)):
             info = _native.cdm_device_info()
             rc = L.cdm_device_list_get(lst, i, ctypes.byref(info))

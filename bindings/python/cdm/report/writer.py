@@ -1,5 +1,10 @@
 """The report's driver: the sections in page order, the figures drawn, the files
 moved into place; and the command line."""
+from __future__ import annotations
+
+from typing import Any, List, Optional, Sequence, Tuple, Union
+
+from .loading import Diag
 
 import argparse
 import os
@@ -20,7 +25,7 @@ FIGURE_PREFIXES = ("error_summary", "residual_map_", "residual_cut", "candidates
                    "fingerprint_", "vs_cable_length", "vs_variables", "comparison", "search_path")
 
 
-def _render(runs, tmp):
+def _render(runs: List[Tuple[str, Diag]], tmp: str) -> Tuple[str, List[str]]:
     """Draw everything for runs[-1] (+ comparison) into tmp; return (html, figs)."""
     path, diag = runs[-1]
     page = Page()
@@ -35,7 +40,7 @@ def _render(runs, tmp):
             page.add(f"<p class=\"bad\">{_e(msg)}</p>")
             print(f"cdm.report: warning: {path}: {msg}", file=sys.stderr)
     _draw_all(page.figures, tmp)
-    figs = []
+    figs: List[str] = []
     for i, part in enumerate(page.parts):
         if not isinstance(part, _Figure):
             continue
@@ -52,25 +57,27 @@ def _render(runs, tmp):
     if len(runs) > 1:
         files += ", compared with the earlier " + ", ".join(
             _e(os.path.basename(p)) for p, _ in runs[:-1])
-    return document(title, files, page.notes, page.toc, page.parts), figs
+    return document(title, files, page.notes, page.toc, [p for p in page.parts if isinstance(p, str)]), figs
 
 
-def write_report(runs, out):
+Run = Union[str, "os.PathLike[str]", Diag]
+
+
+def write_report(runs: Union[Run, Sequence[Run]], out: Union[str, "os.PathLike[str]"]) -> List[str]:
     """Write the report on runs[-1], comparing it with the earlier runs[:-1].
 
     Each run is a diagnosis JSON path or a loaded diagnosis dict. Raises
     DiagnosisError (naming the file) before writing anything if one is unusable.
     Returns the paths written (figures, then index.html).
     """
-    if isinstance(runs, (str, os.PathLike, dict)):
-        runs = [runs]
-    runs = [_run(r, i) for i, r in enumerate(runs)]
-    if not runs:
+    items: Sequence[Run] = [runs] if isinstance(runs, (str, os.PathLike, dict)) else runs
+    loaded = [_run(r, i) for i, r in enumerate(items)]
+    if not loaded:
         raise DiagnosisError("no diagnosis given")
     os.makedirs(out, exist_ok=True)
     tmp = tempfile.mkdtemp(prefix="tmp-report-", dir=out)
     try:
-        doc, figs = _render(runs, tmp)
+        doc, figs = _render(loaded, tmp)
         with open(os.path.join(tmp, "index.html"), "w", encoding="utf-8") as f:
             f.write(doc)
         # Move into place: figures first, the page last; remove stale figures.
@@ -87,7 +94,8 @@ def write_report(runs, out):
     return [os.path.join(out, n) for n in figs + ["index.html"]]
 
 
-def main(argv=None):
+def main(argv: Optional[List[str]] = None) -> int:
+    """The command line: ``python3 -m cdm.report [EARLIER.json ...] DIAG.json --out DIR``; the exit code."""
     ap = argparse.ArgumentParser(
         prog="python3 -m cdm.report",
         description="Figures and index.html for `cdm calib diagnose --json` output. Files are "

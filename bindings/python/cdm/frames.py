@@ -65,7 +65,7 @@ def to_frame(position_mm: Sequence[float], orientation_wxyz: Sequence[float], fr
 
 def _mm_wxyz(pose: Pose) -> Tuple[Vec3, Tuple[float, float, float, float]]:
     """A Pose's position in mm and orientation (w, x, y, z), whatever its units."""
-    if pose.units == "m":
+    if getattr(pose, "units", "mm") == "m":  # any object with position and orientation: mm
         x, y, z = pose.position
         qx, qy, qz, qw = pose.orientation
         return (x * 1000.0, y * 1000.0, z * 1000.0), (qw, qx, qy, qz)

@@ -61,7 +61,8 @@ include(CPack)
 # SONAME, which Mono finds beside the assembly: the layout a consumer gets
 # when NuGet copies lib/ and runtimes/linux-x64/native/ to its output.
 find_program(CDM_NUGET nuget)
-if(CDM_NUGET AND TARGET cdm_csharp)
+find_package(Python3 COMPONENTS Interpreter QUIET)
+if(CDM_NUGET AND TARGET cdm_csharp AND Python3_Interpreter_FOUND)
   set(_nu ${PROJECT_BINARY_DIR}/nuget)
   configure_file(${PROJECT_SOURCE_DIR}/bindings/csharp/Cdm.nuspec.in ${_nu}/stage/Cdm.nuspec @ONLY)
   add_custom_command(
@@ -71,7 +72,10 @@ if(CDM_NUGET AND TARGET cdm_csharp)
     COMMAND ${CMAKE_STRIP} --strip-debug -o ${_nu}/stage/libcdm.so.${CDM_SOVERSION} $<TARGET_FILE:cdm>
     COMMAND ${CDM_NUGET} pack ${_nu}/stage/Cdm.nuspec -BasePath ${_nu}/stage -OutputDirectory ${_nu}
             -NonInteractive -Verbosity quiet
-    DEPENDS cdm cdm_csharp ${_nu}/stage/Cdm.nuspec
+    # Debian's nuget packs licenseUrl only: the licence expression goes in after.
+    COMMAND ${Python3_EXECUTABLE} ${CMAKE_CURRENT_LIST_DIR}/nupkg_license.py
+            ${_nu}/Cdm.${PROJECT_VERSION}.nupkg Apache-2.0
+    DEPENDS cdm cdm_csharp ${_nu}/stage/Cdm.nuspec ${CMAKE_CURRENT_LIST_DIR}/nupkg_license.py
     COMMENT "nuget: Cdm.${PROJECT_VERSION}.nupkg"
     VERBATIM)
   add_custom_target(cdm_nupkg DEPENDS ${_nu}/Cdm.${PROJECT_VERSION}.nupkg)

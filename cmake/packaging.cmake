@@ -43,7 +43,7 @@ set(CPACK_GENERATOR "DEB")
 set(CPACK_PACKAGING_INSTALL_PREFIX "/usr")
 set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
 set(CPACK_DEBIAN_PACKAGE_SECTION "libs")
-set(CPACK_DEBIAN_PACKAGE_HOMEPAGE "https://example.invalid/cdm")
+# No Homepage field: the project has no public home page to name.
 # The Depends line (libhidapi-hidraw0, libnlopt0, libstdc++6, libc6, ...)
 # comes from dpkg-shlibdeps on the packaged binaries, not from a list here.
 set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)

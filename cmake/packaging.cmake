@@ -13,6 +13,15 @@ if(SKBUILD)
                 \"\${CMAKE_INSTALL_PREFIX}/cdm/libcdm.so.${CDM_SOVERSION}\")" COMPONENT python)
 endif()
 
+# --- The Python package (binding and report tool) where Debian's python3
+# imports it, so `cdm calib diagnose --report` works from the .deb alone
+# (cdm finds it there too under another prefix: src/cli/report_spawn.cpp).
+# The wheel carries it itself.
+if(NOT SKBUILD)
+  install(DIRECTORY ${PROJECT_SOURCE_DIR}/bindings/python/cdm DESTINATION lib/python3/dist-packages
+          PATTERN "__pycache__" EXCLUDE PATTERN "*.pyc" EXCLUDE PATTERN "report.py" EXCLUDE)
+endif()
+
 # --- Mono: the installed Cdm.dll.config maps "cdm" to the installed library
 # by absolute path, so an installed program needs no LD_LIBRARY_PATH even
 # under a prefix the dynamic linker does not search. Written at install time

@@ -23,6 +23,7 @@ fi
 test -f "$root/usr/lib/python3/dist-packages/cdm/report/__init__.py"
 test -f "$root/usr/lib/python3/dist-packages/cdm/py.typed"
 test ! -e "$root/usr/lib/python3/dist-packages/cdm/report.py"
+test -f "$root/usr/share/doc/cdm/README.md" && test -f "$root/usr/share/doc/cdm/docs/bindings.md"
 if dpkg-deb -f "$deb" Homepage | grep -q .; then
   dpkg-deb -f "$deb" Homepage | grep -qv 'example\.invalid'
 fi

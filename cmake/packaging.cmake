@@ -13,6 +13,15 @@ if(SKBUILD)
                 \"\${CMAKE_INSTALL_PREFIX}/cdm/libcdm.so.${CDM_SOVERSION}\")" COMPONENT python)
 endif()
 
+# --- The Python package (binding and report tool) where Debian's python3
+# imports it, so `cdm calib diagnose --report` works from the .deb alone
+# (cdm finds it there too under another prefix: src/cli/report_spawn.cpp).
+# The wheel carries it itself.
+if(NOT SKBUILD)
+  install(DIRECTORY ${PROJECT_SOURCE_DIR}/bindings/python/cdm DESTINATION lib/python3/dist-packages
+          PATTERN "__pycache__" EXCLUDE PATTERN "*.pyc" EXCLUDE PATTERN "report.py" EXCLUDE)
+endif()
+
 # --- Mono: the installed Cdm.dll.config maps "cdm" to the installed library
 # by absolute path, so an installed program needs no LD_LIBRARY_PATH even
 # under a prefix the dynamic linker does not search. Written at install time
@@ -32,6 +41,9 @@ endif()
 # Licence text: the copyright file Debian policy wants in /usr/share/doc.
 configure_file(${CMAKE_CURRENT_LIST_DIR}/copyright.in ${CMAKE_CURRENT_BINARY_DIR}/copyright @ONLY)
 install(FILES ${CMAKE_CURRENT_BINARY_DIR}/copyright DESTINATION ${CMAKE_INSTALL_DOCDIR})
+# The README and the documentation beside it, for a machine without the clone.
+install(FILES ${PROJECT_SOURCE_DIR}/README.md DESTINATION ${CMAKE_INSTALL_DOCDIR})
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/docs/ DESTINATION ${CMAKE_INSTALL_DOCDIR}/docs)
 
 set(CPACK_PACKAGE_NAME "cdm")
 set(CPACK_PACKAGE_VENDOR "cdm project")
@@ -43,7 +55,7 @@ set(CPACK_GENERATOR "DEB")
 set(CPACK_PACKAGING_INSTALL_PREFIX "/usr")
 set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
 set(CPACK_DEBIAN_PACKAGE_SECTION "libs")
-set(CPACK_DEBIAN_PACKAGE_HOMEPAGE "https://example.invalid/cdm")
+# No Homepage field: the project has no public home page to name.
 # The Depends line (libhidapi-hidraw0, libnlopt0, libstdc++6, libc6, ...)
 # comes from dpkg-shlibdeps on the packaged binaries, not from a list here.
 set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)
@@ -61,7 +73,8 @@ include(CPack)
 # SONAME, which Mono finds beside the assembly: the layout a consumer gets
 # when NuGet copies lib/ and runtimes/linux-x64/native/ to its output.
 find_program(CDM_NUGET nuget)
-if(CDM_NUGET AND TARGET cdm_csharp)
+find_package(Python3 COMPONENTS Interpreter QUIET)
+if(CDM_NUGET AND TARGET cdm_csharp AND Python3_Interpreter_FOUND)
   set(_nu ${PROJECT_BINARY_DIR}/nuget)
   configure_file(${PROJECT_SOURCE_DIR}/bindings/csharp/Cdm.nuspec.in ${_nu}/stage/Cdm.nuspec @ONLY)
   add_custom_command(
@@ -71,7 +84,10 @@ if(CDM_NUGET AND TARGET cdm_csharp)
     COMMAND ${CMAKE_STRIP} --strip-debug -o ${_nu}/stage/libcdm.so.${CDM_SOVERSION} $<TARGET_FILE:cdm>
     COMMAND ${CDM_NUGET} pack ${_nu}/stage/Cdm.nuspec -BasePath ${_nu}/stage -OutputDirectory ${_nu}
             -NonInteractive -Verbosity quiet
-    DEPENDS cdm cdm_csharp ${_nu}/stage/Cdm.nuspec
+    # Debian's nuget packs licenseUrl only: the licence expression goes in after.
+    COMMAND ${Python3_EXECUTABLE} ${CMAKE_CURRENT_LIST_DIR}/nupkg_license.py
+            ${_nu}/Cdm.${PROJECT_VERSION}.nupkg Apache-2.0
+    DEPENDS cdm cdm_csharp ${_nu}/stage/Cdm.nuspec ${CMAKE_CURRENT_LIST_DIR}/nupkg_license.py
     COMMENT "nuget: Cdm.${PROJECT_VERSION}.nupkg"
     VERBATIM)
   add_custom_target(cdm_nupkg DEPENDS ${_nu}/Cdm.${PROJECT_VERSION}.nupkg)

@@ -94,7 +94,8 @@ static class TeleopLoop
                 }
                 long wake = sw.ElapsedTicks;
 
-                int rc = dev.TryGetPose(out pose);
+                dev.TryGetPose(out pose); // pose.Status: the C code
+                int rc = (int)pose.Status;
                 long readAt = MonotonicNs();
                 if (rc == 0 || rc == (int)ErrorCode.Stale || rc == (int)ErrorCode.Disconnected)
                 {

@@ -20,6 +20,8 @@ assumption is the frame's orientation: upright, +z up (GRAVITY below).
 The `cdm` command does not run Python: a calibration with this effect is
 used from Python, in a process that registered it first.
 """
+from typing import Any
+
 import numpy as np
 
 import cdm
@@ -28,14 +30,15 @@ import cdm
 GRAVITY = np.array([0.0, 0.0, -1.0])
 
 
-def cable_sag(params, geom, values):
+def cable_sag(params: "np.ndarray[Any, np.dtype[np.float64]]", geom: cdm.EffectGeometry,
+              values: "np.ndarray[Any, np.dtype[np.float64]]") -> None:
     """values (n, 4): the cables' lengths so far (mm); adds each one's sag."""
     (c,) = params
     ug = geom.unit @ GRAVITY  # (n, 4): the cosine between each cable and gravity
     values += c * geom.chord ** 3 * (1.0 - ug * ug)
 
 
-def register(name="cable_sag"):
+def register(name: str = "cable_sag") -> None:
     """Registers the effect (again: replaces a registration from this module)."""
     if name in cdm.effect_names():
         cdm.unregister_effect(name)

@@ -2,7 +2,7 @@
 """Teleoperate a simulated 6-DoF arm in MuJoCo with the cable-driven master.
 
 The master's pose (position and IMU orientation) commands the arm's tool pose:
-motion is scaled (--scale, default 0.5), the clutch button (CDM_BUTTON_CLUTCH)
+motion is scaled (--scale, default 0.5), the clutch button (cdm.Button.CLUTCH)
 decouples the master while held, so the operator can re-centre their hand, and
 re-anchors the master-to-tool offset so that the tool does not jump on release.
 Damped-least-squares IK turns the commanded tool pose into joint set-points;
@@ -19,11 +19,15 @@ import argparse
 import math
 import sys
 import time
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
+import numpy.typing as npt
+
+Vec = npt.NDArray[np.float64]
 
 try:
-    import mujoco
+    import mujoco  # type: ignore[import-untyped]  # MuJoCo ships no type information
 except ImportError:  # pragma: no cover - told to the user, not a test
     sys.exit("mujoco_teleop: needs MuJoCo's Python package (pip install mujoco)")
 
@@ -87,17 +91,17 @@ HOME_Q = np.array([0.0, -0.6, 1.3, 0.0, 0.0, 0.0])
 Q_WD = np.array([0.0, 0.0, 0.0, 1.0])
 
 
-def qmul(a, b):
+def qmul(a: npt.ArrayLike, b: npt.ArrayLike) -> Vec:
     r = np.zeros(4)
     mujoco.mju_mulQuat(r, np.asarray(a, float), np.asarray(b, float))
     return r
 
 
-def qconj(q):
+def qconj(q: Vec) -> Vec:
     return np.array([q[0], -q[1], -q[2], -q[3]])
 
 
-def qrot(q, v):
+def qrot(q: npt.ArrayLike, v: npt.ArrayLike) -> Vec:
     r = np.zeros(3)
     mujoco.mju_rotVecQuat(r, np.asarray(v, float), np.asarray(q, float))
     return r
@@ -109,13 +113,15 @@ class TeleopMapper:
     While the clutch is held the command holds still and the offset follows
     the master, so releasing it never makes the tool jump."""
 
-    def __init__(self, tool_pos, tool_quat, scale):
+    def __init__(self, tool_pos: npt.ArrayLike, tool_quat: npt.ArrayLike, scale: float) -> None:
         self.scale = float(scale)
         self.target_pos = np.array(tool_pos, float)
         self.target_quat = np.array(tool_quat, float)
-        self.anchor = None  # (master pos world m, master quat world, tool pos, tool quat)
+        # (master pos world m, master quat world, tool pos, tool quat)
+        self.anchor: Optional[Tuple[Vec, Vec, Vec, Vec]] = None
 
-    def update(self, master_pos_mm, master_quat, clutch):
+    def update(self, master_pos_mm: Sequence[float], master_quat: Sequence[float],
+               clutch: bool) -> Tuple[Vec, Vec]:
         p_m = qrot(Q_WD, np.asarray(master_pos_mm, float) / 1000.0)
         q_m = qmul(qmul(Q_WD, master_quat), qconj(Q_WD))
         if clutch or self.anchor is None:
@@ -131,7 +137,9 @@ class TeleopMapper:
 
 
 class Arm:
-    def __init__(self):
+    """The simulated arm: MuJoCo model, IK and position servos."""
+
+    def __init__(self) -> None:
         self.model = mujoco.MjModel.from_xml_string(ARM_XML)
         self.data = mujoco.MjData(self.model)
         self.ik = mujoco.MjData(self.model)  # scratch for IK: kinematics only
@@ -150,14 +158,16 @@ class Arm:
         kv = -self.model.actuator_biasprm[:, 2]
         self.lag_s = np.zeros(self.model.nv)
         self.lag_s[ids] = (kv + self.model.dof_damping[ids]) / kp
+        self.q_prev: Optional[Vec] = None
 
-    def tool_pose(self, d=None):
+    def tool_pose(self, d: Any = None) -> Tuple[Vec, Vec]:
         d = self.data if d is None else d
         q = np.zeros(4)
         mujoco.mju_mat2Quat(q, d.site_xmat[self.site])
         return d.site_xpos[self.site].copy(), q
 
-    def solve_ik(self, pos, quat, iterations=4, damping=0.05, rot_weight=0.2):
+    def solve_ik(self, pos: Vec, quat: Vec, iterations: int = 4, damping: float = 0.05,
+                 rot_weight: float = 0.2) -> Vec:
         """Damped least squares from the current set-point; rotation errors
         weighted (m per rad) so that 1 cm and ~3 deg count alike."""
         jp, jr = np.zeros((3, self.model.nv)), np.zeros((3, self.model.nv))
@@ -173,28 +183,30 @@ class Arm:
             J = np.vstack([jp, rot_weight * jr])
             dq = J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(6), err)
             self.q_des = np.clip(self.q_des + dq, self.lo, self.hi)
-        return self.q_des
+        q_des: Vec = self.q_des
+        return q_des
 
-    def set_point(self, q_des, dt, cutoff_hz=15.0):
+    def set_point(self, q_des: Vec, dt: float, cutoff_hz: float = 15.0) -> None:
         """New set-point; joint velocity estimated by finite difference, low-passed
         (the master's pot noise would otherwise reach the feed-forward)."""
-        qd = (q_des - self.q_prev) / dt if hasattr(self, "q_prev") else np.zeros_like(q_des)
+        qd = (q_des - self.q_prev) / dt if self.q_prev is not None else np.zeros_like(q_des)
         alpha = 1.0 - math.exp(-2 * math.pi * cutoff_hz * dt)
         self.qd_des += alpha * (qd - self.qd_des)
         self.q_prev = q_des.copy()
 
-    def step_until(self, t, feedforward=True):
+    def step_until(self, t: float, feedforward: bool = True) -> None:
         self.data.ctrl[:] = self.q_des + (self.lag_s * self.qd_des if feedforward else 0.0)
         while self.data.time < t:
             mujoco.mj_step(self.model, self.data)
 
 
-def quat_angle(a, b):
+def quat_angle(a: Vec, b: Vec) -> float:
     d = abs(float(np.dot(a, b)))
     return 2.0 * math.acos(min(1.0, d))
 
 
-def run(uri, seconds, scale, control_hz=500.0, feedforward=True, verbose=True):
+def run(uri: str, seconds: float, scale: float, control_hz: float = 500.0, feedforward: bool = True,
+        verbose: bool = True) -> Dict[str, float]:
     # Imported here, not at the top: examples/ros2/dds_teleop.py reuses the
     # arm on a machine that gets its poses over DDS and may not have cdm.
     import cdm
@@ -202,8 +214,11 @@ def run(uri, seconds, scale, control_hz=500.0, feedforward=True, verbose=True):
     arm = Arm()
     tool_pos, tool_quat = arm.tool_pose()
     mapper = TeleopMapper(tool_pos, tool_quat, scale)
-    pos_err, rot_err, speeds = [], [], []
-    clutch_presses, last_clutch, prev_target = 0, False, None
+    pos_err: List[float] = []
+    rot_err: List[float] = []
+    speeds: List[float] = []
+    clutch_presses, last_clutch = 0, False
+    prev_target: Optional[Vec] = None
     max_late = 0.0  # how late a control cycle started (s): a stall of this process
     with cdm.open(uri) as dev:
         pose = dev.wait_pose(2.0, after=0)  # the first pose, even one already published
@@ -233,16 +248,16 @@ def run(uri, seconds, scale, control_hz=500.0, feedforward=True, verbose=True):
             # Real time: the arm's clock follows the wall clock.
             arm.step_until(time.monotonic() - t0, feedforward)
             p, q = arm.tool_pose()
-            pos_err.append(np.linalg.norm(p - target_p))
+            pos_err.append(float(np.linalg.norm(p - target_p)))
             rot_err.append(quat_angle(q, target_q))
             if prev_target is not None:
-                speeds.append(np.linalg.norm(target_p - prev_target) * control_hz)
+                speeds.append(float(np.linalg.norm(target_p - prev_target)) * control_hz)
             prev_target = target_p.copy()
     if not pos_err:
         raise RuntimeError("mujoco_teleop: no control cycle ran")
     e = np.array(pos_err) * 1000.0
     r = np.degrees(rot_err)
-    result = {
+    result: Dict[str, float] = {
         "cycles": len(e),
         "rms_mm": float(np.sqrt(np.mean(e ** 2))),
         "max_mm": float(e.max()),
@@ -266,8 +281,8 @@ def run(uri, seconds, scale, control_hz=500.0, feedforward=True, verbose=True):
     return result
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def main(argv: Optional[List[str]] = None) -> int:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--uri", default="sim:", help="device URI (default sim:)")
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--scale", type=float, default=0.5, help="tool motion per master motion (default 0.5)")

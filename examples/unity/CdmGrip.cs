@@ -52,12 +52,12 @@ public class CdmGrip : MonoBehaviour
     {
         if (device == null) return;
         Cdm.Pose pose;
-        int rc = device.TryGetPose(out pose); // no exception, no allocation: fine every frame
-        if (rc == (int)Cdm.ErrorCode.NoData) return; // nothing yet
-        if (rc < 0 && rc != (int)Cdm.ErrorCode.Stale && rc != (int)Cdm.ErrorCode.Disconnected &&
-            rc != (int)Cdm.ErrorCode.EndOfStream)
+        // No exception, no allocation: fine every frame. True for a pose to use
+        // (current, or the last good one when stale, disconnected or ended).
+        if (!device.TryGetPose(out pose))
         {
-            Debug.LogWarning("CdmGrip: cdm_get_pose returned " + (Cdm.ErrorCode)rc);
+            if (pose.Status != Cdm.ErrorCode.NoData) // NoData: nothing yet
+                Debug.LogWarning("CdmGrip: cdm_get_pose returned " + pose.Status);
             return;
         }
         LastPose = pose;

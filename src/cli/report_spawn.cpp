@@ -1,7 +1,8 @@
 // Starts the HTML report tool (python3 -m cdm.report) with an argument
 // vector: no shell, so any path (quotes, spaces, `$`) reaches it verbatim.
-// The installed package (wheel or .deb) is preferred; the source tree beside
-// the build is the fallback for a run from a clone.
+// The package Python imports (wheel or .deb) is preferred; then the places
+// beside this executable (package_dirs): nothing of the build machine's paths
+// is compiled in.
 #include <spawn.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -11,6 +12,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -65,6 +67,26 @@ const char *const kProbe = "import sys\n"
                            "        sys.stderr.write('cdm: missing Python module: %s\\n' % (e.name or e))\n"
                            "    sys.exit(3)\n";
 
+// Where the cdm Python package may be, found from this executable's own path:
+// the file cdm-pythonpath beside it (written by the build tree, naming the
+// sources' bindings/python; never installed), then an installed tree's
+// ../lib/python3/dist-packages (the .deb's /usr/lib/python3/dist-packages).
+std::vector<std::string> package_dirs() {
+    std::vector<std::string> out;
+    std::vector<char> buf(4096);
+    const ssize_t n = readlink("/proc/self/exe", buf.data(), buf.size() - 1);
+    if (n <= 0)
+        return out;
+    const std::string exe(buf.data(), static_cast<size_t>(n));
+    const std::string dir = exe.substr(0, exe.rfind('/'));
+    std::ifstream f(dir + "/cdm-pythonpath");
+    std::string line;
+    if (f && std::getline(f, line) && !line.empty())
+        out.push_back(line);
+    out.push_back(dir + "/../lib/python3/dist-packages");
+    return out;
+}
+
 } // namespace
 
 int run_report(const std::string &json_path, const std::vector<std::string> &before, const std::string &dir) {
@@ -77,15 +99,14 @@ int run_report(const std::string &json_path, const std::vector<std::string> &bef
                      std::strerror(errno));
         return 1;
     }
-#ifdef CDM_SOURCE_DIR
-    struct stat st {};
-    const std::string src = CDM_SOURCE_DIR "/bindings/python";
-    if (probe != 0 && stat((src + "/cdm/report.py").c_str(), &st) == 0) {
+    for (const std::string &src : package_dirs()) {
+        struct stat st {};
+        if (probe == 0 || stat((src + "/cdm/report/__init__.py").c_str(), &st) != 0)
+            continue;
         const char *pp = std::getenv("PYTHONPATH");
-        env.push_back("PYTHONPATH=" + src + (pp && *pp ? ":" + std::string(pp) : ""));
+        env.assign({"PYTHONPATH=" + src + (pp && *pp ? ":" + std::string(pp) : "")});
         probe = spawn_wait({py, "-c", kProbe}, env);
     }
-#endif
     if (probe != 0) {
         spawn_wait({py, "-c", kProbe, "-v"}, env); // names what is missing
         std::fprintf(stderr,

@@ -4,6 +4,7 @@ and the messages a user reads: usage, unknown commands, defaults, numbers,
 import json
 import os
 import re
+import subprocess
 
 import pytest
 
@@ -159,3 +160,23 @@ def test_report_says_what_to_install(tmp_path, small_dataset):
             str(tmp_path / "rep"), env=env)
     assert r.returncode == 1
     assert "pip install" in r.stderr and "PYTHON" in r.stderr
+
+
+def test_report_found_in_an_installed_tree(tmp_path, small_dataset):
+    """The layout the .deb installs (bin/cdm, lib/python3/dist-packages/cdm), with
+    no cdm-pythonpath beside the executable and cdm not importable otherwise:
+    cdm finds the package from its own path, not from the build machine's."""
+    import shutil
+    src = os.environ["CDM_SOURCE_DIR"]
+    prefix = tmp_path / "prefix"
+    (prefix / "bin").mkdir(parents=True)
+    shutil.copy2(os.environ["CDM_CLI"], prefix / "bin" / "cdm")
+    shutil.copytree(os.path.join(src, "bindings", "python", "cdm"), prefix / "lib" / "python3" / "dist-packages" / "cdm",
+                    ignore=shutil.ignore_patterns("__pycache__", "report.py"))
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHON")}
+    out = tmp_path / "rep"
+    r = subprocess.run([str(prefix / "bin" / "cdm"), "calib", "diagnose", str(small_dataset), "--quiet",
+                        "--no-candidates", "--report", str(out)], capture_output=True, text=True, env=env,
+                       timeout=300, cwd=str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    assert (out / "index.html").is_file()

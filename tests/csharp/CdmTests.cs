@@ -53,6 +53,7 @@ static partial class CdmTests
                     Run("wait_inside_own_callback_refused", WaitInsideOwnCallbackRefused);
                     Run("callback_may_call_its_device", CallbackMayCallItsDevice);
                     break;
+                case "missing_dependency": Run("missing_dependency", () => MissingDependency(args[0])); break;
                 case "watch": Run("watch_replug", WatchReplug); break; // under with_master --replug (tests/umockdev)
                 case "calibration":
                     Run("calibration_errors", CalibrationErrors);
@@ -64,6 +65,18 @@ static partial class CdmTests
         }
         Console.WriteLine("{0} checks, {1} failed", checks, failures);
         return Math.Min(failures, 99);
+    }
+
+    // Run with a libcdm.so.1 beside Cdm.dll whose own dependency is absent
+    // (tests/csharp/missing_dependency.sh): the exception names that dependency.
+    static void MissingDependency(string missing)
+    {
+        try { Device.Open("sim:").Dispose(); Expect(false, "missing_dependency: Open succeeded"); }
+        catch (DllNotFoundException e)
+        {
+            Expect(e.Message.Contains(missing), "missing_dependency: the message names " + missing + ": " + e.Message);
+            Console.WriteLine(e.Message);
+        }
     }
 
     // since 1.1: a stall is reported once as Stale; libcdm's messages arrive
@@ -244,6 +257,9 @@ static partial class CdmTests
             var info0 = dev.GetInfo();
             var raw0 = dev.GetRaw();
             Expect(p.Status == ErrorCode.Ok, "first pose status " + p.Status);
+            Pose tp;
+            Expect(dev.TryGetPose(out tp) && (tp.Status == ErrorCode.Ok || tp.Status == ErrorCode.Stale),
+                   "TryGetPose: true with a pose, status " + tp.Status);
             // motion=still holds the holder at (50, 0, 0) mm. With noise off the only
             // error is the pots' quantisation, +-scale/2 per cable, which moves the
             // holder by at most dl * L / x (out of the plane, the worst direction).

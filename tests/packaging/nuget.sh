@@ -13,6 +13,13 @@ cd "$work"
 unzip -q "$nupkg" -d pkg
 test -f pkg/lib/netstandard2.0/Cdm.dll
 test -f pkg/runtimes/linux-x64/native/libcdm.so.1
+# A licence expression (the URL beside it is the one NuGet writes for it), and
+# the native dependencies declared in the description.
+grep -q '<license type="expression">Apache-2.0</license>' pkg/Cdm.nuspec
+if grep -o '<licenseUrl>[^<]*</licenseUrl>' pkg/Cdm.nuspec | grep -v 'licenses.nuget.org/Apache-2.0'; then
+  echo "nuget.sh: a licenseUrl other than the expression's" >&2; exit 1
+fi
+for dep in libhidapi-hidraw.so.0 libnlopt.so.0 libudev.so.1; do grep -q "$dep" pkg/Cdm.nuspec; done
 cp pkg/lib/netstandard2.0/* pkg/runtimes/linux-x64/native/* app/
 cat > app/Use.cs <<'CS'
 using System;

@@ -16,6 +16,7 @@ namespace Cdm
         public static Calibration Load(string path)
         {
             if (path == null) throw new ArgumentNullException("path");
+            NativeLoad.EnsureLoaded();
             CalibrationHandle h;
             int rc = NativeMethods.cdm_calibration_load(path, out h);
             if (rc < 0) { var e = Check.Error(rc, "cdm_calibration_load"); h.Dispose(); throw e; }
@@ -26,6 +27,7 @@ namespace Cdm
         public static Calibration Parse(string json)
         {
             if (json == null) throw new ArgumentNullException("json");
+            NativeLoad.EnsureLoaded();
             var bytes = Encoding.UTF8.GetBytes(json);
             CalibrationHandle h;
             int rc = NativeMethods.cdm_calibration_parse(bytes, new UIntPtr((uint)bytes.Length), out h);

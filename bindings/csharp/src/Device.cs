@@ -23,8 +23,9 @@ namespace Cdm
         Device(DeviceHandle h, string uri) { _h = h; Uri = uri; }
 
         /// <summary>"1.2.0": the version of the libcdm actually loaded.</summary>
-        public static string LibraryVersion { get { return NativeMethods.Utf8(NativeMethods.cdm_version()); } }
-        public static int LibraryVersionNumber { get { return NativeMethods.cdm_version_number(); } }
+        public static string LibraryVersion { get { NativeLoad.EnsureLoaded(); return NativeMethods.Utf8(NativeMethods.cdm_version()); } }
+        /// <summary>CDM_VERSION_NUMBER of the libcdm actually loaded.</summary>
+        public static int LibraryVersionNumber { get { NativeLoad.EnsureLoaded(); return NativeMethods.cdm_version_number(); } }
 
         /// <summary>Opens a master: null or "" ($CDM_DEVICE, else the first device),
         /// "sim:?...", "replay:FILE", "hid:/dev/hidrawN", "serial:SN".</summary>
@@ -45,6 +46,7 @@ namespace Cdm
         /// end of stream; cdm_event_kind).</summary>
         public static Device Open(string uri, uint staleTimeoutUs, Action<Pose> onSample, Action<DeviceEvent, string> onEvent)
         {
+            NativeLoad.EnsureLoaded();
             var opts = new NativeOpenOptions();
             opts.struct_size = (uint)Marshal.SizeOf(typeof(NativeOpenOptions));
             opts.stale_timeout_us = staleTimeoutUs;
@@ -92,6 +94,7 @@ namespace Cdm
         /// <summary>Information about every connected master (an empty array is not an error).</summary>
         public static DeviceInfo[] Enumerate()
         {
+            NativeLoad.EnsureLoaded();
             DeviceListHandle list;
             Check.Ensure(NativeMethods.cdm_enumerate(out list), "cdm_enumerate");
             using (list)
@@ -141,14 +144,21 @@ namespace Cdm
         public Pose GetPose()
         {
             Pose p;
-            int rc = TryGetPose(out p);
+            int rc = GetPoseCode(out p);
             if (rc < 0 && !Filled(rc)) throw Check.Error(rc, "cdm_get_pose", _h);
             return p;
         }
 
-        /// <summary>GetPose without exceptions, for control loops: returns the C code
-        /// (0, or negative; pose filled for Stale/Disconnected/EndOfStream).</summary>
-        public int TryGetPose(out Pose pose)
+        /// <summary>GetPose without exceptions, for control loops: true when pose holds a pose
+        /// (current, or the last one for Stale/Disconnected/EndOfStream: see pose.Status);
+        /// false before the first report (pose.Status NoData) or on an error (pose.Status).</summary>
+        public bool TryGetPose(out Pose pose)
+        {
+            int rc = GetPoseCode(out pose);
+            return rc >= 0 || Filled(rc);
+        }
+
+        int GetPoseCode(out Pose pose)
         {
             var n = new NativePose();
             n.struct_size = PoseSize;

@@ -71,6 +71,7 @@ namespace Cdm
         {
             if (name == null) throw new ArgumentNullException("name");
             if (apply == null) throw new ArgumentNullException("apply");
+            NativeLoad.EnsureLoaded();
             if (paramNames == null) throw new ArgumentNullException("paramNames");
             int n = paramNames.Length;
             CheckNames(name, paramNames);
@@ -118,6 +119,7 @@ namespace Cdm
         public static void Unregister(string name)
         {
             if (name == null) throw new ArgumentNullException("name");
+            NativeLoad.EnsureLoaded();
             Check.Ensure(NativeMethods.cdm_effect_unregister(Z(name)), "cdm_effect_unregister");
         }
 
@@ -125,6 +127,7 @@ namespace Cdm
         public static void LoadPlugin(string path)
         {
             if (path == null) throw new ArgumentNullException("path");
+            NativeLoad.EnsureLoaded();
             Check.Ensure(NativeMethods.cdm_effect_load_plugin(Z(path)), "cdm_effect_load_plugin");
         }
 
@@ -133,6 +136,7 @@ namespace Cdm
         {
             get
             {
+                NativeLoad.EnsureLoaded();
                 int n = (int)NativeMethods.cdm_effect_count().ToUInt64();
                 var r = new string[n];
                 for (int i = 0; i < n; i++) r[i] = NativeMethods.Utf8(NativeMethods.cdm_effect_name(new UIntPtr((uint)i)));

@@ -30,6 +30,7 @@ namespace Cdm
         public static Watcher Start(Action<WatchEvent, DeviceInfo> onChange, bool enumerate)
         {
             if (onChange == null) throw new ArgumentNullException("onChange");
+            NativeLoad.EnsureLoaded();
             Watcher self = null;
             var started = new ManualResetEvent(false);
             WatchFn fn = (user, ev) =>

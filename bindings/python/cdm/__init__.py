@@ -13,32 +13,33 @@ built-in a Python user catches (TimeoutError, FileNotFoundError,
 ConnectionError, ValueError...; see cdm.errors).
 """
 from . import _native
+from . import constants as constants
+from . import frames as frames
+from . import log as log
+from . import records as records
 from .calibration import Calibration
 from .constants import *  # noqa: F401,F403 - the header's constants
-from .constants import Button, Error, PoseFlag
-from .device import Device, DeviceInfo, Pose, Raw, Sample, Stats, enumerate_devices, open  # noqa: A004
+from .constants import Button, EffectStage, Error, EventKind, LogLevel, PoseFlag, WatchFlag, WatchKind
+from .device import Device, enumerate_devices, open  # noqa: A004
 from .diagnosis import Diagnosis, diagnose, fit, load_diagnosis
 from .effects import EffectGeometry, effect_names, load_plugin, register_effect, unregister_effect
-from . import frames
-from . import log
-from .watch import Watcher, watch
 from .errors import (CdmError, CdmFileNotFoundError, CdmIOError, CdmMemoryError, CdmTimeoutError,
                      DisconnectedError, InvalidArgumentError, LibraryNotFoundError, NoDeviceError, ParseError)
-from . import constants as _constants
+from .records import DeviceInfo, Pose, Raw, Sample, Stats
+from .watch import Watcher, watch
 
 __all__ = ["open", "enumerate", "enumerate_devices", "Device", "DeviceInfo", "Pose", "Raw", "Sample", "Stats",
            "Calibration", "Diagnosis", "diagnose", "fit", "load_diagnosis",
            "effect_names", "load_plugin", "register_effect", "unregister_effect", "EffectGeometry",
            "CdmError", "InvalidArgumentError", "ParseError", "NoDeviceError", "CdmIOError", "CdmFileNotFoundError",
            "CdmTimeoutError", "DisconnectedError", "CdmMemoryError", "LibraryNotFoundError",
-           "Watcher", "watch", "frames", "log", "version", "version_number", "library_path"] + list(_constants.__all__)
-
+           "Watcher", "watch", "frames", "log", "records", "version", "version_number", "library_path"]
+__all__ += constants.__all__
 
 
 def __getattr__(name: str) -> str:
-    # __version__ is the loaded library's (the version lives in one place,
-    # CMakeLists.txt); read lazily so that `import cdm` works without libcdm,
-    # and from the installed package's metadata when libcdm cannot be loaded.
+    """cdm.__version__: the loaded library's version (read lazily, so that
+    `import cdm` works without libcdm), else the installed package's."""
     if name == "__version__":
         try:
             return version()
@@ -59,7 +60,7 @@ enumerate = enumerate_devices  # noqa: A001
 
 def version() -> str:
     """Version text of the libcdm actually loaded ("1.2.0")."""
-    return _native.lib().cdm_version().decode("ascii")
+    return _native.text(_native.lib().cdm_version())
 
 
 def version_number() -> int:

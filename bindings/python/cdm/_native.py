@@ -9,6 +9,7 @@ import ctypes.util
 import os
 import sys
 import threading
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Type, TypeVar, Union
 
 from .constants import CDM_VERSION_MAJOR, Error
 from .errors import CdmError, LibraryNotFoundError
@@ -19,7 +20,7 @@ c_double_p = ctypes.POINTER(ctypes.c_double)
 class _Sized(ctypes.Structure):
     """A public struct: struct_size is set to sizeof() on construction."""
 
-    def __init__(self, *args, **kwargs):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.struct_size = ctypes.sizeof(self)
 
@@ -189,7 +190,7 @@ class cdm_watch_event(_Sized):  # CDM_EXPERIMENTAL, since 1.1
 
 cdm_watch_fn = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(cdm_watch_event))
 
-STRUCTS = {cls.__name__: cls for cls in
+STRUCTS: Dict[str, Type[_Sized]] = {cls.__name__: cls for cls in
            (cdm_pose, cdm_raw, cdm_device_info, cdm_stats, cdm_sample, cdm_open_options, cdm_effect_context,
             cdm_effect_def, cdm_event, cdm_watch_event)}
 
@@ -199,7 +200,7 @@ _handle_p = ctypes.POINTER(ctypes.c_void_p)
 _int, _size, _str = ctypes.c_int, ctypes.c_size_t, ctypes.c_char_p
 
 # name: (restype, argtypes), in the header's order.
-PROTOTYPES = {
+PROTOTYPES: Dict[str, Tuple[Any, List[Any]]] = {
     "cdm_version": (_str, []),
     "cdm_version_number": (_int, []),
     "cdm_strerror": (_str, [_int]),
@@ -276,7 +277,7 @@ PROTOTYPES = {
 }
 
 
-def _library_names():
+def _library_names() -> List[str]:
     if sys.platform == "darwin":
         return ["libcdm.1.dylib", "libcdm.dylib"]
     if sys.platform == "win32":
@@ -284,10 +285,10 @@ def _library_names():
     return ["libcdm.so.1", "libcdm.so"]
 
 
-def candidates(environ=None):
+def candidates(environ: Optional[Mapping[str, str]] = None) -> List[Tuple[str, str]]:
     """Where the library is looked for, in order: [(path or name, origin), ...]."""
     env = os.environ if environ is None else environ
-    out = []
+    out: List[Tuple[str, str]] = []
     if env.get("CDM_LIBRARY"):
         out.append((env["CDM_LIBRARY"], "$CDM_LIBRARY"))
     here = os.path.dirname(os.path.abspath(__file__))
@@ -305,22 +306,91 @@ class _Missing:
     """Stands in for a function the loaded library does not export (an older
     or foreign build): calling it raises a CdmError naming the function."""
 
-    def __init__(self, name, path):
+    def __init__(self, name: str, path: str) -> None:
         self.__name__ = name
         self._path = path
 
-    def __call__(self, *args):
+    def __call__(self, *args: Any) -> Any:
         raise CdmError(Error.CDM_ERR_UNSUPPORTED, "%s is not exported by %s" % (self.__name__, self._path),
                        function=self.__name__)
 
 
 class Library:
-    """The loaded libcdm with its prototypes applied."""
+    """The loaded libcdm with its prototypes applied: one attribute per
+    function of PROTOTYPES, typed by what it returns (int for int and size_t,
+    bytes or None for a C string, None for void)."""
 
-    def __init__(self, cdll, path):
+    cdm_version: Callable[..., Optional[bytes]]
+    cdm_version_number: Callable[..., int]
+    cdm_strerror: Callable[..., Optional[bytes]]
+    cdm_thread_error: Callable[..., Optional[bytes]]
+    cdm_enumerate: Callable[..., int]
+    cdm_device_list_count: Callable[..., int]
+    cdm_device_list_get: Callable[..., int]
+    cdm_device_list_free: Callable[..., None]
+    cdm_open: Callable[..., int]
+    cdm_open_ex: Callable[..., int]
+    cdm_close: Callable[..., None]
+    cdm_shutdown: Callable[..., int]
+    cdm_get_pose: Callable[..., int]
+    cdm_wait_pose: Callable[..., int]
+    cdm_wait_pose_after: Callable[..., int]
+    cdm_set_log_fn: Callable[..., None]
+    cdm_get_raw: Callable[..., int]
+    cdm_get_info: Callable[..., int]
+    cdm_set_stale_timeout: Callable[..., int]
+    cdm_get_stats: Callable[..., int]
+    cdm_device_error: Callable[..., int]
+    cdm_calibration_load: Callable[..., int]
+    cdm_calibration_parse: Callable[..., int]
+    cdm_calibration_free: Callable[..., None]
+    cdm_calibration_position: Callable[..., int]
+    cdm_calibration_lengths: Callable[..., int]
+    cdm_calibration_effect_count: Callable[..., int]
+    cdm_calibration_effect_name: Callable[..., Optional[bytes]]
+    cdm_set_calibration: Callable[..., int]
+    cdm_device_calibration_read: Callable[..., int]
+    cdm_device_calibration_write: Callable[..., int]
+    cdm_effect_register: Callable[..., int]
+    cdm_effect_unregister: Callable[..., int]
+    cdm_effect_load_plugin: Callable[..., int]
+    cdm_effect_count: Callable[..., int]
+    cdm_effect_name: Callable[..., Optional[bytes]]
+    cdm_effect_fingerprint: Callable[..., int]
+    cdm_diagnose: Callable[..., int]
+    cdm_fit: Callable[..., int]
+    cdm_free_string: Callable[..., None]
+    cdm_dataset_writer_open: Callable[..., int]
+    cdm_dataset_writer_add: Callable[..., int]
+    cdm_dataset_writer_add_at: Callable[..., int]
+    cdm_dataset_writer_commit: Callable[..., int]
+    cdm_dataset_writer_free: Callable[..., None]
+    cdm_device_info_report: Callable[..., int]
+    cdm_sim_truth: Callable[..., int]
+    cdm_recorder_open: Callable[..., int]
+    cdm_recorder_write: Callable[..., int]
+    cdm_recorder_close: Callable[..., int]
+    cdm_recorder_open_ex: Callable[..., int]
+    cdm_recorder_write_sample: Callable[..., int]
+    cdm_jig_plan_create: Callable[..., int]
+    cdm_jig_plan_count: Callable[..., int]
+    cdm_jig_plan_samples: Callable[..., int]
+    cdm_jig_plan_get: Callable[..., int]
+    cdm_jig_plan_free: Callable[..., None]
+    cdm_effect_doc: Callable[..., Optional[bytes]]
+    cdm_effect_param_count: Callable[..., int]
+    cdm_effect_param: Callable[..., int]
+    cdm_nominal_device_json: Callable[..., int]
+    cdm_simulate_jig_defaults: Callable[..., int]
+    cdm_simulate_jig_dataset: Callable[..., int]
+    cdm_write_file_atomic: Callable[..., int]
+    cdm_watch: Callable[..., int]
+    cdm_watch_free: Callable[..., None]
+
+    def __init__(self, cdll: ctypes.CDLL, path: str) -> None:
         self.cdll = cdll
         self.path = path
-        self.missing = []
+        self.missing: List[str] = []
         for name, (restype, argtypes) in PROTOTYPES.items():
             try:
                 fn = getattr(cdll, name)
@@ -333,9 +403,9 @@ class Library:
             setattr(self, name, fn)
 
 
-def load(cands=None):
+def load(cands: Optional[Sequence[Tuple[str, str]]] = None) -> Library:
     """Loads libcdm from the first candidate that works; LibraryNotFoundError lists them all."""
-    tried = []
+    tried: List[Tuple[str, str]] = []
     for path, origin in (candidates() if cands is None else cands):
         label = "%s (%s)" % (path, origin)
         if os.sep in path and not os.path.exists(path):
@@ -352,7 +422,7 @@ def load(cands=None):
             tried.append((label, "not libcdm (no cdm_version_number)"))
             continue
         fn.restype, fn.argtypes = ctypes.c_int, []
-        major = fn() // 10000
+        major = int(fn()) // 10000
         if major != CDM_VERSION_MAJOR:
             tried.append((label, "major version %d, this binding needs %d" % (major, CDM_VERSION_MAJOR)))
             continue
@@ -360,11 +430,11 @@ def load(cands=None):
     raise LibraryNotFoundError(tried)
 
 
-_lib = None
+_lib: Optional[Library] = None
 _lib_lock = threading.Lock()
 
 
-def lib():
+def lib() -> Library:
     """The process's libcdm, loaded on first use (so that `import cdm` works without it)."""
     global _lib
     if _lib is None:
@@ -374,7 +444,12 @@ def lib():
     return _lib
 
 
-def c_path(value, what="path"):
+def text(value: Optional[bytes]) -> str:
+    """A C string the library returned, decoded ("" for NULL; invalid UTF-8 replaced)."""
+    return (value or b"").decode("utf-8", "replace")
+
+
+def c_path(value: Union[str, bytes, "os.PathLike[str]", "os.PathLike[bytes]"], what: str = "path") -> bytes:
     """A str, bytes or os.PathLike as the NUL-terminated bytes C receives.
 
     An embedded NUL would silently cut the string where C reads it ("a\\x00b"
@@ -386,34 +461,41 @@ def c_path(value, what="path"):
     return data
 
 
-def fail(code, function, detail=""):
+def fail(code: int, function: str, detail: str = "") -> CdmError:
     """The CdmError for a failed call. Call it right after the call: the thread's
     detail text is valid only until this thread's next cdm_* call."""
     L = lib()
     if not detail:
-        detail = (L.cdm_thread_error() or b"").decode("utf-8", "replace")
-    text = (L.cdm_strerror(code) or b"").decode("utf-8", "replace")
-    return CdmError(code, "%s: %s" % (text, detail) if detail else text, detail, function)
+        detail = text(L.cdm_thread_error())
+    message = text(L.cdm_strerror(code))
+    return CdmError(code, "%s: %s" % (message, detail) if detail else message, detail, function)
 
 
-def check(code, function):
+def check(code: int, function: str) -> int:
     """Raises the CdmError for a negative code; returns the code otherwise."""
     if code < 0:
         raise fail(code, function)
     return code
 
 
+_C = TypeVar("_C", bound="Closing")
+
+
 class Closing:
     """A handle that frees its native object on close(), idempotently; as a
     context manager and at garbage collection too. Subclasses define close()."""
 
-    def __enter__(self):
+    def close(self) -> None:
+        """Frees the native object (idempotent)."""
+        raise NotImplementedError
+
+    def __enter__(self: "_C") -> "_C":
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def __del__(self):
+    def __del__(self) -> None:
         try:
             self.close()
         except Exception:

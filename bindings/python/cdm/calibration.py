@@ -1,14 +1,17 @@
 """Calibrations: load, corrected forward kinematics and its inverse."""
+from __future__ import annotations
+
 import ctypes
 import math
 import os
+from typing import Any, Iterable, List, Tuple, Union
 
 from . import _native
 from .constants import Error
 from .errors import CdmError
 
 
-def _vector(values, n, what):
+def _vector(values: Iterable[float], n: int, what: str) -> Any:
     try:
         vals = [float(v) for v in values]
     except (TypeError, ValueError):
@@ -26,12 +29,12 @@ class Calibration(_native.Closing):
     or Calibration.parse(text); free with close() or a with-block (or let the
     garbage collector do it). Read-only: safe to share between threads."""
 
-    def __init__(self, handle, source):
-        self._h = handle
+    def __init__(self, handle: ctypes.c_void_p, source: str) -> None:
+        self._h: ctypes.c_void_p | None = handle
         self.source = source
 
     @classmethod
-    def load(cls, path):
+    def load(cls, path: Union[str, os.PathLike[str]]) -> Calibration:
         """Loads a calibration JSON file; errors name the file, line and column."""
         path = os.fspath(path)
         h = ctypes.c_void_p()
@@ -41,7 +44,7 @@ class Calibration(_native.Closing):
         return cls(h, path)
 
     @classmethod
-    def parse(cls, text):
+    def parse(cls, text: Union[str, bytes]) -> Calibration:
         """The same from JSON text (str or bytes)."""
         data = text.encode("utf-8") if isinstance(text, str) else bytes(text)
         h = ctypes.c_void_p()
@@ -50,20 +53,21 @@ class Calibration(_native.Closing):
             raise _native.fail(rc, "cdm_calibration_parse")
         return cls(h, "<text>")
 
-    def _handle(self, function):
+    def _handle(self, function: str) -> ctypes.c_void_p:
         if self._h is None:
             raise CdmError(Error.CDM_ERR_INVALID_ARG, "calibration %s is closed" % self.source, function=function)
         return self._h
 
-    def close(self):
+    def close(self) -> None:
+        """Frees the calibration (idempotent)."""
         h, self._h = self._h, None
         if h:
             _native.lib().cdm_calibration_free(h)
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return "<cdm.Calibration %s%s>" % (self.source, " closed" if self._h is None else "")
 
-    def position(self, lengths):
+    def position(self, lengths: Iterable[float]) -> Tuple[float, float, float]:
         """The holder position (x, y, z) in mm whose predicted readings best match
         `lengths` (4 nominal-scale pot readings, mm). CdmError CDM_ERR_NUMERIC
         when there is no solution."""
@@ -73,9 +77,9 @@ class Calibration(_native.Closing):
         rc = _native.lib().cdm_calibration_position(h, inp, out)
         if rc < 0:
             raise _native.fail(rc, "cdm_calibration_position")
-        return tuple(out)
+        return (float(out[0]), float(out[1]), float(out[2]))
 
-    def lengths(self, position):
+    def lengths(self, position: Iterable[float]) -> Tuple[float, float, float, float]:
         """The 4 readings (mm) the calibrated model predicts at position (x, y, z) mm."""
         h = self._handle("cdm_calibration_lengths")
         inp = _vector(position, 3, "Calibration.lengths: position")
@@ -83,12 +87,12 @@ class Calibration(_native.Closing):
         rc = _native.lib().cdm_calibration_lengths(h, inp, out)
         if rc < 0:
             raise _native.fail(rc, "cdm_calibration_lengths")
-        return tuple(out)
+        return (float(out[0]), float(out[1]), float(out[2]), float(out[3]))
 
     @property
-    def effects(self):
+    def effects(self) -> List[str]:
         """Names of the physical effects in this calibration, in model order."""
         h = self._handle("cdm_calibration_effect_count")
         L = _native.lib()
-        return [L.cdm_calibration_effect_name(h, i).decode("utf-8")
+        return [_native.text(L.cdm_calibration_effect_name(h, i))
                 for i in range(L.cdm_calibration_effect_count(h))]

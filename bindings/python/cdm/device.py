@@ -1,157 +1,30 @@
 """Devices: open, poses, raw values, information, counters, stored calibration."""
+from __future__ import annotations
+
+import contextlib
 import ctypes
 import math
 import threading
+import os
 import time
-from dataclasses import dataclass
-from typing import Callable, Optional, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Iterator, List, Optional, Tuple, Union
 
 from . import _native
-from .constants import Button, Error, PoseFlag
+from .constants import Error
 from .errors import CdmError
+from .records import DeviceInfo, Pose, Raw, Sample, Stats, check_units, pose_dtype, pose_record, sample_from_c
+
+if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
+
+    from .calibration import Calibration
+
+__all__ = ["Device", "DeviceInfo", "Pose", "Raw", "Sample", "Stats", "open", "enumerate_devices"]
 
 # Return codes of cdm_get_pose / cdm_wait_pose / cdm_get_raw that come with a
 # filled record: the pose is the last one, and its flags say why it is old.
 _FILLED = (Error.CDM_ERR_STALE, Error.CDM_ERR_DISCONNECTED, Error.CDM_ERR_END_OF_STREAM)
-
-
-@dataclass(frozen=True)
-class Pose:
-    """cdm_pose as Python values. position in mm (device frame: x out of the
-    cable plane), orientation a unit quaternion (w, x, y, z), grip in rad.
-
-    status is what the call returned: CDM_OK, or CDM_ERR_STALE /
-    CDM_ERR_DISCONNECTED / CDM_ERR_END_OF_STREAM for a pose that is still the
-    last one the device gave (see flags)."""
-    position: Tuple[float, float, float]
-    orientation: Tuple[float, float, float, float]
-    grip: float
-    buttons: int
-    sequence: int
-    dropped: int
-    flags: int
-    device_time_us: int
-    host_time_ns: int
-    status: int = 0
-    host_sequence: int = 0  # since 1.1: poses published by this handle so far; pass to wait_pose(after=)
-    # since 1.1: mm/s, device frame; a low-passed difference (50 Hz, ~3.7 ms lag: docs/protocol.md)
-    velocity: Tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-    @classmethod
-    def _from_c(cls, p, status=0):
-        return cls(tuple(p.position), tuple(p.orientation), p.grip, p.buttons, p.sequence, p.dropped,
-                   p.flags, p.device_time_us, p.host_time_ns, int(status), int(p.host_sequence),
-                   tuple(p.velocity))
-
-    @property
-    def is_stale(self):
-        return bool(self.flags & PoseFlag.CDM_POSE_STALE)
-
-    @property
-    def is_disconnected(self):
-        return bool(self.flags & PoseFlag.CDM_POSE_DISCONNECTED)
-
-    @property
-    def is_compensated(self):
-        return bool(self.flags & PoseFlag.CDM_POSE_COMPENSATED)
-
-    @property
-    def is_out_of_workspace(self):
-        return bool(self.flags & PoseFlag.CDM_POSE_OUT_OF_WORKSPACE)
-
-    @property
-    def is_end_of_stream(self):
-        return bool(self.flags & PoseFlag.CDM_POSE_END_OF_STREAM or self.status == Error.CDM_ERR_END_OF_STREAM)
-
-    @property
-    def is_fresh(self):
-        """A current pose: returned with CDM_OK."""
-        return self.status == Error.CDM_OK
-
-    def pressed(self, button):
-        """pose.pressed(cdm.CDM_BUTTON_CLUTCH)"""
-        return bool(self.buttons & int(button))
-
-    @property
-    def clutch(self):
-        return self.pressed(Button.CDM_BUTTON_CLUTCH)
-
-
-@dataclass(frozen=True)
-class Raw:
-    """cdm_raw: the newest report's sensor values."""
-    status: int
-    pot_adc: Tuple[int, int, int, int]
-    hall_adc: int
-    buttons: int
-    quat_q14: Tuple[int, int, int, int]
-    sequence: int
-    lengths_mm: Tuple[float, float, float, float]
-    device_time_us: int
-    host_time_ns: int
-    return_code: int = 0
-
-    @classmethod
-    def _from_c(cls, r, code=0):
-        return cls(r.status, tuple(r.pot_adc), r.hall_adc, r.buttons, tuple(r.quat_q14), r.sequence,
-                   tuple(r.lengths_mm), r.device_time_us, r.host_time_ns, int(code))
-
-    @property
-    def quaternion(self):
-        """quat_q14 scaled to (w, x, y, z)."""
-        return tuple(q / 16384.0 for q in self.quat_q14)
-
-
-@dataclass(frozen=True)
-class DeviceInfo:
-    vendor_id: int
-    product_id: int
-    uri: str
-    serial: str
-    firmware: str
-    transport: str
-    protocol_version: int
-    adc_bits: int
-    pot_scale_mm: Tuple[float, float, float, float]
-    pot_offset_mm: Tuple[float, float, float, float]
-    a_mm: float
-    b_mm: float
-    m_mm: float
-    report_rate_hz: float
-    hall_closed: float
-    hall_open: float
-    grip_open_rad: float
-
-    @classmethod
-    def _from_c(cls, i):
-        def s(b):
-            return b.decode("utf-8", "replace")
-        return cls(i.vendor_id, i.product_id, s(i.uri), s(i.serial), s(i.firmware), s(i.transport),
-                   i.protocol_version, i.adc_bits, tuple(i.pot_scale_mm), tuple(i.pot_offset_mm), i.a_mm,
-                   i.b_mm, i.m_mm, i.report_rate_hz, i.hall_closed, i.hall_open, i.grip_open_rad)
-
-
-@dataclass(frozen=True)
-class Stats:
-    reports: int
-    malformed: int
-    dropped: int
-    out_of_workspace: int
-    reconnects: int
-    sequence_jumps: int = 0  # since 1.1: counter resets or corruptions (not in dropped)
-    out_of_order: int = 0  # since 1.1: duplicated or late reports, discarded
-    replay_truncated_bytes: int = 0  # since 1.1: incomplete tail a replay dropped
-
-
-@dataclass(frozen=True)
-class Sample:
-    """What an on_sample callback receives: one report as it arrived."""
-    report: bytes
-    raw: Raw
-    pose: Pose
-    #: since 1.1: ns when the report was first received (a replay: the time
-    #: recorded with it; otherwise raw.host_time_ns)
-    source_time_ns: int = 0
 
 
 class _CallbackState:
@@ -159,21 +32,17 @@ class _CallbackState:
     one the callbacks run on), and whether close() began (no user callback
     runs after it)."""
 
-    def __init__(self):
-        self.reader = None
+    def __init__(self) -> None:
+        self.reader: Optional[int] = None
         self.closed = False
 
 
-def _make_sample_callback(fn, state):
-    def trampoline(_user, sample_p):
+def _make_sample_callback(fn: Callable[[Sample], Any], units: str, state: _CallbackState) -> Any:
+    def trampoline(_user: Any, sample_p: Any) -> None:
         state.reader = threading.get_ident()
         if state.closed:
             return
-        s = sample_p.contents
-        report = ctypes.string_at(s.report, s.report_len) if s.report else b""
-        raw = Raw._from_c(s.raw.contents) if s.raw else None
-        pose = Pose._from_c(s.pose.contents) if s.pose else None
-        fn(Sample(report, raw, pose, s.source_time_ns))
+        fn(sample_from_c(sample_p.contents, units))
     return _native.cdm_sample_fn(trampoline)
 
 
@@ -190,9 +59,12 @@ class Device(_native.Closing):
     helper thread once the callback has returned (docs/reliability.md,
     "Callbacks")."""
 
-    def __init__(self, handle, uri, callback=None, state=None):
-        self._h = handle
+    def __init__(self, handle: ctypes.c_void_p, uri: Optional[str], callback: Any = None, units: str = "mm",
+                 state: Optional[_CallbackState] = None) -> None:
+        self._h: Optional[ctypes.c_void_p] = handle
         self.uri = uri
+        #: "mm" or "m": the units of the poses this device returns (cdm.open(units=))
+        self.units = check_units(units, "Device")
         # The ctypes callback object must outlive the native handle: the reader
         # thread calls it until cdm_close returns.
         self._callback = callback
@@ -201,7 +73,10 @@ class Device(_native.Closing):
         self._calls = 0  # native calls in progress on self._h
 
     # -- lifetime
-    def close(self):
+    def close(self) -> None:
+        """Closes the device (idempotent). Outside its callbacks, its reader
+        thread has stopped when this returns; inside one, it stops once the
+        callback has returned."""
         with self._lock:
             h = self._h
             if h is None or self._state.closed:
@@ -218,7 +93,7 @@ class Device(_native.Closing):
             return
         self._finish_close(h)
 
-    def _finish_close(self, h):
+    def _finish_close(self, h: ctypes.c_void_p) -> None:
         with self._lock:
             while self._calls:
                 self._lock.wait()
@@ -227,71 +102,70 @@ class Device(_native.Closing):
         self._callback = None
 
     @property
-    def closed(self):
+    def closed(self) -> bool:
+        """close() was called."""
         return self._h is None or self._state.closed
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return "<cdm.Device %r%s>" % (self.uri, " closed" if self.closed else "")
 
-    def _handle(self, function):
+    def _handle(self, function: str) -> ctypes.c_void_p:
         """The native handle, uncounted: for a caller that keeps the device
-        open during its own native call (the package's calls use _enter)."""
+        open during its own native call (the package's calls use _use)."""
         if self._h is None or self._state.closed:
             raise CdmError(Error.CDM_ERR_INVALID_ARG, "device %r is closed" % (self.uri,), function=function)
         return self._h
 
-    def _enter(self, function):
-        """The handle, counted as in use until _leave(): close() waits for it."""
+    @contextlib.contextmanager
+    def _use(self, function: str) -> Iterator[ctypes.c_void_p]:
+        """The handle, counted as in use for the block: close() waits for it."""
         with self._lock:
             if self._h is None or self._state.closed:
                 raise CdmError(Error.CDM_ERR_INVALID_ARG, "device %r is closed" % (self.uri,), function=function)
             self._calls += 1
-            return self._h
+            h = self._h
+        try:
+            yield h
+        finally:
+            with self._lock:
+                self._calls -= 1
+                if self._calls == 0:
+                    self._lock.notify_all()
 
-    def _leave(self):
-        with self._lock:
-            self._calls -= 1
-            if self._calls == 0:
-                self._lock.notify_all()
-
-    def _fail(self, code, function):
+    def _fail(self, code: int, function: str) -> CdmError:
         L = _native.lib()
-        detail = (L.cdm_thread_error() or b"").decode("utf-8", "replace")
+        detail = _native.text(L.cdm_thread_error())
         if not detail and not self.closed:
             detail = self.error_detail()
         return _native.fail(code, function, detail)
 
     # -- poses
-    def get_pose(self):
+    def get_pose(self) -> Pose:
         """The newest pose, without blocking.
 
         Raises CdmError(CDM_ERR_NO_DATA) before the first report (use
         wait_pose first). A stale, disconnected or ended stream is *not* an
         exception: the last pose is returned with its flags and .status set, as
         a control loop wants to hold the last command and look at the flags."""
-        h = self._enter("cdm_get_pose")
-        try:
+        with self._use("cdm_get_pose") as h:
             p = _native.cdm_pose()
             rc = _native.lib().cdm_get_pose(h, ctypes.byref(p))
             if rc < 0 and rc not in _FILLED:
                 raise self._fail(rc, "cdm_get_pose")
-            return Pose._from_c(p, rc)
-        finally:
-            self._leave()
+            return Pose._from_c(p, rc, self.units)
 
     # The C call waits in slices this long, so that Ctrl-C (handled by Python
     # between two foreign calls) interrupts a long wait within 0.1 s.
     _WAIT_SLICE_MS = 100
 
-    def wait_pose(self, timeout=1.0, after=None):
+    def wait_pose(self, timeout: Optional[float] = 1.0, after: Optional[int] = None) -> Pose:
         """Blocks until a pose newer than `after` (a Pose.host_sequence; None:
         the newest pose at the time of the call) exists; returns at once if one
         already does, so a loop passing the last pose's host_sequence never
         misses one. timeout in seconds (None: no limit). Raises
         CdmError(CDM_ERR_TIMEOUT) when none came in time; otherwise returns
         like get_pose. Ctrl-C interrupts it."""
-        h = self._enter("cdm_wait_pose_after")
-        try:
+        with self._use("cdm_wait_pose_after") as h:
             if timeout is not None and (timeout < 0 or math.isnan(timeout)):
                 raise ValueError("wait_pose: timeout must be >= 0 seconds or None, got %r" % (timeout,))
             if after is not None and (isinstance(after, bool) or not isinstance(after, int) or not 0 <= after < 2**64):
@@ -314,88 +188,69 @@ class Device(_native.Closing):
                     break
             if rc < 0 and rc not in _FILLED:
                 raise self._fail(rc, "cdm_wait_pose_after")
-            return Pose._from_c(p, rc)
-        finally:
-            self._leave()
+            return Pose._from_c(p, rc, self.units)
 
-    def get_raw(self):
+    def get_raw(self) -> Raw:
         """Raw values of the newest report (same returns as get_pose)."""
-        h = self._enter("cdm_get_raw")
-        try:
+        with self._use("cdm_get_raw") as h:
             r = _native.cdm_raw()
             rc = _native.lib().cdm_get_raw(h, ctypes.byref(r))
             if rc < 0 and rc not in _FILLED:
                 raise self._fail(rc, "cdm_get_raw")
             return Raw._from_c(r, rc)
-        finally:
-            self._leave()
 
     # -- information
-    def info(self):
-        h = self._enter("cdm_get_info")
-        try:
+    def info(self) -> DeviceInfo:
+        """What the device says about itself (cdm_get_info)."""
+        with self._use("cdm_get_info") as h:
             i = _native.cdm_device_info()
             rc = _native.lib().cdm_get_info(h, ctypes.byref(i))
             if rc < 0:
                 raise self._fail(rc, "cdm_get_info")
             return DeviceInfo._from_c(i)
-        finally:
-            self._leave()
 
-    def stats(self):
-        h = self._enter("cdm_get_stats")
-        try:
+    def stats(self) -> Stats:
+        """The device's counters since it was opened (cdm_get_stats)."""
+        with self._use("cdm_get_stats") as h:
             s = _native.cdm_stats()
             rc = _native.lib().cdm_get_stats(h, ctypes.byref(s))
             if rc < 0:
                 raise self._fail(rc, "cdm_get_stats")
             return Stats(s.reports, s.malformed, s.dropped, s.out_of_workspace, s.reconnects, s.sequence_jumps,
                          s.out_of_order, s.replay_truncated_bytes)
-        finally:
-            self._leave()
 
-    def error_detail(self):
+    def error_detail(self) -> str:
         """The handle's last asynchronous problem (cdm_device_error), "" if none."""
-        h = self._enter("cdm_device_error")
-        try:
+        with self._use("cdm_device_error") as h:
             buf = ctypes.create_string_buffer(1024)
             rc = _native.lib().cdm_device_error(h, buf, len(buf))
             if rc < 0:
                 return ""
             return buf.value.decode("utf-8", "replace")
-        finally:
-            self._leave()
 
-    def set_stale_timeout(self, seconds):
+    def set_stale_timeout(self, seconds: float) -> None:
         """Poses older than this are flagged stale; 0 restores the default (50 ms)."""
         us = int(round(seconds * 1e6))
         if not 0 <= us < 2**32:
             raise ValueError("set_stale_timeout: %r s is outside 0..4294 s" % (seconds,))
-        h = self._enter("cdm_set_stale_timeout")
-        try:
+        with self._use("cdm_set_stale_timeout") as h:
             rc = _native.lib().cdm_set_stale_timeout(h, us)
             if rc < 0:
                 raise self._fail(rc, "cdm_set_stale_timeout")
-        finally:
-            self._leave()
 
     # -- calibration
-    def set_calibration(self, calibration):
+    def set_calibration(self, calibration: Optional[Calibration]) -> None:
         """Applies a cdm.Calibration to the poses from the next report on (the
         library copies it); None returns to the nominal model."""
-        h = self._enter("cdm_set_calibration")
-        try:
+        with self._use("cdm_set_calibration") as h:
             ch = None if calibration is None else calibration._handle("cdm_set_calibration")
             rc = _native.lib().cdm_set_calibration(h, ch)
             if rc < 0:
                 raise self._fail(rc, "cdm_set_calibration")
-        finally:
-            self._leave()
 
-    def read_stored_calibration(self):
+    def read_stored_calibration(self) -> bytes:
         """The calibration bytes stored in the device (CdmError CDM_ERR_CRC when corrupt)."""
-        h = self._enter("cdm_device_calibration_read")
-        try:
+        with self._use("cdm_device_calibration_read") as h:
             L = _native.lib()
             n = ctypes.c_size_t(0)
             cap = 4096
@@ -410,37 +265,81 @@ class Device(_native.Closing):
                 return buf.raw[:n.value]
             raise CdmError(Error.CDM_ERR_INTERNAL, "cdm_device_calibration_read kept asking for a bigger buffer",
                            function="cdm_device_calibration_read")
-        finally:
-            self._leave()
 
-    def write_stored_calibration(self, data):
+    def write_stored_calibration(self, data: Union[str, bytes]) -> None:
         """Stores bytes (typically a calibration JSON) in the device."""
         if isinstance(data, str):
             data = data.encode("utf-8")
         data = bytes(data)
-        h = self._enter("cdm_device_calibration_write")
-        try:
+        with self._use("cdm_device_calibration_write") as h:
             rc = _native.lib().cdm_device_calibration_write(h, data, len(data))
             if rc < 0:
                 raise self._fail(rc, "cdm_device_calibration_write")
-        finally:
-            self._leave()
+
+    # -- iteration and batches
+    def __iter__(self) -> Iterator[Pose]:
+        """`for pose in dev:` yields every pose newer than the one before
+        (the first: newer than the newest when the loop starts), waiting as
+        long as it takes; it ends at the end of a replay or when the device is
+        closed. A pose the loop was too slow to see is skipped (host_sequence
+        shows the gap): the device keeps the newest pose, not a queue (use
+        on_sample for every report). Ctrl-C interrupts the wait."""
+        after: Optional[int] = None
+        while not self.closed:
+            try:
+                pose = self.wait_pose(None, after)
+            except CdmError:
+                if self.closed:
+                    return
+                raise
+            if pose.status == Error.END_OF_STREAM and after is not None and pose.host_sequence <= after:
+                return
+            yield pose
+            if pose.is_end_of_stream:
+                return
+            after = pose.host_sequence
+
+    def read(self, n: int, timeout: Optional[float] = 1.0) -> npt.NDArray[np.void]:
+        """The next n poses as a numpy structured array (dtype
+        cdm.records.pose_dtype(): position, orientation, velocity, grip,
+        buttons, flags, sequence, dropped, status, host_sequence, device_time,
+        host_time; in the device's units, times in seconds), each newer than
+        the one before, as `for pose in dev` yields them. Shorter than n when
+        a replay ends. timeout: seconds to wait for each pose (None: no
+        limit); CdmTimeoutError when one does not come."""
+        import numpy as np
+        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+            raise ValueError("read: n must be an int >= 0, got %r" % (n,))
+        out = np.zeros(n, dtype=pose_dtype())
+        after: Optional[int] = None
+        for i in range(n):
+            pose = self.wait_pose(timeout, after)
+            if pose.status == Error.END_OF_STREAM and after is not None and pose.host_sequence <= after:
+                return out[:i]
+            out[i] = pose_record(pose)
+            if pose.is_end_of_stream:
+                return out[:i + 1]
+            after = pose.host_sequence
+        return out
 
 
 EVENT_NAMES = {1: "disconnected", 2: "reconnected", 3: "stale", 4: "fresh", 5: "end_of_stream"}
 
 
-def _make_event_callback(fn, state):
-    def trampoline(_user, event_p):
+def _make_event_callback(fn: Callable[[str, str], Any], state: _CallbackState) -> Any:
+    def trampoline(_user: Any, event_p: Any) -> None:
         state.reader = threading.get_ident()
         if state.closed:
             return
         e = event_p.contents
-        fn(EVENT_NAMES.get(e.kind, "event %d" % e.kind), (e.text or b"").decode("utf-8", "replace"))
+        fn(EVENT_NAMES.get(e.kind, "event %d" % e.kind), _native.text(e.text))
     return _native.cdm_event_fn(trampoline)
 
 
-def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None, calibration=None):  # noqa: A001
+def open(uri: Optional[str] = None, stale_timeout_us: int = 0,  # noqa: A001
+         on_sample: Optional[Callable[[Sample], Any]] = None, on_event: Optional[Callable[[str, str], Any]] = None,
+         calibration: Union[Calibration, str, os.PathLike[str], None] = None, units: str = "mm",
+         stale_timeout: Optional[float] = None) -> Device:
     """Opens a master (cdm_open_ex). uri: None or "" ($CDM_DEVICE, else the
     first device), "sim:?...", "replay:FILE", "hid:/dev/hidrawN", "serial:SN".
 
@@ -453,9 +352,21 @@ def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None, calibratio
     calibration JSON, applied from the first pose on (set_calibration). A
     calibration with a user effect needs it registered in this process
     first (cdm.register_effect, cdm.load_plugin); so does a sim: URI that
-    hides one (effects=, truth=)."""
+    hides one (effects=, truth=).
+    units: "mm" (the default: mm, mm/s, quaternions (w, x, y, z), as the C
+    API) or "m" (metres, m/s, quaternions (x, y, z, w), as ROS): the units of
+    every Pose this device returns (cdm.records).
+    stale_timeout: seconds after which a pose is flagged stale (None: the
+    library's default, 50 ms); stale_timeout_us is the same in µs."""
+    check_units(units, "open")
+    if stale_timeout is not None:
+        if stale_timeout_us:
+            raise ValueError("open: give stale_timeout (s) or stale_timeout_us, not both")
+        if not 0 <= stale_timeout < 4294.967296:
+            raise ValueError("open: stale_timeout %r s is outside 0..4294 s" % (stale_timeout,))
+        stale_timeout_us = int(round(stale_timeout * 1e6))
     L = _native.lib()
-    cal = None
+    cal: Optional[Calibration] = None
     if calibration is not None:
         from .calibration import Calibration
         cal = calibration if isinstance(calibration, Calibration) else Calibration.load(calibration)
@@ -463,12 +374,12 @@ def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None, calibratio
     if not 0 <= int(stale_timeout_us) < 2**32:
         raise ValueError("open: stale_timeout_us %r is outside 0..2^32-1" % (stale_timeout_us,))
     opts.stale_timeout_us = int(stale_timeout_us)
-    callback = None
+    callback: Any = None
     state = _CallbackState()
     if on_sample is not None:
         if not callable(on_sample):
             raise TypeError("open: on_sample must be callable, got %r" % (on_sample,))
-        callback = _make_sample_callback(on_sample, state)
+        callback = _make_sample_callback(on_sample, units, state)
         opts.on_sample = callback
     if on_event is not None:
         if not callable(on_event):
@@ -488,7 +399,7 @@ def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None, calibratio
         raise _native.fail(rc, "cdm_open")
     if not h.value:
         raise CdmError(Error.CDM_ERR_INTERNAL, "cdm_open returned CDM_OK and no handle", function="cdm_open")
-    dev = Device(h, uri, callback, state)
+    dev = Device(h, uri, callback, units, state)
     if cal is not None:
         try:
             dev.set_calibration(cal)
@@ -501,7 +412,7 @@ def open(uri=None, stale_timeout_us=0, on_sample=None, on_event=None, calibratio
     return dev
 
 
-def enumerate_devices():
+def enumerate_devices() -> List[DeviceInfo]:
     """Information about every connected master (an empty list is not an error)."""
     L = _native.lib()
     lst = ctypes.c_void_p()
@@ -509,7 +420,7 @@ def enumerate_devices():
     if rc < 0:
         raise _native.fail(rc, "cdm_enumerate")
     try:
-        out = []
+        out: List[DeviceInfo] = []
         for i in range(L.cdm_device_list_count(lst)):
             info = _native.cdm_device_info()
             rc = L.cdm_device_list_get(lst, i, ctypes.byref(info))

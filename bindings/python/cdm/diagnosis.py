@@ -5,7 +5,7 @@ import numbers
 import os
 import signal
 import threading
-from typing import Any, Callable, Dict, Iterable, Optional, Union
+from typing import Any, Callable, Dict, Iterable, List, Optional, Union
 
 from . import _native
 from .constants import Error
@@ -18,7 +18,7 @@ except ImportError:  # numpy is optional: per-position data stay lists
     _np = None  # type: ignore[assignment]
 
 
-def _is_number(v):
+def _is_number(v: Any) -> bool:
     return isinstance(v, numbers.Real) and not isinstance(v, bool)
 
 
@@ -28,7 +28,7 @@ Progress = Callable[[str, float], Any]
 __all__ = ["Diagnosis", "diagnose", "fit", "load_diagnosis"]
 
 
-class Diagnosis(dict):
+class Diagnosis(Dict[str, Any]):
     """What cdm.diagnose() returns: the library's result (docs/calibration.md
     gives the schema) as a dict, with the per-position data under
     ["positions"] as numpy arrays when numpy is installed. Saved and loaded
@@ -36,6 +36,7 @@ class Diagnosis(dict):
 
     @property
     def verdict(self) -> str:
+        """The diagnosis's one-line verdict ("" when absent)."""
         return str(self.get("verdict", ""))
 
     def to_json(self, path: Optional[PathLike] = None, indent: Optional[int] = None) -> str:
@@ -77,7 +78,7 @@ def _plain(obj: Any) -> Any:
     return obj
 
 
-def _arrays(obj):
+def _arrays(obj: Any) -> Any:
     """Lists of numbers (or rectangular lists of such lists) -> numpy arrays, recursively."""
     if isinstance(obj, dict):
         return {k: _arrays(v) for k, v in obj.items()}
@@ -137,10 +138,10 @@ def _run(fn: str, data_csv: PathLike, device_json: PathLike, effects: Optional[U
     # progress callback, which the library calls between fit iterations,
     # cancels on it, and KeyboardInterrupt is raised once back in Python. A
     # KeyboardInterrupt raised inside a ctypes callback would be swallowed.
-    raised: list = []
-    interrupted: list = []
+    raised: List[BaseException] = []
+    interrupted: List[int] = []
 
-    def trampoline(_user, stage, fraction):
+    def trampoline(_user: Any, stage: Optional[bytes], fraction: float) -> int:
         if interrupted:
             return 1
         try:
@@ -161,7 +162,7 @@ def _run(fn: str, data_csv: PathLike, device_json: PathLike, effects: Optional[U
             and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
         previous = signal.signal(signal.SIGINT, lambda signum, frame: interrupted.append(signum))
     try:
-        rc = getattr(L, fn)(data_path, device_path, options_json, cb, None, ctypes.byref(out))
+        rc: int = getattr(L, fn)(data_path, device_path, options_json, cb, None, ctypes.byref(out))
     finally:
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
@@ -195,7 +196,7 @@ def _run(fn: str, data_csv: PathLike, device_json: PathLike, effects: Optional[U
         raise CdmError(Error.CDM_ERR_INVALID_ARG, "user effect %r raised %s: %s (%d failed call(s)); the result "
                        "is not trustworthy" % (name, type(exc).__name__, exc, len(effect_errors)),
                        function=fn) from exc
-    result = json.loads(text)
+    result: Any = json.loads(text)
     if not isinstance(result, dict):
         raise CdmError(Error.CDM_ERR_INTERNAL, "%s returned %s, not a JSON object" % (fn, type(result).__name__),
                        function=fn)

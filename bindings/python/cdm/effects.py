@@ -1,9 +1,13 @@
 """User-defined physical effects (CDM_EXPERIMENTAL): register Python code as an
 effect that every later fit, diagnosis and calibration load can use."""
+from __future__ import annotations
+
 import ctypes
 import math
+import os
 import re
 import threading
+from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple, Union
 
 from . import _native
 from .constants import EffectStage, Error
@@ -15,25 +19,27 @@ except ImportError:  # numpy is optional
 
 # name -> _Registration. Holds every object native code may still reach
 # (the apply trampoline, the parameter arrays).
-_registry: dict = {}
+_registry: Dict[str, _Registration] = {}
 # Registrations removed by unregister_effect. A model or calibration built
 # while the effect was registered keeps its description, and with it the
 # trampoline's address, for as long as it lives; freeing the trampoline
 # would leave it a dangling pointer. They are kept for the process's life
 # (a few hundred bytes each).
-_retired: list = []
+_retired: List[_Registration] = []
 _registry_lock = threading.Lock()
 
 
 class _Registration:
-    def __init__(self, name, n, apply):
+    """One Python effect and every object native code may reach through it."""
+
+    def __init__(self, name: str, n: int, apply: Callable[..., Any]) -> None:
         self.name = name
         self.n = n
         self.apply = apply
-        self.errors = []  # exceptions raised by apply, newest last (capped)
-        self.keep = []    # ctypes objects native code points into
+        self.errors: List[Tuple[str, BaseException]] = []  # exceptions raised by apply, newest last (capped)
+        self.keep: List[Any] = []    # ctypes objects native code points into
 
-    def _guarded(self, body, *args):
+    def _guarded(self, body: Callable[..., None], *args: Any) -> int:
         # Runs body(*args) for native code: 0 on success, an error code
         # (the exception kept in self.errors) otherwise.
         try:
@@ -46,14 +52,17 @@ class _Registration:
             self._record(e)
             return int(Error.CDM_ERR_INTERNAL)
 
-    def trampoline(self, _user, params_p, position_p, readings_p):
+    def trampoline(self, _user: Any, params_p: Any, position_p: Any, readings_p: Any) -> int:
         return self._guarded(self._one, params_p, position_p, readings_p)
 
-    def batch_trampoline(self, _user, params_p, n, positions_p, readings_p):
+    def batch_trampoline(self, _user: Any, params_p: Any, n: int, positions_p: Any, readings_p: Any) -> int:
         # vectorized=True: every position at once (numpy is checked at registration).
         return self._guarded(self._batch, params_p, n, positions_p, readings_p)
 
-    def _one(self, params_p, position_p, readings_p):
+    def _one(self, params_p: Any, position_p: Any, readings_p: Any) -> None:
+        params: Any
+        position: Any
+        readings: Any
         if _np is not None:
             params = _np.ctypeslib.as_array(params_p, shape=(self.n,)).copy() if self.n else _np.zeros(0)
             position = _np.ctypeslib.as_array(position_p, shape=(3,)).copy()
@@ -64,7 +73,7 @@ class _Registration:
             readings = ctypes.cast(readings_p, ctypes.POINTER(ctypes.c_double * 4)).contents
         self.apply(params, position, readings)
 
-    def _batch(self, params_p, n, positions_p, readings_p):
+    def _batch(self, params_p: Any, n: int, positions_p: Any, readings_p: Any) -> None:
         if n == 0:
             return
         params = _np.ctypeslib.as_array(params_p, shape=(self.n,)).copy() if self.n else _np.zeros(0)
@@ -77,17 +86,17 @@ class _Registration:
                 raise ValueError("effect %r: apply returned shape %r, expected (%d, 4)" % (self.name, out.shape, n))
             readings[...] = out
 
-    def geom_trampoline(self, _user, params_p, n, ctx_p, values_p):
+    def geom_trampoline(self, _user: Any, params_p: Any, n: int, ctx_p: Any, values_p: Any) -> int:
         # geometry=True (since 1.2): the positions with the cables' geometry.
         return self._guarded(self._geom, params_p, n, ctx_p, values_p)
 
-    def _geom(self, params_p, n, ctx_p, values_p):
+    def _geom(self, params_p: Any, n: int, ctx_p: Any, values_p: Any) -> None:
         if n == 0:
             return
         c = ctx_p.contents
         params = _np.ctypeslib.as_array(params_p, shape=(self.n,)).copy() if self.n else _np.zeros(0)
 
-        def arr(p, shape):
+        def arr(p: Any, shape: Tuple[int, ...]) -> Any:
             return _np.ctypeslib.as_array(p, shape=shape).copy()
         geom = EffectGeometry(
             stage="path" if c.stage == int(EffectStage.CDM_EFFECT_STAGE_PATH) else "reading",
@@ -101,7 +110,7 @@ class _Registration:
                 raise ValueError("effect %r: apply returned shape %r, expected (%d, 4)" % (self.name, out.shape, n))
             values[...] = out
 
-    def _record(self, e):
+    def _record(self, e: BaseException) -> None:
         self.errors.append((self.name, e))
         del self.errors[:-10]
 
@@ -123,15 +132,16 @@ class EffectGeometry:
     """
     __slots__ = ("stage", "positions", "t_s", "anchors", "holders", "unit", "chord")
 
-    def __init__(self, stage, positions, t_s, anchors, holders, unit, chord):
+    def __init__(self, stage: str, positions: Any, t_s: Any, anchors: Any, holders: Any, unit: Any,
+                 chord: Any) -> None:
         self.stage, self.positions, self.t_s = stage, positions, t_s
         self.anchors, self.holders, self.unit, self.chord = anchors, holders, unit, chord
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return "EffectGeometry(stage=%r, n=%d)" % (self.stage, len(self.t_s))
 
 
-def _param_names(param_names, name):
+def _param_names(param_names: Iterable[str], name: str) -> List[str]:
     # Each name is a key of the calibration JSON and a column of the report:
     # an ASCII identifier, given once.
     if isinstance(param_names, (str, bytes)):
@@ -144,7 +154,7 @@ def _param_names(param_names, name):
         if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", p):
             raise ValueError("register_effect(%r): parameter %d's name %r is not an identifier "
                              "([A-Za-z_][A-Za-z0-9_]*, non-empty, ASCII)" % (name, k, p))
-    seen = set()
+    seen: set[str] = set()
     for p in names:
         if p in seen:
             raise ValueError("register_effect(%r): parameter name %r is given twice" % (name, p))
@@ -152,16 +162,16 @@ def _param_names(param_names, name):
     return names
 
 
-def _units(units, n, name):
+def _units(units: Optional[Iterable[str]], n: int, name: str) -> Optional[List[bytes]]:
     if units is None:
         return None
     if isinstance(units, (str, bytes)):
         raise TypeError("register_effect(%r): units must be a list of one unit per parameter, got %r" % (name, units))
-    units = list(units)
-    if len(units) != n:
-        raise ValueError("register_effect(%r): units has %d values for %d parameters" % (name, len(units), n))
-    out = []
-    for k, u in enumerate(units):
+    unit_list = list(units)
+    if len(unit_list) != n:
+        raise ValueError("register_effect(%r): units has %d values for %d parameters" % (name, len(unit_list), n))
+    out: List[bytes] = []
+    for k, u in enumerate(unit_list):
         if not isinstance(u, str):
             raise TypeError("register_effect(%r): unit %d must be a str, got %r" % (name, k, u))
         try:
@@ -175,7 +185,7 @@ def _units(units, n, name):
     return out
 
 
-def _origin(apply):
+def _origin(apply: Callable[..., Any]) -> Optional[str]:
     # Where the effect comes from, for a calibration written with it: the
     # module that defines apply (a script run as __main__: its file).
     mod = getattr(apply, "__module__", None) or ""
@@ -185,7 +195,7 @@ def _origin(apply):
     return "python:" + mod if mod else None
 
 
-def _doubles(values, n, what, name):
+def _doubles(values: Optional[Iterable[float]], n: int, what: str, name: str) -> Any:
     if values is None:
         return None
     vals = [float(v) for v in values]
@@ -196,8 +206,11 @@ def _doubles(values, n, what, name):
     return (ctypes.c_double * n)(*vals)
 
 
-def register_effect(name, param_names, param_scale, apply, doc="", lower=None, upper=None, initial=None,
-                    vectorized=False, units=None, stage="reading", geometry=False, origin=None):
+def register_effect(name: str, param_names: Iterable[str], param_scale: Optional[Iterable[float]],
+                    apply: Callable[..., Any], doc: str = "", lower: Optional[Iterable[float]] = None,
+                    upper: Optional[Iterable[float]] = None, initial: Optional[Iterable[float]] = None,
+                    vectorized: bool = False, units: Optional[Iterable[str]] = None, stage: str = "reading",
+                    geometry: bool = False, origin: Optional[str] = None) -> None:
     """Registers apply(params, position, readings) as the effect `name`.
 
     The model calls apply with the readings (4 values, mm) predicted by the
@@ -255,8 +268,8 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
                          "lengths with their geometry)" % name)
     if geometry and vectorized:
         raise ValueError("register_effect(%r): geometry=True is always called on arrays; drop vectorized=True" % name)
-    param_names = _param_names(param_names, name)
-    n = len(param_names)
+    names = _param_names(param_names, name)
+    n = len(names)
     units_raw = _units(units, n, name)
     if origin is None:
         origin = _origin(apply)
@@ -267,7 +280,7 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
     lo = _doubles(lower, n, "lower", name)
     hi = _doubles(upper, n, "upper", name)
     init = _doubles(initial, n, "initial", name)
-    names_c = (ctypes.c_char_p * max(n, 1))(*[p.encode("utf-8") for p in param_names])
+    names_c = (ctypes.c_char_p * max(n, 1))(*[p.encode("utf-8") for p in names])
     # One function, registered as apply or as apply_batch: the library calls
     # apply_batch with n = 1 where it needs one position.
     if geometry:
@@ -292,7 +305,7 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
         d.apply = fn
     d.user = None
     d.initial = init
-    units_c = None
+    units_c: Any = None
     if units_raw is not None:
         units_c = (ctypes.c_char_p * max(n, 1))(*units_raw)
         d.param_units = units_c
@@ -308,7 +321,7 @@ def register_effect(name, param_names, param_scale, apply, doc="", lower=None, u
         _registry[name] = reg
 
 
-def unregister_effect(name):
+def unregister_effect(name: str) -> None:
     """Removes a user effect registered with register_effect (or by a plugin)."""
     with _registry_lock:
         rc = _native.lib().cdm_effect_unregister(_native.c_path(name, "effect name"))
@@ -319,23 +332,22 @@ def unregister_effect(name):
             _retired.append(reg)
 
 
-def load_plugin(path):
+def load_plugin(path: Union[str, os.PathLike[str]]) -> None:
     """Loads a shared object exporting cdm_plugin_init and registers its effects."""
-    import os
     rc = _native.lib().cdm_effect_load_plugin(os.fspath(path).encode("utf-8"))
     if rc < 0:
         raise _native.fail(rc, "cdm_effect_load_plugin")
 
 
-def effect_names():
+def effect_names() -> List[str]:
     """Every effect known to the library: built-in first, then user ones."""
     L = _native.lib()
-    return [L.cdm_effect_name(i).decode("utf-8") for i in range(L.cdm_effect_count())]
+    return [_native.text(L.cdm_effect_name(i)) for i in range(L.cdm_effect_count())]
 
 
-def _take_errors():
+def _take_errors() -> List[Tuple[str, BaseException]]:
     """(effect name, exception) raised by Python effects since the last call (for diagnose)."""
-    out = []
+    out: List[Tuple[str, BaseException]] = []
     with _registry_lock:
         for reg in _registry.values():
             out += reg.errors

@@ -43,7 +43,7 @@ class CdmError(Exception):
     detail: str
     function: Optional[str]
 
-    def __new__(cls, code: int, message: str = "", detail: str = "", function: Optional[str] = None):
+    def __new__(cls, code: int, message: str = "", detail: str = "", function: Optional[str] = None) -> "CdmError":
         if cls is CdmError:
             cls = _subclass_for(int(code), detail or message)
         return super().__new__(cls)
@@ -58,10 +58,7 @@ class CdmError(Exception):
     @property
     def name(self) -> str:
         """"CDM_ERR_NO_DEVICE" and so on; "unknown error <code>" for codes this binding does not know."""
-        try:
-            return Error(self.code).name
-        except ValueError:
-            return "unknown error %d" % self.code
+        return _C_NAMES.get(self.code, "unknown error %d" % self.code)
 
     def __str__(self) -> str:
         where = "%s: " % self.function if self.function else ""
@@ -70,7 +67,8 @@ class CdmError(Exception):
     def __repr__(self) -> str:
         return "%s(%d, %r)" % (type(self).__name__, self.code, self.message)
 
-    def __reduce__(self):  # picklable across processes (multiprocessing, concurrent.futures)
+    def __reduce__(self) -> Tuple[Type["CdmError"], Tuple[int, str, str, Optional[str]]]:
+        """Picklable across processes (multiprocessing, concurrent.futures)."""
         return (CdmError, (self.code, self.message, self.detail, self.function))
 
 
@@ -105,6 +103,9 @@ class DisconnectedError(CdmError, ConnectionError):
 class CdmMemoryError(CdmError, MemoryError):
     """CDM_ERR_NO_MEM."""
 
+
+# The C names (CDM_ERR_TIMEOUT) the messages show: the enum's members drop the prefix.
+_C_NAMES: Dict[int, str] = {int(v): k for k, v in Error.__members__.items() if k.startswith("CDM_")}
 
 _BY_CODE: Dict[int, Type[CdmError]] = {
     int(Error.CDM_ERR_INVALID_ARG): InvalidArgumentError,

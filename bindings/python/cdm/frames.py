@@ -16,8 +16,13 @@ A rotation is carried with the same change of frame, R' = C R C^T; as a
 quaternion that keeps the component formula v' = q' v q'^-1 both frames
 use. A master mounted another way changes only the matrix C (`frame=`).
 """
+from __future__ import annotations
+
 import math
-from typing import Sequence, Tuple
+from typing import TYPE_CHECKING, Sequence, Tuple
+
+if TYPE_CHECKING:
+    from .records import Pose
 
 __all__ = ["ROS_FROM_DEVICE", "UNITY_FROM_DEVICE", "to_frame", "to_ros", "to_unity", "metres_xyzw"]
 
@@ -58,16 +63,30 @@ def to_frame(position_mm: Sequence[float], orientation_wxyz: Sequence[float], fr
     return p, q
 
 
-def metres_xyzw(pose) -> Tuple[Vec3, QuatXYZW]:
-    """A cdm.Pose in the device frame, in metres, quaternion x, y, z, w."""
-    return to_frame(pose.position, pose.orientation, ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)))
+def _mm_wxyz(pose: Pose) -> Tuple[Vec3, Tuple[float, float, float, float]]:
+    """A Pose's position in mm and orientation (w, x, y, z), whatever its units."""
+    if getattr(pose, "units", "mm") == "m":  # any object with position and orientation: mm
+        x, y, z = pose.position
+        qx, qy, qz, qw = pose.orientation
+        return (x * 1000.0, y * 1000.0, z * 1000.0), (qw, qx, qy, qz)
+    return pose.position, pose.orientation
 
 
-def to_ros(pose) -> Tuple[Vec3, QuatXYZW]:
-    """A cdm.Pose in ROS's REP 103 frame (see the module's note), metres, x, y, z, w."""
-    return to_frame(pose.position, pose.orientation, ROS_FROM_DEVICE)
+def _pose_to(pose: Pose, frame: Matrix) -> Tuple[Vec3, QuatXYZW]:
+    position_mm, orientation_wxyz = _mm_wxyz(pose)
+    return to_frame(position_mm, orientation_wxyz, frame)
 
 
-def to_unity(pose) -> Tuple[Vec3, QuatXYZW]:
-    """A cdm.Pose in Unity's frame (left-handed, y up), metres, x, y, z, w."""
-    return to_frame(pose.position, pose.orientation, UNITY_FROM_DEVICE)
+def metres_xyzw(pose: Pose) -> Tuple[Vec3, QuatXYZW]:
+    """A cdm.Pose (of either units) in the device frame, in metres, quaternion x, y, z, w."""
+    return _pose_to(pose, ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)))
+
+
+def to_ros(pose: Pose) -> Tuple[Vec3, QuatXYZW]:
+    """A cdm.Pose (of either units) in ROS's REP 103 frame (see the module's note), metres, x, y, z, w."""
+    return _pose_to(pose, ROS_FROM_DEVICE)
+
+
+def to_unity(pose: Pose) -> Tuple[Vec3, QuatXYZW]:
+    """A cdm.Pose (of either units) in Unity's frame (left-handed, y up), metres, x, y, z, w."""
+    return _pose_to(pose, UNITY_FROM_DEVICE)

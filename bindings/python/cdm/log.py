@@ -27,8 +27,8 @@ def to_python(logger: Optional[logging.Logger] = None) -> None:
     global _installed, _registered_atexit
     target = logger or logging.getLogger("cdm")
 
-    def hook(_user, level, message):
-        target.log(_LEVELS.get(level, logging.ERROR), "%s", (message or b"").decode("utf-8", "replace"))
+    def hook(_user: object, level: int, message: Optional[bytes]) -> None:
+        target.log(_LEVELS.get(level, logging.ERROR), "%s", _native.text(message))
 
     cb = _native.cdm_log_fn(hook)
     with _lock:

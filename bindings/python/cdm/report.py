@@ -3,9 +3,8 @@ the same as ``python3 -m cdm.report ARGS``.
 
 The tool is the package ``report/`` beside this file. ``import cdm.report`` and
 ``-m cdm.report`` always find that package (a package wins over a module of the
-same name), so this file is only ever run as a script. It is kept as the
-source tree's entry point because src/cli/report_spawn.cpp looks for it to
-know that the tree's bindings/python can serve ``cdm calib --report``.
+same name), so this file is only ever run as a script: the source tree's
+entry point. It is not installed.
 """
 
 if __name__ == "__main__":

@@ -9,10 +9,11 @@ experimental in the C API: docs/reliability.md, "Hot-plug").
 """
 import ctypes
 import threading
+from typing import Any, Callable, List, Optional
 
 from . import _native
 from .constants import Error, WatchFlag, WatchKind
-from .device import DeviceInfo
+from .records import DeviceInfo
 from .errors import CdmError
 
 KIND_NAMES = {WatchKind.CDM_WATCH_ARRIVED: "arrived", WatchKind.CDM_WATCH_LEFT: "left"}
@@ -24,15 +25,16 @@ class Watcher(_native.Closing):
     run again. close() from inside the callback raises RuntimeError (it would
     join the thread it runs on); the watch goes on."""
 
-    def __init__(self, handle, callback, callback_thread):
-        self._h = handle
+    def __init__(self, handle: ctypes.c_void_p, callback: Any, callback_thread: List[int]) -> None:
+        self._h: Optional[ctypes.c_void_p] = handle
         # The ctypes function object must outlive the native watcher: its
         # thread calls it until cdm_watch_free returns.
         self._callback = callback
         self._callback_thread = callback_thread  # [ident] of the watcher's thread, once it called
         self._lock = threading.Lock()
 
-    def close(self):
+    def close(self) -> None:
+        """Stops the watch (idempotent): the callback does not run after this returns."""
         if self._callback_thread and self._callback_thread[0] == threading.get_ident():
             raise RuntimeError("cdm.Watcher.close() from its own callback: it would join the thread it runs on")
         with self._lock:
@@ -42,14 +44,16 @@ class Watcher(_native.Closing):
             self._callback = None
 
     @property
-    def closed(self):
+    def closed(self) -> bool:
+        """close() was called."""
         return self._h is None
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return "<cdm.Watcher%s>" % (" closed" if self.closed else "")
 
 
-def watch(callback, enumerate=True):  # noqa: A002 - mirrors CDM_WATCH_ENUMERATE
+def watch(callback: Callable[[str, DeviceInfo], Any],
+          enumerate: bool = True) -> Watcher:  # noqa: A002 - mirrors CDM_WATCH_ENUMERATE
     """Calls callback(kind, info) for every master that arrives or leaves:
     kind is "arrived" or "left", info a cdm.DeviceInfo (for "left", what was
     known when it arrived). With enumerate (the default), the masters already
@@ -62,9 +66,9 @@ def watch(callback, enumerate=True):  # noqa: A002 - mirrors CDM_WATCH_ENUMERATE
     if not callable(callback):
         raise TypeError("watch: callback must be callable, got %r" % (callback,))
 
-    callback_thread = []
+    callback_thread: List[int] = []
 
-    def trampoline(_user, event_p):
+    def trampoline(_user: Any, event_p: Any) -> None:
         if not callback_thread:
             callback_thread.append(threading.get_ident())
         e = event_p.contents

@@ -35,6 +35,8 @@ The modules: loading (reading and checking the JSON), page (the HTML),
 figures (drawing helpers), drawing (the worker processes), sections (one
 module per part of the page), writer (the driver and the command line).
 """
+from __future__ import annotations
+
 
 from .loading import DiagnosisError, load_diagnosis
 from .writer import main, write_report

@@ -1,5 +1,11 @@
 """Drawing the page's figures: in this process, or in forked worker processes
 that each draw a share of them (CDM_REPORT_JOBS sets how many)."""
+from __future__ import annotations
+
+from typing import Any, Dict, List, Optional, TYPE_CHECKING, Tuple
+
+if TYPE_CHECKING:
+    from .page import _Figure
 
 import concurrent.futures
 import math
@@ -16,10 +22,10 @@ from .figures import _RC, _drop_frames, _forget_frames, _is_kept, _save_png
 from .loading import DiagnosisError
 
 
-def _draw_one(f, tmp):
+def _draw_one(f: Any, tmp: str) -> Any:
     """Draw one figure into tmp; None, or why it could not be drawn."""
     try:
-        with matplotlib.rc_context(_RC):
+        with matplotlib.rc_context(_RC):  # type: ignore[arg-type]  # keys checked by matplotlib
             fig = f.draw()
             try:
                 _save_png(fig, os.path.join(tmp, f.name))
@@ -35,10 +41,11 @@ def _draw_one(f, tmp):
 
 # The figures a pool's worker processes draw: set before the pool forks them, so
 # that the workers inherit the drawing closures instead of receiving them pickled.
-_PENDING = None
+_PENDING: Optional[Tuple[List[_Figure], str]] = None
 
 
-def _draw_pending(task):
+def _draw_pending(task: Any) -> Any:
+    assert _PENDING is not None  # set before the pool forks
     figures, tmp = _PENDING
     try:
         return [_draw_one(figures[i], tmp) for i in task]
@@ -46,7 +53,7 @@ def _draw_pending(task):
         _drop_frames()
 
 
-def _tasks(figures, n):
+def _tasks(figures: List[_Figure], n: int) -> Any:
     """The figures' indices in tasks for n processes, heaviest task first.
 
     A group's figures go into as few tasks (consecutive runs) as keep every
@@ -55,7 +62,8 @@ def _tasks(figures, n):
     """
     total = (sum(f.weight for f in figures)
              + sum({f.group: f.build for f in figures if f.group is not None}.values()))
-    groups, tasks = {}, []
+    groups: Dict[str, List[int]] = {}
+    tasks: List[Tuple[List[int], float]] = []
     for i, f in enumerate(figures):
         if f.group is None:
             tasks.append(([i], f.weight))
@@ -71,7 +79,7 @@ def _tasks(figures, n):
     return [t for t, _ in tasks]
 
 
-def _workers(n):
+def _workers(n: int) -> int:
     """How many processes to draw n figures with (1: in this process).
 
     CDM_REPORT_JOBS sets it (1 draws everything in this process). Worker
@@ -97,7 +105,7 @@ def _workers(n):
     return max(1, min(want, n))
 
 
-def _draw_all(figures, tmp):
+def _draw_all(figures: List[_Figure], tmp: str) -> None:
     """Draw every figure into tmp, in worker processes when that helps; sets .error."""
     global _PENDING
     n = _workers(len(figures))

@@ -1,6 +1,13 @@
 """Drawing helpers shared by the sections: residual maps on the jig's grid, the
 symmetric colour scale, fixed layouts in inches, the figure kept for redrawing,
 and the PNG writer."""
+from __future__ import annotations
+
+from typing import Any, Dict, Optional, TYPE_CHECKING, Tuple
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 import math
 
@@ -17,7 +24,7 @@ CMAP = "RdBu_r"
 DPI = 100
 
 
-def _regular_grid(y, z):
+def _regular_grid(y: Any, z: Any) -> Any:
     """(ycentres, zcentres, iy, iz) when (y, z) lie on a regular grid, else None."""
     ok = np.isfinite(y) & np.isfinite(z)
     if ok.sum() < 4 or not ok.all():
@@ -43,14 +50,14 @@ def _regular_grid(y, z):
     return yc, zc, iy, iz
 
 
-def _edges(c):
+def _edges(c: Any) -> Any:
     if len(c) == 1:
         return np.array([c[0] - 0.5, c[0] + 0.5])
     p = c[1] - c[0]
     return np.concatenate([c - p / 2, [c[-1] + p / 2]])
 
 
-def _raster(g, v):
+def _raster(g: Any, v: Any) -> Any:
     """Values v on the regular grid g (from _regular_grid), nan where no position."""
     yc, zc, iy, iz = g
     G = np.full((len(zc), len(yc)), np.nan)
@@ -58,12 +65,12 @@ def _raster(g, v):
     return np.ma.masked_invalid(G)
 
 
-def _map(ax, y, z, v, norm, failing=None, g=None):
+def _map(ax: Axes, y: Any, z: Any, v: Any, norm: Any, failing: Any = None, g: Any = None) -> Any:
     """Draw values v at (y, z): raster on a regular grid (g, from _regular_grid(y, z)),
     scatter otherwise. Returns (mappable, the line of failing crosses or None)."""
     if g is not None:
         ey, ez = _edges(g[0]), _edges(g[1])
-        m = ax.imshow(_raster(g, v), cmap=CMAP, norm=norm, origin="lower",
+        m: Any = ax.imshow(_raster(g, v), cmap=CMAP, norm=norm, origin="lower",
                       extent=(ey[0], ey[-1], ez[0], ez[-1]), interpolation="nearest")
     else:
         s = max(8.0, min(200.0, 4000.0 / max(1, len(y))))
@@ -78,7 +85,7 @@ def _map(ax, y, z, v, norm, failing=None, g=None):
     return m, cross
 
 
-def _crosses(ax, y, z):
+def _crosses(ax: Axes, y: Any, z: Any) -> Any:
     # line markers, not a scatter collection: one marker stamped per position
     return ax.plot(y, z, "x", ls="none", ms=math.sqrt(14), mew=0.8, color="k",
                    label="failing")[0]
@@ -90,34 +97,34 @@ def _crosses(ax, y, z):
 # colour scale, title) instead of building its axes and their ticks anew, which
 # is most of such a figure's time. name -> (signature, figure, handles); emptied
 # when a figure fails, after each task of a worker and after each report.
-_FRAMES: dict = {}
+_FRAMES: Dict[str, Tuple[Any, Figure, Any]] = {}
 
 
-def _drop_frames(name=None):
+def _drop_frames(name: Optional[str] = None) -> None:
     """Close and forget the kept figure of that name (None: every one)."""
     for k in [k for k in _FRAMES if name in (None, k)]:
         plt.close(_FRAMES.pop(k)[1])
 
 
-def _kept(name):
+def _kept(name: str) -> Any:
     """(signature, figure, handles) kept under name by _keep, or None."""
     return _FRAMES.get(name)
 
 
-def _keep(name, signature, fig, handles):
+def _keep(name: str, signature: Any, fig: Figure, handles: Any) -> None:
     _FRAMES[name] = (signature, fig, handles)
 
 
-def _is_kept(fig):
+def _is_kept(fig: Figure) -> bool:
     return any(fig is fr[1] for fr in _FRAMES.values())
 
 
-def _forget_frames():
+def _forget_frames() -> None:
     """Forget every kept figure without drawing it again (one was left half redrawn)."""
     _FRAMES.clear()
 
 
-def _symnorm(*arrays):
+def _symnorm(*arrays: Any) -> Any:
     """Symmetric colour scale over all arrays: their largest |value|, unless a few
     outliers exceed 3x the 99th percentile; then the percentile, and the colour
     bar shows arrows (``norm.clipped``)."""
@@ -133,16 +140,16 @@ def _symnorm(*arrays):
     if not vmax > 0:
         vmax = 1e-3
     norm = Normalize(-vmax, vmax)
-    norm.clipped = clipped
+    norm.clipped = clipped  # type: ignore[attr-defined]  # read back by _colorbar
     return norm
 
 
-def _colorbar(fig, mappable, cax, norm, label):
+def _colorbar(fig: Figure, mappable: Any, cax: Axes, norm: Any, label: Optional[str]) -> None:
     fig.colorbar(mappable, cax=cax, label=label,
                  extend="both" if getattr(norm, "clipped", False) else "neither")
 
 
-def _map_grid(figsize, nrows, groups):
+def _map_grid(figsize: Tuple[float, float], nrows: int, groups: Any) -> Any:
     """A figure of map panels: nrows x sum(groups) axes sharing y and z, and in each
     row a colour-bar axes after each group of maps. Returns (fig, maps, cbars).
 
@@ -183,7 +190,7 @@ def _map_grid(figsize, nrows, groups):
     return fig, maps, cbars
 
 
-def _fit(fig, axs, right=0.15, left_min=0.0, wgap_min=0.0):
+def _fit(fig: Figure, axs: Any, right: float = 0.15, left_min: float = 0.0, wgap_min: float = 0.0) -> None:
     """Place a grid of equal axes (2-D array, as plt.subplots(squeeze=False)) with
     margins and gaps in inches fitted to their tick labels, axis labels and titles.
 
@@ -198,12 +205,12 @@ def _fit(fig, axs, right=0.15, left_min=0.0, wgap_min=0.0):
     W, H = fig.get_size_inches()
     nrows, ncols = axs.shape
 
-    def ext(texts, dim):
+    def ext(texts: Any, dim: str) -> float:
         sizes = [getattr(t.get_window_extent(r), dim) for t in texts
                  if t.get_visible() and t.get_text()]
-        return max(sizes, default=0.0) / dpi
+        return float(max(sizes, default=0.0)) / dpi
 
-    def label(t, dim):  # an axis label or title and its padding
+    def label(t: Any, dim: str) -> float:  # an axis label or title and its padding
         return ext([t], dim) + 0.08 if t.get_visible() and t.get_text() else 0.0
 
     tick = 0.1  # tick length and pad
@@ -224,17 +231,17 @@ def _fit(fig, axs, right=0.15, left_min=0.0, wgap_min=0.0):
                         wspace=wgap / aw, hspace=hgap / ah)
 
 
-def _first_label_reach(ax):
+def _first_label_reach(ax: Axes) -> float:
     """How far (inches) the first x tick label, right-aligned at its tick and
     rotated, may reach left of the axes: at most its own width."""
     labels = [t for t in ax.get_xticklabels() if t.get_text()]
     if not labels:
         return 0.0
-    fig = ax.get_figure()
-    return labels[0].get_window_extent(_agg(fig).get_renderer()).width / fig.dpi
+    fig: Any = ax.get_figure()
+    return float(labels[0].get_window_extent(_agg(fig).get_renderer()).width / fig.dpi)
 
 
-def _outer_labels(maps):
+def _outer_labels(maps: Any) -> None:
     """Axis labels on the left column and the bottom row only."""
     nrows, ncols = maps.shape
     for k in range(nrows):
@@ -252,13 +259,13 @@ def _outer_labels(maps):
 _RC = {"axes.titley": 1.0, "figure.dpi": DPI}
 
 
-def _agg(fig):
+def _agg(fig: Figure) -> Any:
     """fig's Agg canvas (pyplot's under the Agg backend this module selects; a new
     one if a caller's process had another backend forced)."""
     return fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
 
 
-def _save_png(fig, path):
+def _save_png(fig: Figure, path: str) -> None:
     """Render fig and write it as an RGB PNG at zlib level 3.
 
     savefig would write RGBA (an alpha channel that is opaque everywhere here)
@@ -271,7 +278,7 @@ def _save_png(fig, path):
     img.convert("RGB").save(path, format="png", compress_level=3, dpi=(DPI, DPI))
 
 
-def _dots(ax, x, y, s, color, alpha, label=None):
+def _dots(ax: Axes, x: Any, y: Any, s: Any, color: Any, alpha: float, label: Optional[str] = None) -> None:
     """A plain scatter of equal dots (s: area in points², as scatter's) drawn as line
     markers: one marker image stamped at every point, several times faster than a
     scatter collection for the thousands of positions of a jig."""
@@ -279,7 +286,8 @@ def _dots(ax, x, y, s, color, alpha, label=None):
             label=label)
 
 
-def _binned(ax, x, y, color="k", bins=24, label="binned mean", width=None):
+def _binned(ax: Axes, x: Any, y: Any, color: Any = "k", bins: int = 24, label: Optional[str] = "binned mean",
+            width: Optional[float] = None) -> None:
     """Mean of y in bins of x (per value when x takes few values)."""
     ok = np.isfinite(x) & np.isfinite(y)
     x, y = x[ok], y[ok]
@@ -303,7 +311,7 @@ def _binned(ax, x, y, color="k", bins=24, label="binned mean", width=None):
     ax.plot(c[good], s[good] / cnt[good], "-", color=color, lw=2, label=label)
 
 
-def _annot(ax, texts):
+def _annot(ax: Axes, texts: Any) -> None:
     if texts:
         ax.text(0.02, 0.98, "\n".join(texts), transform=ax.transAxes, va="top",
                 fontsize=7.5, color="darkred",

@@ -1,20 +1,31 @@
 """Reading diagnosis files: the checks that name what is unusable, and the
 tolerant accessors every section reads the diagnosis through (a missing or
 malformed value becomes None or nan, never an exception)."""
+from __future__ import annotations
+
+from typing import Any, Dict, List, Optional, TYPE_CHECKING, Tuple, Union
+
+if TYPE_CHECKING:
+    from typing import TypeGuard  # Python 3.10; only read by type checkers here
+    from .page import Page
 
 import math
 import json
+import os
 
 import numpy as np
 
 AXES = ("x", "y", "z")
+
+#: A diagnosis as its JSON reads (docs/calibration.md gives the schema).
+Diag = Dict[str, Any]
 
 
 class DiagnosisError(Exception):
     """An input file that cannot be used; the message names the file."""
 
 
-def load_diagnosis(path):
+def load_diagnosis(path: str) -> Diag:
     """Read and sanity-check one diagnosis JSON; raise DiagnosisError if unusable."""
     try:
         with open(path, "r", encoding="utf-8") as f:
@@ -41,7 +52,7 @@ def load_diagnosis(path):
     return d
 
 
-def _num(v):
+def _num(v: Any) -> float:
     """A float, or nan for None / non-numbers / booleans."""
     if isinstance(v, bool) or v is None:
         return math.nan
@@ -53,21 +64,22 @@ def _num(v):
         return math.nan
 
 
-def _finite(v):
+def _finite(v: Any) -> TypeGuard[float]:
+    """v is a finite number (not a bool)."""
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
-def _dict(d, key):
+def _dict(d: Any, key: str) -> Optional[Dict[str, Any]]:
     v = d.get(key) if isinstance(d, dict) else None
     return v if isinstance(v, dict) else None
 
 
-def _list(d, key):
+def _list(d: Any, key: str) -> Optional[List[Any]]:
     v = d.get(key) if isinstance(d, dict) else None
     return v if isinstance(v, list) else None
 
 
-def _array(v, width=None):
+def _array(v: Any, width: Optional[int] = None) -> Any:
     """Nested list -> float array (None -> nan); None if the shape is unusable."""
     if not isinstance(v, list):
         return None
@@ -87,7 +99,7 @@ def _array(v, width=None):
     return a
 
 
-def _label(diag):
+def _label(diag: Diag) -> str:
     model = diag.get("model")
     if isinstance(model, list):
         return "nominal" if not model else " + ".join(str(m) for m in model)
@@ -97,7 +109,7 @@ def _label(diag):
 class Positions:
     """The per-position arrays, checked for a common length P."""
 
-    def __init__(self, diag, page):
+    def __init__(self, diag: Diag, page: Page) -> None:
         self.ok = False
         pos = _dict(diag, "positions")
         if pos is None:
@@ -111,7 +123,7 @@ class Positions:
         self.P = P = len(ref)
         self.ref = ref
 
-        def get(key, width=None, required=False):
+        def get(key: str, width: Optional[int] = None, required: bool = False) -> Any:
             a = _array(pos.get(key), width)
             if a is None:
                 if key in pos:
@@ -154,13 +166,13 @@ class Positions:
         self.ok = True
 
 
-def _run(item, i):
+def _run(item: Union[str, "os.PathLike[str]", Diag], i: int) -> Tuple[str, Diag]:
     if isinstance(item, dict):
         return f"run {i + 1}", _plain(item)
-    return str(item), load_diagnosis(item)
+    return str(item), load_diagnosis(os.fspath(item))
 
 
-def _plain(obj):
+def _plain(obj: Any) -> Any:
     """numpy arrays / scalars (as cdm.diagnose returns them) -> lists / floats."""
     if isinstance(obj, dict):
         return {k: _plain(v) for k, v in obj.items()}

@@ -1,21 +1,27 @@
 """The HTML page: number formatting, escaping, tables, and the Page that the
 sections fill in order (HTML parts and the places of figures still to draw)."""
+from __future__ import annotations
+
+from typing import Any, Callable, Iterable, List, Optional, Sequence, TYPE_CHECKING, Union
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 import html
 
 from .loading import _finite
 
 
-def fmt_mm(v):
+def fmt_mm(v: Any) -> str:
     """Millimetre statistics: 4 decimals as the seed's Table 1; 'n/a' if missing."""
     return f"{v:.4f}" if _finite(v) else "n/a"
 
 
-def fmt_g(v, digits=6):
+def fmt_g(v: Any, digits: int = 6) -> str:
     return f"{v:.{digits}g}" if _finite(v) else "n/a"
 
 
-def _e(s):
+def _e(s: Any) -> str:
     return html.escape(str(s), quote=True)
 
 
@@ -32,7 +38,8 @@ class _Figure:
     processes as keeps the load even.
     """
 
-    def __init__(self, name, draw, alt, caption, weight=1, group=None, build=0):
+    def __init__(self, name: str, draw: Callable[[], Figure], alt: str, caption: str, weight: float = 1,
+                 group: Optional[str] = None, build: float = 0) -> None:
         self.name, self.draw, self.alt, self.caption = name, draw, alt, caption
         self.weight, self.group, self.build = weight, group, build
         self.error = None  # why it could not be drawn, or None
@@ -41,21 +48,23 @@ class _Figure:
 class Page:
     """Collects HTML sections and notes about what was missing."""
 
-    def __init__(self):
-        self.parts = []  # HTML strings and _Figure places, in page order
-        self.notes = []
-        self.toc = []  # section titles (already escaped HTML), in order
-        self.figures = []
+    def __init__(self) -> None:
+        self.parts: List[Union[str, _Figure]] = []  # HTML strings and _Figure places, in page order
+        self.notes: List[str] = []
+        self.toc: List[str] = []  # section titles (already escaped HTML), in order
+        self.figures: List[_Figure] = []
 
-    def note(self, text):
+    def note(self, text: str) -> None:
         self.notes.append(text)
 
-    def figure(self, name, draw, alt, caption, weight=1, group=None, build=0):
+    def figure(self, name: str, draw: Callable[[], Figure], alt: str, caption: str, weight: float = 1,
+               group: Optional[str] = None, build: float = 0) -> None:
+        """Keeps the place of a figure that draw() will make."""
         f = _Figure(name, draw, alt, caption, weight, group, build)
         self.figures.append(f)
         self.parts.append(f)
 
-    def add(self, s):
+    def add(self, s: Any) -> None:
         # Section headings get an anchor for the table of contents.
         if s.startswith("<h2>") and s.endswith("</h2>"):
             self.toc.append(s[4:-5])
@@ -63,13 +72,13 @@ class Page:
         self.parts.append(s)
 
 
-def _table(header, rows, cls=""):
+def _table(header: Sequence[str], rows: Iterable[Sequence[Any]], cls: str = "") -> str:
     h = "".join(f"<th>{_e(c)}</th>" for c in header)
     body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
     return f'<table class="{cls}"><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>'
 
 
-def _img(name, alt, caption):
+def _img(name: str, alt: str, caption: str) -> str:
     return (f'<figure><img src="{_e(name)}" alt="{_e(alt)}">'
             f"<figcaption>{caption}</figcaption></figure>")
 
@@ -89,7 +98,7 @@ figcaption{font-size:.88em;color:#444;max-width:60em}
 """
 
 
-def document(title, files, notes, toc, parts):
+def document(title: str, files: str, notes: List[str], toc: List[str], parts: List[str]) -> str:
     """The whole page: title, source files (escaped HTML), notes, contents, parts."""
     notes_html = ""
     if notes:

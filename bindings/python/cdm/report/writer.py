@@ -1,5 +1,10 @@
 """The report's driver: the sections in page order, the figures drawn, the files
 moved into place; and the command line."""
+from __future__ import annotations
+
+from typing import Any, List, Optional, Sequence, Set, Tuple, Union
+
+from .loading import Diag
 
 import argparse
 import os
@@ -26,7 +31,7 @@ class ReportDirError(Exception):
     """The output directory is not the report's to write into."""
 
 
-def _claim(out, inputs=()):
+def _claim(out: "Union[str, os.PathLike[str]]", inputs: Sequence[Any] = ()) -> Set[str]:
     """Makes `out` the report's directory or refuses it; returns the names an
     earlier report wrote there (empty for a new or empty directory). The
     report's own inputs inside `out` (the diagnosis `cdm calib diagnose
@@ -49,7 +54,7 @@ def _claim(out, inputs=()):
     return set()
 
 
-def _write_marker(out, tmp, names):
+def _write_marker(out: "Union[str, os.PathLike[str]]", tmp: str, names: Set[str]) -> None:
     path = os.path.join(tmp, MARKER)
     with open(path, "w", encoding="utf-8") as f:
         f.write("".join(n + "\n" for n in sorted(names)))
@@ -58,7 +63,7 @@ def _write_marker(out, tmp, names):
     os.replace(path, os.path.join(out, MARKER))
 
 
-def _render(runs, tmp):
+def _render(runs: List[Tuple[str, Diag]], tmp: str) -> Tuple[str, List[str]]:
     """Draw everything for runs[-1] (+ comparison) into tmp; return (html, figs)."""
     path, diag = runs[-1]
     page = Page()
@@ -73,7 +78,7 @@ def _render(runs, tmp):
             page.add(f"<p class=\"bad\">{_e(msg)}</p>")
             print(f"cdm.report: warning: {path}: {msg}", file=sys.stderr)
     _draw_all(page.figures, tmp)
-    figs = []
+    figs: List[str] = []
     for i, part in enumerate(page.parts):
         if not isinstance(part, _Figure):
             continue
@@ -90,26 +95,28 @@ def _render(runs, tmp):
     if len(runs) > 1:
         files += ", compared with the earlier " + ", ".join(
             _e(os.path.basename(p)) for p, _ in runs[:-1])
-    return document(title, files, page.notes, page.toc, page.parts), figs
+    return document(title, files, page.notes, page.toc, [p for p in page.parts if isinstance(p, str)]), figs
 
 
-def write_report(runs, out):
+Run = Union[str, "os.PathLike[str]", Diag]
+
+
+def write_report(runs: Union[Run, Sequence[Run]], out: Union[str, "os.PathLike[str]"]) -> List[str]:
     """Write the report on runs[-1], comparing it with the earlier runs[:-1].
 
     Each run is a diagnosis JSON path or a loaded diagnosis dict. Raises
     DiagnosisError (naming the file) before writing anything if one is unusable.
     Returns the paths written (figures, then index.html).
     """
-    if isinstance(runs, (str, os.PathLike, dict)):
-        runs = [runs]
-    inputs = [r for r in runs if isinstance(r, (str, os.PathLike))]
-    runs = [_run(r, i) for i, r in enumerate(runs)]
-    if not runs:
+    items: Sequence[Run] = [runs] if isinstance(runs, (str, os.PathLike, dict)) else runs
+    inputs = [r for r in items if isinstance(r, (str, os.PathLike))]
+    loaded = [_run(r, i) for i, r in enumerate(items)]
+    if not loaded:
         raise DiagnosisError("no diagnosis given")
     earlier = _claim(out, inputs)
     tmp = tempfile.mkdtemp(prefix="tmp-report-", dir=out)
     try:
-        doc, figs = _render(runs, tmp)
+        doc, figs = _render(loaded, tmp)
         with open(os.path.join(tmp, "index.html"), "w", encoding="utf-8") as f:
             f.write(doc)
         new = set(figs + ["index.html"])
@@ -131,7 +138,8 @@ def write_report(runs, out):
     return [os.path.join(out, n) for n in figs + ["index.html"]]
 
 
-def main(argv=None):
+def main(argv: Optional[List[str]] = None) -> int:
+    """The command line: ``python3 -m cdm.report [EARLIER.json ...] DIAG.json --out DIR``; the exit code."""
     ap = argparse.ArgumentParser(
         prog="python3 -m cdm.report",
         description="Figures and index.html for `cdm calib diagnose --json` output. Files are "

@@ -1,5 +1,14 @@
 """The page's sections, each a function that adds its HTML and describes its
 figures to the Page (drawn later, see drawing.py)."""
+from __future__ import annotations
+
+from typing import Any, List, TYPE_CHECKING, Tuple
+
+if TYPE_CHECKING:
+    from ..page import Page
+    from ..loading import Positions
+
+from ..loading import Diag
 
 from .beyond import section_beyond
 from .candidates import section_candidates, section_search
@@ -14,7 +23,7 @@ __all__ = ["section_summary", "section_maps", "section_cut", "section_candidates
            "in_order"]
 
 
-def in_order(runs, page, P):
+def in_order(runs: List[Tuple[str, Diag]], page: Page, P: Positions) -> Any:
     """The sections of the report on runs[-1], in page order, as calls without arguments."""
     diag = runs[-1][1]
     sections = [lambda: section_summary(diag, page),

@@ -3,12 +3,20 @@ values an effect's own physics does not allow), the term it proposes for
 what the catalogue lacks, and the jig's errors it doubts: the library's
 words and numbers (docs/calibration.md, "Stand-ins, the term the catalogue
 lacks, and the jig's errors in doubt"), none recomputed here."""
+from __future__ import annotations
+
+from typing import Any, TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..page import Page
+
+from ..loading import Diag
 
 from ..loading import _dict, _list, _num
 from ..page import _e, _table, fmt_g
 
 
-def _stand_in_rows(items, whose):
+def _stand_in_rows(items: Any, whose: str) -> Any:
     rows = []
     for s in items or []:
         if isinstance(s, dict):
@@ -17,7 +25,7 @@ def _stand_in_rows(items, whose):
     return rows
 
 
-def section_beyond(diag, page):
+def section_beyond(diag: Diag, page: Page) -> None:
     rec = _dict(diag, "recommended") or {}
     rows = _stand_in_rows(_list(rec, "stand_ins"), "recommended") + _stand_in_rows(_list(diag, "stand_ins"), "yours")
     disc = _dict(diag, "discovered")

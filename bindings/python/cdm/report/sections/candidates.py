@@ -1,4 +1,13 @@
 """Section 3: the candidate effects ranked, and section 3b: where the model search led."""
+from __future__ import annotations
+
+from typing import Any, Dict, List, Optional, TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from ..page import Page
+
+from ..loading import Diag
 
 import numpy as np
 import matplotlib.pyplot as plt
@@ -8,11 +17,11 @@ from ..loading import AXES, _dict, _finite, _list, _num
 from ..page import _e, _table, fmt_g, fmt_mm
 
 
-def _fmt_list(v):
+def _fmt_list(v: Any) -> str:
     return ", ".join(str(x) for x in v) if isinstance(v, list) and v else ""
 
 
-def section_candidates(diag, page):
+def section_candidates(diag: Diag, page: Page) -> None:
     page.add("<h2>3. Which effect is missing: candidate ranking</h2>")
     cands = _list(diag, "candidates")
     if cands is None:
@@ -43,7 +52,7 @@ def section_candidates(diag, page):
         page.add("</ul>")
 
 
-def _candidates_table(cands):
+def _candidates_table(cands: List[Any]) -> Any:
     rows = []
     for c in cands:
         after = _dict(c, "error_mm_after") or {}
@@ -60,9 +69,10 @@ def _candidates_table(cands):
                   rows, "cands")
 
 
-def _confusion_colours(cands):
+def _confusion_colours(cands: List[Any]) -> Any:
     """One colour per set of effects the data cannot tell apart; grey for the others."""
-    groups, colours = {}, []
+    groups: Dict[Any, Any] = {}
+    colours: List[Any] = []
     pal = plt.get_cmap("tab10")
     for c in cands:
         cw = c.get("confused_with")
@@ -76,7 +86,7 @@ def _confusion_colours(cands):
     return colours
 
 
-def _ranking_figure(diag, page, cands, key, label):
+def _ranking_figure(diag: Diag, page: Page, cands: List[Any], key: str, label: Optional[str]) -> None:
     names = [str(c.get("effect", "?")) for c in cands]
     vals = np.array([_num(c.get(key)) for c in cands])
     colours = _confusion_colours(cands)
@@ -88,7 +98,7 @@ def _ranking_figure(diag, page, cands, key, label):
                         for c in cands])
     show_after = np.isfinite(after_x).any() and np.nanmin(after_x) > 0
 
-    def draw():
+    def draw() -> Any:
         fig, axs = plt.subplots(1, 2 if show_after else 1, figsize=(13 if show_after else 8.5,
                                 0.45 * len(cands) + 1.6), squeeze=False)
         ax = axs[0][0]
@@ -131,7 +141,7 @@ def _ranking_figure(diag, page, cands, key, label):
                 weight=2)
 
 
-def _after_panel(diag, ax2, yy, after_x, colours):
+def _after_panel(diag: Diag, ax2: Axes, yy: Any, after_x: Any, colours: Any) -> None:
     ax2.barh(yy, np.where(np.isfinite(after_x), after_x, np.nan), color=colours)
     ax2.set_xscale("log")
     ax2.set_yticks(yy, [""] * len(yy))
@@ -148,7 +158,7 @@ def _after_panel(diag, ax2, yy, after_x, colours):
     ax2.grid(axis="x", alpha=0.3, which="both")
 
 
-def section_search(diag, page):
+def section_search(diag: Diag, page: Page) -> None:
     page.add("<h2>3b. The model search: where following the ranking leads</h2>")
     rec = _dict(diag, "recommended")
     if rec is None:
@@ -183,7 +193,7 @@ def section_search(diag, page):
                  "−" + str(st.get("removed")) if not st.get("added") else
                  str(st.get("removed")) + "→" + str(st.get("added"))) for st in path]
 
-            def draw():
+            def draw() -> Any:
                 fig, ax = plt.subplots(figsize=(8.5, 3.2))
                 ax.plot(np.arange(len(ys)), ys, "o-", color="tab:blue")
                 ax.set_yscale("log")

@@ -1,4 +1,12 @@
 """Section 6: the runs compared (did the error fall?)."""
+from __future__ import annotations
+
+from typing import Any, List, TYPE_CHECKING, Tuple
+
+if TYPE_CHECKING:
+    from ..page import Page
+
+from ..loading import Diag
 
 import os
 
@@ -10,7 +18,7 @@ from ..loading import AXES, _dict, _label, _num
 from ..page import _e, _table, fmt_g, fmt_mm
 
 
-def section_comparison(runs, page):
+def section_comparison(runs: List[Tuple[str, Diag]], page: Page) -> None:
     """runs: [(path, diag)], earliest first, the report's run last."""
     page.add("<h2>6. Error fell? Runs compared</h2>")
     labels = [_label(d) for _, d in runs]
@@ -30,7 +38,7 @@ def section_comparison(runs, page):
     page.add(_table(["model", "file", "x RMS (mm)", "y RMS (mm)", "z RMS (mm)", "chi²/dof",
                      "explained"], rows, "stats"))
 
-    def draw():
+    def draw() -> Any:
         fig, ax = plt.subplots(figsize=(max(7.0, 1.2 * len(runs) + 5), 4.4))
         w = 0.8 / len(runs)
         cmap = plt.get_cmap("viridis")
@@ -49,7 +57,8 @@ def section_comparison(runs, page):
                 v = _num((_dict(nf, a) or {}).get("rms"))
                 if np.isfinite(v):
                     ax.hlines(v, k - 0.45, k + 0.45, colors="k", linestyles="--", lw=1,
-                              label="noise floor" if k == 0 else None)
+                              # None: no legend entry (matplotlib's stubs say str)
+                              label="noise floor" if k == 0 else None)  # type: ignore[arg-type]
         ax.set_xticks(range(3), [f"{a} error" for a in AXES])
         ax.set_ylabel("RMS position error (mm)")
         ax.set_title("Position error RMS per run")

@@ -1,4 +1,13 @@
 """Section 4: the fingerprints of the top candidates beside the current residual."""
+from __future__ import annotations
+
+from typing import Any, TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..page import Page
+    from ..loading import Positions
+
+from ..loading import Diag
 
 import math
 import re
@@ -11,7 +20,7 @@ from ..loading import _array, _dict, _finite, _list
 from ..page import _e, fmt_g
 
 
-def _corr(a, b):
+def _corr(a: Any, b: Any) -> float:
     ok = np.isfinite(a) & np.isfinite(b)
     if ok.sum() < 3:
         return math.nan
@@ -20,7 +29,7 @@ def _corr(a, b):
     return float((a * b).sum() / d) if d > 0 else math.nan
 
 
-def section_fingerprints(diag, page, P):
+def section_fingerprints(diag: Diag, page: Page, P: Positions) -> None:
     page.add("<h2>4. Fingerprints of the top candidates</h2>")
     fps = _dict(diag, "fingerprints")
     if fps is None:
@@ -54,7 +63,7 @@ def section_fingerprints(diag, page, P):
         if _finite(cj):
             title += f", reported correlation = {fmt_g(cj, 3)}"
 
-        def draw(fp=fp, title=title):
+        def draw(fp: Any = fp, title: str = title) -> Any:
             nf = _symnorm(fp[:, 0])
             grids = [_regular_grid(P.ref[P.height_index[hi], 1], P.ref[P.height_index[hi], 2])
                      for hi in hsel]

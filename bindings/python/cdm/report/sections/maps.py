@@ -1,4 +1,15 @@
 """Section 2: the residual maps per height, and the seed's cut view through the centre."""
+from __future__ import annotations
+
+from typing import Any, List, TYPE_CHECKING, Tuple
+
+if TYPE_CHECKING:
+    from ..page import Page
+    from ..loading import Positions
+
+from ..loading import Diag
+
+import functools
 
 import numpy as np
 import matplotlib.pyplot as plt
@@ -9,7 +20,7 @@ from ..loading import AXES, _label
 from ..page import _e
 
 
-def section_maps(diag, page, P):
+def section_maps(diag: Diag, page: Page, P: Positions) -> None:
     page.add("<h2>2. Residual maps per height</h2>")
     if not P.ok or (P.residual is None and P.nominal is None):
         page.add("<p>Not available (see the notes).</p>")
@@ -18,7 +29,7 @@ def section_maps(diag, page, P):
     maps = _Maps(P, cols)
     for h, idx in zip(P.heights, P.height_index):
         page.figure(f"residual_map_h{h:g}.png".replace("-", "m"),
-                    lambda h=h, idx=idx: maps.draw(h, idx), f"residual maps at {h:g} mm",
+                    functools.partial(maps.draw, h, idx), f"residual maps at {h:g} mm",
                     f"Height {h:g} mm: residual per jig position in the cable plane "
                     f"(y right, z up), rows x, y, z; {_e(how)}"
                     + (", and the current residual again on its own colour scale"
@@ -34,7 +45,7 @@ def section_maps(diag, page, P):
     section_cut(page, P, *cut)
 
 
-def _columns(diag, P):
+def _columns(diag: Diag, P: Positions) -> Any:
     """The maps' columns [(values, title, current)], the caption's words for them,
     and the cut view's (solid, solid name, dashed, dashed name)."""
     model = diag.get("model")
@@ -57,12 +68,12 @@ def _columns(diag, P):
 class _Maps:
     """The residual maps of every height: one layout and colour scale for all."""
 
-    def __init__(self, P, cols):
+    def __init__(self, P: Positions, cols: Any) -> None:
         self.P, self.cols = P, cols
         self.norms = norms = [_symnorm(*[c[0][:, k] for c in cols]) for k in range(3)]
         # The current residual again on its own scale when the shared one washes it out,
         # so that what is left (the next missing effect) is visible.
-        cur = next((c[0] for c in cols if c[2]), None)
+        cur: Any = next((c[0] for c in cols if c[2]), None)
         self.zoom = zoom = [None] * 3
         if cur is not None and len(cols) > 1:
             for k in range(3):
@@ -72,7 +83,8 @@ class _Maps:
         self.ncol = ncol = len(cols) + (1 if any(zoom) else 0)
         self.groups = [len(cols)] + ([1] if ncol > len(cols) else [])
         # The panels: (row, column, values over all positions, norm, crosses marked).
-        self.panels = panels = []
+        self.panels: List[Tuple[int, int, Any, Any, bool]] = []
+        panels = self.panels
         for k in range(3):
             for j, (arr, title, current) in enumerate(cols):
                 panels.append((k, j, arr[:, k], norms[k], current))
@@ -81,12 +93,12 @@ class _Maps:
         # Same layout at every height on the same grid: a process redraws its last figure.
         self.signature = (ncol, tuple(cols[j][1] for j in range(len(cols))))
 
-    def suptitle(self, h, idx):
+    def suptitle(self, h: Any, idx: Any) -> Any:
         nf = int(self.P.failing[idx].sum())
         return (f"Residual (estimate - reference) at height x = {h:g} mm"
                 + (f"; {nf} failing positions marked ×" if nf else ""))
 
-    def redraw(self, h, idx, g):
+    def redraw(self, h: Any, idx: Any, g: Any) -> Any:
         """The last figure drawn, with this height's data, or None if it cannot be."""
         P = self.P
         last = _kept("residual_map")
@@ -105,7 +117,7 @@ class _Maps:
         fig.suptitle(self.suptitle(h, idx))
         return fig
 
-    def draw(self, h, idx):
+    def draw(self, h: Any, idx: Any) -> Any:
         P, cols, ncol = self.P, self.cols, self.ncol
         y, z = P.ref[idx, 1], P.ref[idx, 2]
         g = _regular_grid(y, z)
@@ -139,7 +151,7 @@ class _Maps:
         return fig
 
 
-def _cut(P, idx, along):
+def _cut(P: Positions, idx: Any, along: int) -> Any:
     """Indices (into idx) on the grid line nearest the centre, sorted along `along`."""
     other = 2 if along == 1 else 1
     v = P.ref[idx, other]
@@ -153,7 +165,7 @@ def _cut(P, idx, along):
     return sel, c
 
 
-def section_cut(page, P, solid, solid_name, dashed, dashed_name):
+def section_cut(page: Page, P: Positions, solid: Any, solid_name: str, dashed: Any, dashed_name: str) -> None:
     # The grid lines first: whether there is a cut decides between figure and note.
     cuts = {(along, i): _cut(P, idx, along)
             for along in (1, 2) for i, idx in enumerate(P.height_index)}
@@ -161,7 +173,7 @@ def section_cut(page, P, solid, solid_name, dashed, dashed_name):
         page.note("No grid line through the centre: cut view skipped.")
         return
 
-    def draw():
+    def draw() -> Any:
         fig, axs = plt.subplots(1, 2, figsize=(11, 4.2))
         cmap = plt.get_cmap("viridis")
         for a, (along, ax) in enumerate(zip((1, 2), axs)):

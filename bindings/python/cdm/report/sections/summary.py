@@ -1,5 +1,13 @@
 """Section 1: the verdict, the error table, the facts of the run, the fitted
 parameters, the validation and the bar chart of the error per axis."""
+from __future__ import annotations
+
+from typing import Any, Dict, TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..page import Page
+
+from ..loading import Diag
 
 import numpy as np
 import matplotlib.pyplot as plt
@@ -14,7 +22,7 @@ STAT_ROWS = (("nominal_error_mm", "Nominal model"),
              ("noise_floor_mm", "Noise floor (repeatability + jig tolerance)"))
 
 
-def _stat_cells(block):
+def _stat_cells(block: Any) -> Any:
     cells = []
     for a in AXES:
         s = _dict(block, a) or {}
@@ -25,7 +33,7 @@ def _stat_cells(block):
     return cells
 
 
-def _glitch_words(g):
+def _glitch_words(g: Any) -> str:
     """The samples the dataset's screen set aside, for the Data line ('' when none)."""
     if not isinstance(g, dict) or not _finite(g.get("count")) or g["count"] <= 0:
         return ""
@@ -33,7 +41,7 @@ def _glitch_words(g):
             f"glitches (beyond {fmt_g(g.get('threshold_sd'), 3)} sd of their position's median)")
 
 
-def _outlier_words(o):
+def _outlier_words(o: Any) -> str:
     """The positions the diagnosis set aside as outliers, for the Data line ('' when none)."""
     if not isinstance(o, dict) or not _finite(o.get("count")) or o["count"] <= 0:
         return ""
@@ -43,7 +51,7 @@ def _outlier_words(o):
             f"(points {_e(', '.join(pts))}{', ...' if o['count'] > 8 else ''})")
 
 
-def section_summary(diag, page):
+def section_summary(diag: Diag, page: Page) -> None:
     page.add("<h2>1. Summary</h2>")
     _verdict(diag, page)
     _error_table(diag, page)
@@ -54,7 +62,7 @@ def section_summary(diag, page):
     _error_figure(diag, page)
 
 
-def _verdict(diag, page):
+def _verdict(diag: Diag, page: Page) -> None:
     verdict = diag.get("verdict")
     explained = diag.get("explained")
     if isinstance(explained, bool):
@@ -71,7 +79,7 @@ def _verdict(diag, page):
         page.note("No \"verdict\" text in the diagnosis.")
 
 
-def _error_table(diag, page):
+def _error_table(diag: Diag, page: Page) -> None:
     header = ["", "x mean ± std", "x RMS", "x max", "y mean ± std", "y RMS", "y max",
               "z mean ± std", "z RMS", "z max"]
     rows = []
@@ -84,7 +92,7 @@ def _error_table(diag, page):
     page.add(_table(header, rows, "stats"))
 
 
-def _test_facts(diag, page):
+def _test_facts(diag: Diag, page: Page) -> Any:
     """(name, HTML) of the statistical tests: chi-square, spatial structure, failing positions."""
     facts = []
     ct = _dict(diag, "chi2_test")
@@ -111,7 +119,7 @@ def _test_facts(diag, page):
     return facts
 
 
-def _run_facts(diag):
+def _run_facts(diag: Diag) -> Any:
     """(name, HTML) of the jig, the fit, the data, the device and the tool."""
     facts = _jig_facts(diag)
     fit = _dict(diag, "fit")
@@ -122,7 +130,7 @@ def _run_facts(diag):
         # The jig's own errors (plate holes, fixture heights), named as the
         # jig's by the diagnosis and taken out of its tests.
         texts = [t for t in (jig.get("text") or []) if isinstance(t, str)]
-        holes = jig.get("holes") if isinstance(jig.get("holes"), dict) else {}
+        holes: Any = jig.get("holes") if isinstance(jig.get("holes"), dict) else {}
         hs = holes.get("std_mm") if isinstance(holes.get("std_mm"), dict) else {}
         line = "; ".join(_e(t) for t in texts) if texts else "nothing of the jig's own beyond its tolerance"
         if hs:
@@ -147,7 +155,7 @@ def _run_facts(diag):
     return facts
 
 
-def _jig_facts(diag):
+def _jig_facts(diag: Diag) -> Any:
     jt = _dict(diag, "jig_tolerance_mm")
     if jt is None:
         return []
@@ -162,7 +170,7 @@ def _jig_facts(diag):
              f"({_e(jt.get('source', 'source not given'))}){pa}{ph}")]
 
 
-def _fit_words(fit):
+def _fit_words(fit: Any) -> str:
     conv = fit.get("converged")
     return (f"{_e(fit.get('algorithm', '?'))}, "
             f"{fmt_g(fit.get('evaluations'))} evaluations, "
@@ -176,7 +184,7 @@ def _fit_words(fit):
                and fit["message"] else ""))
 
 
-def _data_words(data):
+def _data_words(data: Any) -> str:
     hs = data.get("heights")
     hs = ", ".join(fmt_g(_num(h), 6) for h in hs) if isinstance(hs, list) else "n/a"
     ign = data.get("ignored_columns")
@@ -191,7 +199,7 @@ def _data_words(data):
             + _outlier_words(data.get("outliers")))
 
 
-def _parameters(diag, page):
+def _parameters(diag: Diag, page: Page) -> None:
     params = _dict(diag, "params")
     page.add("<h3>Fitted parameters</h3>")
     prow = []
@@ -209,7 +217,7 @@ def _parameters(diag, page):
         page.add("<p>No fitted parameters (nominal model or not given).</p>")
 
 
-def _validation(diag, page):
+def _validation(diag: Diag, page: Page) -> None:
     val = _dict(diag, "validation")
     if val is None:
         page.add("<p>No cross-validation in the diagnosis (it needs fitted parameters and "
@@ -225,22 +233,22 @@ def _validation(diag, page):
                      + [fmt_mm(r.get(a)) for a in AXES])
     r = _dict(val, "rms_mm") or {}
     vrows.append(["<b>all held-out positions</b>"] + [fmt_mm(r.get(a)) for a in AXES])
-    r = _dict(val, "in_sample_rms_mm")
-    if r is not None:
-        vrows.append(["in sample (fitted on all heights)"] + [fmt_mm(r.get(a)) for a in AXES])
+    ins = _dict(val, "in_sample_rms_mm")
+    if ins is not None:
+        vrows.append(["in sample (fitted on all heights)"] + [fmt_mm(ins.get(a)) for a in AXES])
     page.add(_table(["fold", "x RMS (mm)", "y RMS (mm)", "z RMS (mm)"], vrows, "stats"))
     page.add("<p>Held-out error well above the in-sample error means the added effect "
              "fits noise or one height's peculiarity rather than the device.</p>")
 
 
-def _error_figure(diag, page):
+def _error_figure(diag: Diag, page: Page) -> None:
     """A bar chart of the four RMS rows."""
     blocks = [(name, _dict(diag, key)) for key, name in STAT_ROWS]
     blocks = [(n, b) for n, b in blocks if b is not None]
     if not blocks:
         return
 
-    def draw():
+    def draw() -> Any:
         fig, ax = plt.subplots(figsize=(7.5, 3.6))
         w = 0.8 / len(blocks)
         for i, (name, b) in enumerate(blocks):

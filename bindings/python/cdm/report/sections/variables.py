@@ -1,6 +1,15 @@
 """Section 5: the residual against the physical variables (cable lengths and
 angles, height, distance from the centre), with the diagnosis's findings on
 the panels they are about."""
+from __future__ import annotations
+
+from typing import Any, Dict, List, Optional, TYPE_CHECKING, Tuple
+
+if TYPE_CHECKING:
+    from ..page import Page
+    from ..loading import Positions
+
+from ..loading import Diag
 
 import math
 import re
@@ -16,7 +25,7 @@ from ..page import _e, _table, fmt_g
 _VARIABLE_KINDS = ("height", "radius", "length", "angle")
 
 
-def _finding_target(f):
+def _finding_target(f: Any) -> Any:
     """Map a finding to (panel kind, cable number or None).
 
     A diagnosis carries the structured fields "variable_kind" and "cable"
@@ -33,7 +42,7 @@ def _finding_target(f):
     return _finding_target_from_name(f.get("variable"))
 
 
-def _finding_target_from_name(var):
+def _finding_target_from_name(var: Any) -> Any:
     v = str(var).lower()
     m = re.search(r"([1-4])", v)
     cable = int(m.group(1)) if m else None
@@ -48,7 +57,7 @@ def _finding_target_from_name(var):
     return None, None
 
 
-def _finding_text(f):
+def _finding_text(f: Any) -> str:
     t = f.get("text")
     if isinstance(t, str) and t:
         return t if len(t) <= 70 else t[:67] + "..."
@@ -60,7 +69,7 @@ def _finding_text(f):
     return s
 
 
-def _route_findings(findings):
+def _route_findings(findings: List[Any]) -> Any:
     """Route each finding to the panel it is about.
 
     Returns (pos_notes, len_notes, periods): position-residual findings (axis x, y
@@ -68,7 +77,9 @@ def _route_findings(findings):
     findings keyed by cable (1..4, None = all cables) for vs_cable_length.png; and
     (cable, period_mm) of periodic cable-length findings.
     """
-    pos_notes, len_notes, periods = {}, {}, []
+    pos_notes: Dict[Tuple[str, int], List[str]] = {}
+    len_notes: Dict[Optional[int], List[str]] = {}
+    periods: List[Tuple[Optional[int], float]] = []
     for f in findings:
         kind, cable = _finding_target(f)
         axis = str(f.get("axis", "")).strip().lower()
@@ -85,7 +96,7 @@ def _route_findings(findings):
     return pos_notes, len_notes, periods
 
 
-def _route_trends(diag, page, pos_notes, len_notes):
+def _route_trends(diag: Diag, page: Page, pos_notes: Dict[Any, List[str]], len_notes: Dict[Any, List[str]]) -> None:
     """The library's test of each plotted series (positions.trends: a one-way
     analysis of variance over bins of the variable, Bonferroni over the
     series): each significant one annotates its panel, and the text lists
@@ -113,7 +124,7 @@ def _route_trends(diag, page, pos_notes, len_notes):
              "findings above are about the residual they name.</p>")
 
 
-def section_variables(diag, page, P):
+def section_variables(diag: Diag, page: Page, P: Positions) -> None:
     page.add("<h2>5. Residual versus physical variables</h2>")
     pos_notes, len_notes, periods = _route_findings(_findings(diag, page))
     _route_trends(diag, page, pos_notes, len_notes)
@@ -129,10 +140,10 @@ def section_variables(diag, page, P):
     _variables_figure(page, P, pal, pos_notes)
 
 
-def _findings(diag, page):
+def _findings(diag: Diag, page: Page) -> Any:
     """The diagnosis's findings (dicts), after adding their summary and table to the page."""
     us = _dict(diag, "unexplained_structure")
-    findings = []
+    findings: List[Any] = []
     if us is None:
         page.note("\"unexplained_structure\" is not in the diagnosis.")
         return findings
@@ -152,9 +163,9 @@ def _findings(diag, page):
     return findings
 
 
-def _length_figure(page, P, pal, len_notes, periods):
+def _length_figure(page: Page, P: Positions, pal: Any, len_notes: Dict[Optional[int], List[str]], periods: Any) -> None:
     """Length residual per cable vs that cable's length."""
-    def draw():
+    def draw() -> Any:
         fig, axs = plt.subplots(2, 2, figsize=(10, 7.5))
         for i, ax in enumerate(axs.ravel()):
             x, y = P.lengths[:, i], P.length_residual[:, i]
@@ -179,7 +190,7 @@ def _length_figure(page, P, pal, len_notes, periods):
                 "red boxes are the diagnosis's own findings.", weight=3)
 
 
-def _variables_figure(page, P, pal, pos_notes):
+def _variables_figure(page: Page, P: Positions, pal: Any, pos_notes: Dict[Tuple[str, int], List[str]]) -> None:
     """The position residual against every variable, one column each."""
     res = P.residual if P.residual is not None else P.nominal
     if res is None:
@@ -195,7 +206,7 @@ def _variables_figure(page, P, pal, pos_notes):
     else:
         page.note("\"positions.cable_angle_deg\" is missing: no residual-versus-angle plot.")
 
-    def draw():
+    def draw() -> Any:
         W, H = 4.2 * len(cols), 9.5
         fig, axs = plt.subplots(3, len(cols), figsize=(W, H), squeeze=False, sharey="row")
         # Margins in inches (tick labels, axis labels, titles), not constrained

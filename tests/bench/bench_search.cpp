@@ -65,7 +65,7 @@ bool cdm_search(const std::vector<PreparedPos> &pos, const FitOptions &fo, int t
     for (;;) {
         std::vector<diag::FitJob> jobs;
         for (auto &e : kCatalogue)
-            if (!cur.has_effect(e)) jobs.emplace_back(diag::model_with(cur, diag::reading_effects(cur), e), e);
+            if (!cur.has_effect(e)) jobs.emplace_back(model_with(cur, reading_effects(cur), e), e);
         if (jobs.empty()) break;
         if (!diag::fit_all(ctx, jobs, err)) return false;
         const diag::FitJob *best = nullptr;

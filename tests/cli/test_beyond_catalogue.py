@@ -17,6 +17,7 @@ per-position mean (0.05 / sqrt(40) = 0.008 mm), small enough for CI.
 """
 import json
 import os
+import time
 
 import pytest
 
@@ -264,10 +265,11 @@ def test_user_effect_from_the_hint_closes_the_loop(diagnosis, tmp_path):
     assert fitted < floor + noise, (name, fitted, floor, noise, nominal)
 
 
-def stream_errors(cdmpy, tmp_path, name, cal, d, seconds=1.0):
-    """Worst axis RMS against the simulator's truth over `seconds` of the
-    master walked over the jig's volume (motion=jig: a 7 x 7 plate spanning
-    the session's, at its heights, one sample per position): with the
+def stream_errors(cdmpy, tmp_path, name, cal, d, samples=400):
+    """Worst axis RMS against the simulator's truth over `samples` poses of
+    the master walked over the jig's volume (motion=jig: a 7 x 7 plate spanning
+    the session's, at its heights, ten samples per position; at least 100
+    poses with their truth, however many a loaded machine lets through): with the
     calibration, with the truth as calibration, and with none (noise-free
     master, the hidden effect in its truth). The volume the calibration was
     measured in: beyond it a proposed term is an extrapolation of a
@@ -280,7 +282,7 @@ def stream_errors(cdmpy, tmp_path, name, cal, d, seconds=1.0):
     ref = np.asarray(d["positions"]["ref"])
     heights = ",".join("%g" % h for h in sorted(set(np.round(ref[:, 0], 3))))
     pitch = (ref[:, 1].max() - ref[:, 1].min()) / 6
-    uri = ("sim:?truth=%s&noise=0&motion=jig&jig_n=7&jig_pitch=%g&jig_heights=%s&jig_samples=1&jig_transit=1"
+    uri = ("sim:?truth=%s&noise=0&motion=jig&jig_n=7&jig_pitch=%g&jig_heights=%s&jig_samples=10&jig_transit=1"
            % (truth, pitch, heights))
 
     def worst_rms(calibration):
@@ -289,14 +291,17 @@ def stream_errors(cdmpy, tmp_path, name, cal, d, seconds=1.0):
             lib = cdmpy._native.lib()
             p = (ctypes.c_double * 3)()
             after = None
-            for _ in range(int(seconds * 1000)):
+            deadline = time.monotonic() + 30.0  # a loaded machine skips poses; the count is what matters
+            while len(err) < samples and time.monotonic() < deadline:
                 pose = dev.wait_pose(timeout=1.0, after=after)
                 after = pose.host_sequence
+                if pose.is_end_of_stream:
+                    break
                 if not pose.is_fresh:
                     continue
                 if lib.cdm_sim_truth(dev._handle("cdm_sim_truth"), pose.sequence, p) == 0:
                     err.append(np.asarray(pose.position) - np.asarray(p[:]))
-        assert len(err) > 100, len(err)
+        assert len(err) >= 100, len(err)
         return float(np.sqrt(np.mean(np.square(err), axis=0)).max())
 
     return worst_rms(cal), worst_rms(truth), worst_rms(None)

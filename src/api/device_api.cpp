@@ -50,21 +50,6 @@ void copy_out(const T &src, T *dst) {
     dst->struct_size = cs;
 }
 
-// As cdm::guarded (errors.h): the text is this call's, empty on success.
-template <class F>
-int guarded(F &&f) {
-    cdm::clear_thread_error();
-    try {
-        return f();
-    } catch (const std::bad_alloc &) {
-        return cdm::fail(CDM_ERR_NO_MEM, "out of memory");
-    } catch (const std::exception &e) {
-        return cdm::fail(CDM_ERR_INTERNAL, std::string("internal error: ") + e.what());
-    } catch (...) {
-        return cdm::fail(CDM_ERR_INTERNAL, "internal error: unknown exception");
-    }
-}
-
 int bad_size(const char *fn, const char *type, uint32_t got, uint32_t need) {
     return cdm::fail(CDM_ERR_INVALID_ARG, std::string(fn) + ": " + type + ".struct_size is " + std::to_string(got) +
                                               ", at least " + std::to_string(need) + " needed");
@@ -75,7 +60,7 @@ int bad_size(const char *fn, const char *type, uint32_t got, uint32_t need) {
 extern "C" {
 
 int cdm_enumerate(cdm_device_list **out) {
-    return guarded([&] {
+    return cdm::guarded("cdm_enumerate", [&] {
         if (!out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_enumerate: out is NULL");
         *out = nullptr;
         auto list = std::make_unique<cdm_device_list>();
@@ -90,20 +75,22 @@ int cdm_enumerate(cdm_device_list **out) {
 size_t cdm_device_list_count(const cdm_device_list *list) { return list ? list->items.size() : 0; }
 
 int cdm_device_list_get(const cdm_device_list *list, size_t i, cdm_device_info *info) {
-    if (!list || !info) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_device_list_get: NULL argument");
-    if (info->struct_size < kInfoSize10)
-        return bad_size("cdm_device_list_get", "cdm_device_info", info->struct_size, kInfoSize10);
-    if (i >= list->items.size())
-        return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_device_list_get: index " + std::to_string(i) + " of a list of " +
-                                                  std::to_string(list->items.size()));
-    copy_out(list->items[i], info);
-    return CDM_OK;
+    return cdm::guarded("cdm_device_list_get", [&] {
+        if (!list || !info) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_device_list_get: NULL argument");
+        if (info->struct_size < kInfoSize10)
+            return bad_size("cdm_device_list_get", "cdm_device_info", info->struct_size, kInfoSize10);
+        if (i >= list->items.size())
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_device_list_get: index " + std::to_string(i) +
+                                                      " of a list of " + std::to_string(list->items.size()));
+        copy_out(list->items[i], info);
+        return int(CDM_OK);
+    });
 }
 
 void cdm_device_list_free(cdm_device_list *list) { delete list; }
 
 int cdm_open_ex(const char *uri, const cdm_open_options *options, cdm_device **out) {
-    return guarded([&] {
+    return cdm::guarded("cdm_open_ex", [&] {
         if (!out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_open: out is NULL");
         *out = nullptr;
         cdm_open_options opts{};
@@ -211,7 +198,7 @@ int cdm_get_pose(cdm_device *dev, cdm_pose *out) {
 }
 
 int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out) {
-    return guarded([&] {
+    return cdm::guarded("cdm_wait_pose", [&] {
         if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_wait_pose: NULL argument");
         if (out->struct_size < kPoseSize10) return bad_size("cdm_wait_pose", "cdm_pose", out->struct_size, kPoseSize10);
         cdm_pose p;
@@ -222,7 +209,7 @@ int cdm_wait_pose(cdm_device *dev, int timeout_ms, cdm_pose *out) {
 }
 
 int cdm_wait_pose_after(cdm_device *dev, uint64_t after_host_sequence, int timeout_ms, cdm_pose *out) {
-    return guarded([&] {
+    return cdm::guarded("cdm_wait_pose_after", [&] {
         if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_wait_pose_after: NULL argument");
         // The caller must be able to see host_sequence, or it cannot ask again.
         if (out->struct_size < kPoseSize11)
@@ -247,37 +234,49 @@ int cdm_get_raw(cdm_device *dev, cdm_raw *out) {
 }
 
 int cdm_get_info(cdm_device *dev, cdm_device_info *out) {
-    if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_get_info: NULL argument");
-    if (out->struct_size < kInfoSize10) return bad_size("cdm_get_info", "cdm_device_info", out->struct_size, kInfoSize10);
-    cdm_device_info i;
-    dev->get_info(i);
-    copy_out(i, out);
-    return CDM_OK;
+    return cdm::guarded("cdm_get_info", [&] {
+        if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_get_info: NULL argument");
+        if (out->struct_size < kInfoSize10)
+            return bad_size("cdm_get_info", "cdm_device_info", out->struct_size, kInfoSize10);
+        cdm_device_info i;
+        dev->get_info(i);
+        copy_out(i, out);
+        return int(CDM_OK);
+    });
 }
 
 int cdm_set_stale_timeout(cdm_device *dev, uint32_t timeout_us) {
-    if (!dev) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_set_stale_timeout: dev is NULL");
-    dev->set_stale_timeout(timeout_us);
-    return CDM_OK;
+    return cdm::guarded("cdm_set_stale_timeout", [&] {
+        if (!dev) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_set_stale_timeout: dev is NULL");
+        dev->set_stale_timeout(timeout_us);
+        return int(CDM_OK);
+    });
 }
 
 int cdm_get_stats(cdm_device *dev, cdm_stats *out) {
-    if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_get_stats: NULL argument");
-    if (out->struct_size < kStatsSize10) return bad_size("cdm_get_stats", "cdm_stats", out->struct_size, kStatsSize10);
-    cdm_stats s;
-    dev->get_stats(s);
-    copy_out(s, out);
-    return CDM_OK;
+    return cdm::guarded("cdm_get_stats", [&] {
+        if (!dev || !out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_get_stats: NULL argument");
+        if (out->struct_size < kStatsSize10)
+            return bad_size("cdm_get_stats", "cdm_stats", out->struct_size, kStatsSize10);
+        cdm_stats s;
+        dev->get_stats(s);
+        copy_out(s, out);
+        return int(CDM_OK);
+    });
 }
 
+// Not through cdm::guarded: reading the device's text leaves this thread's
+// text (a failing call's, read before or after it) alone. Nothing in it
+// allocates: a copy into the caller's buffer under the device's error mutex.
 int cdm_device_error(cdm_device *dev, char *buf, size_t len) {
-    if (!dev || !buf || len == 0) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_device_error: NULL or empty buffer");
+    if (!dev || !buf || len == 0)
+        return cdm::fail_noexcept(CDM_ERR_INVALID_ARG, "cdm_device_error", "NULL or empty buffer");
     dev->error_text(buf, len);
     return CDM_OK;
 }
 
 int cdm_set_calibration(cdm_device *dev, const cdm_calibration *cal) {
-    return guarded([&] {
+    return cdm::guarded("cdm_set_calibration", [&] {
         if (!dev) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_set_calibration: dev is NULL");
         if (cal && !cal->model) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_set_calibration: empty calibration");
         if (cal) {
@@ -292,7 +291,7 @@ int cdm_set_calibration(cdm_device *dev, const cdm_calibration *cal) {
 }
 
 int cdm_device_calibration_read(cdm_device *dev, char *buf, size_t cap, size_t *len) {
-    return guarded([&] {
+    return cdm::guarded("cdm_device_calibration_read", [&] {
         if (!dev || !len || (!buf && cap > 0))
             return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_device_calibration_read: NULL argument");
         const int rc = dev->calibration_read(buf, cap, len);
@@ -306,7 +305,7 @@ int cdm_device_calibration_read(cdm_device *dev, char *buf, size_t cap, size_t *
 }
 
 int cdm_device_calibration_write(cdm_device *dev, const char *data, size_t len) {
-    return guarded([&] {
+    return cdm::guarded("cdm_device_calibration_write", [&] {
         if (!dev || (!data && len > 0))
             return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_device_calibration_write: NULL argument");
         const int rc = dev->calibration_write(data, len);

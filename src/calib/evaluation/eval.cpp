@@ -13,7 +13,7 @@
 #include <system_error>
 #include <thread>
 
-#include "calib/fit/in_ranges.h"
+#include "calib/fit/parallel.h"
 #include "model/effect.h"
 
 namespace cdm {

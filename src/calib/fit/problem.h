@@ -21,7 +21,7 @@
 #include <Eigen/Dense>
 
 #include "calib/fit/fit.h"
-#include "calib/fit/in_ranges.h"
+#include "calib/fit/parallel.h"
 #include "model/effect.h"
 #include "model/evaluator.h"
 

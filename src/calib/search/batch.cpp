@@ -30,6 +30,7 @@
 
 #include <sched.h>
 
+#include "calib/fit/parallel.h"
 #include "calib/search/context.h"
 #include "model/effect.h"
 
@@ -136,10 +137,9 @@ public:
         const size_t nt = std::max<size_t>(1, std::min(threads, queue_.size()));
         // One fit alone: its positions on the threads (FitOptions::threads).
         solo_threads_ = queue_.size() == 1 ? int(threads) : 1;
-        std::vector<std::thread> pool;
-        for (size_t t = 1; t < nt; ++t) pool.emplace_back([this] { work(false); });
-        work(true);
-        for (auto &t : pool) t.join();
+        // work(true) is this thread's: the one whose fits may show progress.
+        const std::thread::id here = std::this_thread::get_id();
+        on_threads(nt, [&] { work(std::this_thread::get_id() == here); });
         if (failure_) std::rethrow_exception(failure_);
     }
 
@@ -469,22 +469,18 @@ void for_each_parallel(const DiagContext &ctx, size_t n, const std::function<boo
         else shared.push_back(k);
     std::atomic<size_t> next{0};
     std::atomic<bool> failed{false};
-    std::exception_ptr failure;
-    auto run = [&] {
+    const size_t nt = std::min<size_t>(size_t(std::max(1, ctx.threads)), shared.size());
+    // A failure stops every worker at its next job; on_threads rethrows it.
+    on_threads(nt, [&] {
         for (size_t i; !failed && (i = next++) < shared.size();) {
             try {
                 work(shared[i]);
             } catch (...) {
-                if (!failed.exchange(true)) failure = std::current_exception();
+                failed = true;
+                throw;
             }
         }
-    };
-    const size_t nt = std::min<size_t>(size_t(std::max(1, ctx.threads)), shared.size());
-    std::vector<std::thread> pool;
-    for (size_t t = 1; t < nt; ++t) pool.emplace_back(run);
-    run();
-    for (auto &t : pool) t.join();
-    if (failure) std::rethrow_exception(failure);
+    });
 }
 
 } // namespace diag

@@ -57,6 +57,10 @@ int spawn_wait(const std::vector<std::string> &args, const std::vector<std::stri
     return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
 }
 
+// A path as an argument the child cannot take for an option: one that
+// starts with '-' gets "./" before it (the same file).
+std::string path_arg(const std::string &p) { return !p.empty() && p[0] == '-' ? "./" + p : p; }
+
 // Exit 0 when `python` can import the report with its dependencies; else 3,
 // and with "-v" the missing module's name on stderr (no traceback).
 const char *const kProbe = "import sys\n"
@@ -117,8 +121,8 @@ int run_report(const std::string &json_path, const std::vector<std::string> &bef
         return 1;
     }
     std::vector<std::string> args{py, "-m", "cdm.report"};
-    args.insert(args.end(), before.begin(), before.end());
-    args.insert(args.end(), {json_path, "--out", dir});
+    for (const std::string &b : before) args.push_back(path_arg(b));
+    args.insert(args.end(), {path_arg(json_path), "--out", path_arg(dir)});
     const int rc = spawn_wait(args, env);
     if (rc != 0) {
         std::fprintf(stderr, "cdm: --report: %s -m cdm.report failed (exit status %d)\n", py.c_str(), rc);

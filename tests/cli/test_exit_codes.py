@@ -141,6 +141,18 @@ def test_report_path_with_quote_and_space(tmp_path, small_dataset):
     assert (out / "index.html").is_file()
 
 
+def test_report_paths_starting_with_a_dash(tmp_path, small_dataset):
+    """Relative paths that look like options ("-data.csv", "--report -rep"):
+    the dataset after `--`, and each path handed to the report's child, reach
+    their files, never an option parser."""
+    import shutil
+    shutil.copy2(small_dataset, tmp_path / "-data.csv")
+    r = cdm("calib", "diagnose", "--quiet", "--no-candidates", "--report", "-rep", "--", "-data.csv",
+            timeout=300, cwd=str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "-rep" / "index.html").is_file()
+
+
 def test_report_refuses_a_directory_it_does_not_own(tmp_path, small_dataset):
     """`--report .` in the user's working directory: refused before anything
     is written there (not even the diagnosis JSON), the user's files kept."""

@@ -672,6 +672,32 @@ CDM_API int cdm_diagnose(const char *data_csv_path, const char *device_json_path
 CDM_API int cdm_fit(const char *data_csv_path, const char *device_json_path, const char *options_json,
                     cdm_progress_fn progress, void *user, char **result_json);
 
+/* ---- cdm_check (experimental, since 1.2) ----
+ * Checks a calibration (cdm_fit's calibration_out) on another jig session
+ * of the same device, without refitting it: the calibration as it is, with
+ * only the jig placed anew (its Jig-stage effects, jig_misalignment added
+ * at zero when it has none, and the fixture heights' offsets: a jig is
+ * placed by hand at every session), the noise model estimated from this
+ * data as cdm_fit's is. The device is the calibration's own. options_json
+ * (NULL: defaults): {"jig_tolerance_mm": mm (default: estimated),
+ * "max_error_mm": mm (positions whose mean error is longer are listed;
+ * default: none)}. *result_json (free with cdm_free_string): {"effects":
+ * the calibration's (its Jig-stage ones apart), "positions": count, "jig":
+ * {re_estimated, text, effects: [{name, params: {p: {value, std, unit}}}],
+ * added, fixture_mm, tolerance_mm, plate_holes_mm}, "error_mm" and
+ * "nominal_error_mm": {x,y,z} x {mean,std,rms,max} per sample (the seed's
+ * Table 1), "position_error_mm": {x,y,z} x {mean,rms,max} of each position's
+ * mean error (the calibration's systematic error, the noise averaged out),
+ * "calibration_fit": {data, error_mm: {x,y,z: {rms}}} from the calibration's
+ * "fit" block or null, "failing": {count, test, positions: [{point, ref,
+ * error_mm}], beyond_max_error (with max_error_mm)}, "model_check": {holds,
+ * chi2_per_dof, chi2_p_value, chi2_scale, structure, test, text},
+ * "reading_noise_mm", "glitches"}. Errors as cdm_diagnose's (the
+ * calibration's: CDM_ERR_IO unreadable, CDM_ERR_PARSE malformed or naming
+ * an effect not registered). Any thread. */
+CDM_API int cdm_check(const char *data_csv_path, const char *calibration_json_path, const char *options_json,
+                      cdm_progress_fn progress, void *user, char **result_json);
+
 /** Frees a string returned by libcdm. NULL is fine. */
 CDM_API void cdm_free_string(char *s);
 

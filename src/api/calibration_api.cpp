@@ -32,7 +32,7 @@ int parse_calibration(const std::string &text, const std::string &source, cdm_ca
 int diagnose_body(const char *data_csv_path, const char *device_json_path, const char *options_json,
                   cdm_progress_fn progress, void *user, char **result_json) {
     cdm::api::JobArgs a;
-    if (int rc = cdm::api::parse_job_options(options_json, "cdm_diagnose", true, a)) return rc;
+    if (int rc = cdm::api::parse_job_options(options_json, "cdm_diagnose", cdm::api::JobKind::Diagnosis, a)) return rc;
     cdm::DiagnoseOptions opt;
     opt.effects = a.effects;
     opt.jig_tolerance_mm = a.jig_tolerance_mm;

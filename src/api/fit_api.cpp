@@ -74,7 +74,7 @@ extern "C" int cdm_fit(const char *data_csv_path, const char *device_json_path, 
         if (!data_csv_path || !device_json_path)
             return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_fit: data and device paths are required");
         cdm::api::JobArgs a;
-        if (int rc = cdm::api::parse_job_options(options_json, "cdm_fit", false, a)) return rc;
+        if (int rc = cdm::api::parse_job_options(options_json, "cdm_fit", cdm::api::JobKind::Fit, a)) return rc;
         cdm::FitCalibrationOptions opt;
         opt.effects = a.effects;
         opt.jig_tolerance_mm = a.jig_tolerance_mm;

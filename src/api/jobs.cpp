@@ -53,11 +53,13 @@ int load_device(const char *path, cdm::DeviceGeometry &g) {
 
 } // namespace
 
-int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs &a) {
+int parse_job_options(const char *text, const char *fn, JobKind kind, JobArgs &a) {
+    const bool diagnosis = kind == JobKind::Diagnosis, check = kind == JobKind::Check;
     const char *known = diagnosis ? "effects, jig_tolerance_mm, candidates, search, validation, per_position, outliers, calibration_out"
+                        : check   ? "jig_tolerance_mm, max_error_mm"
                                   : "effects, jig_tolerance_mm, outliers, calibration_out";
     if (!text || !*text) {
-        if (diagnosis) return CDM_OK;
+        if (kind != JobKind::Fit) return CDM_OK;
         return cdm::fail(CDM_ERR_INVALID_ARG, std::string(fn) + ": options with a non-empty \"effects\" list are required");
     }
     const std::string src = std::string(fn) + " options";
@@ -77,7 +79,15 @@ int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs 
                                                   ", got " + (v.type == J::Number ? std::string(num, size_t(end - num)) : v.type_name()));
     };
     for (const auto &[k, v] : o.members) {
-        if (k == "effects") {
+        if (check && k != "jig_tolerance_mm" && k != "max_error_mm")
+            return cdm::fail(CDM_ERR_INVALID_ARG, cdm::io::where(src, v) + "unknown option \"" +
+                                                      cdm::io::quote_field(k) + "\" (known: " + known + ")");
+        if (check && k == "max_error_mm") {
+            if (v.type == J::Null) continue;
+            if (v.type != J::Number || !(v.number > 0) || v.number > cdm::kDatasetMaxRefMm)
+                return bad(v, k, "a number of mm in (0, 5000]");
+            a.max_error_mm = v.number;
+        } else if (k == "effects") {
             if (v.type != J::Array) return bad(v, k, "a list of effect names");
             for (const auto &e : v.items) {
                 if (e.type != J::String) return bad(e, k, "a list of effect names");
@@ -108,7 +118,7 @@ int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs 
                                                       "\" (known: " + known + ")");
         }
     }
-    if (!diagnosis && a.effects.empty())
+    if (kind == JobKind::Fit && a.effects.empty())
         return cdm::fail(CDM_ERR_INVALID_ARG, std::string(fn) + ": \"effects\" is required and must not be empty");
     return CDM_OK;
 }
@@ -123,6 +133,14 @@ int open_job(const char *data_path, const char *device_path, const JobArgs &a, J
         return cdm::fail(io_failure ? CDM_ERR_IO : CDM_ERR_PARSE, err);
     if (int rc = load_device(device_path, in.geometry)) return rc;
     return check_solvable(in.data, in.geometry);
+}
+
+int open_job_data(const char *data_path, const DeviceGeometry &g, JobInputs &in) {
+    std::string err;
+    bool io_failure = false;
+    if (!cdm::load_dataset(data_path, in.data, err, &io_failure))
+        return cdm::fail(io_failure ? CDM_ERR_IO : CDM_ERR_PARSE, err);
+    return check_solvable(in.data, g);
 }
 
 int commit_calibration(JobInputs &in, const Model &fitted, const char *data_path, const nlohmann::json &error_mm,

@@ -18,14 +18,19 @@ namespace cdm::api {
 struct JobArgs {
     std::vector<std::string> effects;
     double jig_tolerance_mm = -1; // < 0: estimated from the data
+    double max_error_mm = -1;     // a check's: < 0, none
     bool candidates = true, search = true, validation = true, per_position = true, outliers = true; // DiagnoseOptions defaults
     std::string calib_out;
 };
 
-// Parses `text` (NULL or empty: defaults). `diagnosis`: the diagnosis's own
-// options (candidates, search, validation, per_position) are accepted; cdm_fit
-// refuses them and requires a non-empty "effects". Both take "outliers".
-int parse_job_options(const char *text, const char *fn, bool diagnosis, JobArgs &out);
+// Which job's options: each refuses the others' own.
+enum class JobKind { Fit, Diagnosis, Check };
+
+// Parses `text` (NULL or empty: defaults). Diagnosis: its own options
+// (candidates, search, validation, per_position) are accepted. Fit:
+// requires a non-empty "effects". Both take "outliers" and
+// "calibration_out". Check: "jig_tolerance_mm" and "max_error_mm" only.
+int parse_job_options(const char *text, const char *fn, JobKind kind, JobArgs &out);
 
 struct JobInputs {
     Dataset data;
@@ -37,6 +42,9 @@ struct JobInputs {
 // before any work), then reads the dataset and the device description and
 // checks that most positions can be placed by the nominal triangulation.
 int open_job(const char *data_path, const char *device_path, const JobArgs &a, JobInputs &in);
+// The dataset alone, checked against a geometry already at hand (a
+// calibration's): open_job without the output or the device file.
+int open_job_data(const char *data_path, const DeviceGeometry &g, JobInputs &in);
 
 // Writes the fitted model as a calibration, if one was asked for. Its
 // "fit" block says where it came from: the data file, the fitted model's

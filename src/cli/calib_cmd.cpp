@@ -1,4 +1,4 @@
-// `cdm calib simulate|diagnose|fit|effects`: the model-debugging workflow
+// `cdm calib simulate|diagnose|fit|check|effects`: the model-debugging workflow
 // (docs/calibration.md). The numbers come from libcdm (cdm_diagnose,
 // cdm_simulate_jig_dataset); the figures from the Python package
 // (python3 -m cdm.report, report_spawn.cpp).
@@ -284,6 +284,71 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     return write_outputs(a, r);
 }
 
+struct CheckArgs {
+    std::string data, calibration, json_out;
+    std::vector<std::string> plugins;
+    double jig = -1, max_error = -1;
+    bool quiet = false;
+};
+
+void print_check(const CheckArgs &a, const nlohmann::json &r) {
+    std::printf("checked %s on %s (%zu positions; %s)\n", a.calibration.c_str(), a.data.c_str(),
+                r["positions"].get<size_t>(), r["jig"]["text"].get<std::string>().c_str());
+    std::printf("\nPosition error (mm), estimate - reference, over every sample:\n");
+    std::printf("  %-26s  %-34s  %-34s  %-34s\n", "", "x: mean ± std    rms     max", "y: mean ± std    rms     max",
+                "z: mean ± std    rms     max");
+    print_stats_row("nominal (eq. 1-3)", r["nominal_error_mm"]);
+    print_stats_row("calibration", r["error_mm"]);
+    const auto &pe = r["position_error_mm"];
+    std::printf("  per position (noise averaged out): rms x %.4f y %.4f z %.4f, max x %.4f y %.4f z %.4f\n",
+                pe["x"]["rms"].get<double>(), pe["y"]["rms"].get<double>(), pe["z"]["rms"].get<double>(),
+                pe["x"]["max"].get<double>(), pe["y"]["max"].get<double>(), pe["z"]["max"].get<double>());
+    const auto &cf = r["calibration_fit"];
+    if (cf.is_object() && cf.contains("error_mm") && cf["error_mm"].contains("x"))
+        std::printf("  on the data it was fitted on: rms x %.4f y %.4f z %.4f\n",
+                    cf["error_mm"]["x"]["rms"].get<double>(), cf["error_mm"]["y"]["rms"].get<double>(),
+                    cf["error_mm"]["z"]["rms"].get<double>());
+    const auto &f = r["failing"];
+    std::printf("  failing positions: %zu of %zu\n", f["count"].get<size_t>(), r["positions"].get<size_t>());
+    if (f.contains("beyond_max_error"))
+        std::printf("  positions beyond %s mm: %zu\n", num(f["beyond_max_error"]["max_error_mm"].get<double>()).c_str(),
+                    f["beyond_max_error"]["count"].get<size_t>());
+    std::printf("\nVerdict: %s\n", r["model_check"]["text"].get<std::string>().c_str());
+}
+
+int cmd_check(const CheckArgs &a) {
+    if (int rc = load_plugins(a.plugins); rc != kExitOk) return rc;
+    nlohmann::json o = nlohmann::json::object();
+    if (a.jig >= 0) o["jig_tolerance_mm"] = a.jig;
+    if (a.max_error > 0) o["max_error_mm"] = a.max_error;
+    char *res = nullptr;
+    const int rc = cdm_check(a.data.c_str(), a.calibration.c_str(), o.dump().c_str(),
+                             a.quiet ? nullptr : progress_cb, nullptr, &res);
+    if (rc != CDM_OK) return report_error("calib check", rc);
+    const auto r = nlohmann::json::parse(res);
+    cdm_free_string(res);
+    print_check(a, r);
+    if (!a.json_out.empty() && !write_atomic(a.json_out, r.dump(1) + "\n", {a.data, a.calibration}))
+        return kExitFailure;
+    return kExitOk;
+}
+
+void add_check(CLI::App *calib) {
+    static CheckArgs c;
+    auto *chk = calib->add_subcommand("check", "Check a calibration on another jig session without refitting it "
+                                               "(the jig placed anew)");
+    chk->add_option("data", c.data, "Jig dataset CSV: point,x_ref,y_ref,z_ref,l1,l2,l3,l4")->required();
+    chk->add_option("--calibration", c.calibration, "Calibration JSON to check (`cdm calib fit --out`)")->required();
+    chk->add_option("--json", c.json_out, "Write the check's JSON here");
+    chk->add_option("--jig-tolerance-mm", c.jig, "Std of the jig's own position error (-1: estimated from the data)");
+    chk->add_option("--max-error-mm", c.max_error,
+                    "List the positions whose mean error is longer than this (mm; default: none)")
+        ->check(range(1e-6, 5000));
+    add_plugin_option(chk, c.plugins);
+    chk->add_flag("--quiet", c.quiet, "No progress output");
+    chk->callback([] { select_command([] { return cmd_check(c); }); });
+}
+
 struct SimArgs {
     std::string out, effects, truth, device, heights, truth_out;
     std::vector<std::string> plugins;
@@ -443,6 +508,7 @@ void add_calib_commands(CLI::App &app) {
     fit->callback([] { select_command([] { return cmd_diagnose(f, true); }); });
 
     add_simulate(calib);
+    add_check(calib);
 
     auto *eff = calib->add_subcommand("effects", "List the effect catalogue with each effect's physics");
     static bool e_json = false;

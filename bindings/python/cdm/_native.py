@@ -243,6 +243,7 @@ PROTOTYPES: Dict[str, Tuple[Any, List[Any]]] = {
     # so that ctypes does not copy it away before cdm_free_string gets it.
     "cdm_diagnose": (_int, [_str, _str, _str, cdm_progress_fn, ctypes.c_void_p, _handle_p]),
     "cdm_fit": (_int, [_str, _str, _str, cdm_progress_fn, ctypes.c_void_p, _handle_p]),
+    "cdm_check": (_int, [_str, _str, _str, cdm_progress_fn, ctypes.c_void_p, _handle_p]),
     "cdm_free_string": (None, [ctypes.c_void_p]),
     # since 1.1: the one dataset writer
     "cdm_dataset_writer_open": (_int, [_str, ctypes.POINTER(ctypes.c_char_p), ctypes.c_size_t, _handle_p]),
@@ -359,6 +360,7 @@ class Library:
     cdm_effect_fingerprint: Callable[..., int]
     cdm_diagnose: Callable[..., int]
     cdm_fit: Callable[..., int]
+    cdm_check: Callable[..., int]
     cdm_free_string: Callable[..., None]
     cdm_dataset_writer_open: Callable[..., int]
     cdm_dataset_writer_add: Callable[..., int]

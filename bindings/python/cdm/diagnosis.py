@@ -123,8 +123,27 @@ def fit(data_csv: PathLike, device_json: PathLike, effects: Union[str, Iterable[
     return _run("cdm_fit", data_csv, device_json, effects, jig_tolerance_mm, progress, options)
 
 
+def check(data_csv: PathLike, calibration: PathLike, jig_tolerance_mm: Optional[float] = None,
+          max_error_mm: Optional[float] = None, progress: Optional[Progress] = None) -> Dict[str, Any]:
+    """Runs cdm_check (experimental, since 1.2): the calibration (a file of
+    `cdm calib fit --out` or fit(calibration_out=...)) applied as it is to
+    another jig session of the same device, only the jig placed anew (a jig
+    is placed by hand at every session). Returns {"effects", "positions",
+    "jig", "error_mm" (per sample, the seed's Table 1), "position_error_mm"
+    (each position's mean error: the calibration's systematic error),
+    "nominal_error_mm", "calibration_fit", "failing", "model_check" (holds,
+    chi2_per_dof, ..., text), "reading_noise_mm", "glitches"}.
+    max_error_mm lists the positions whose mean error is longer."""
+    options: Dict[str, Any] = {}
+    if max_error_mm is not None:
+        options["max_error_mm"] = float(max_error_mm)
+    return _run("cdm_check", data_csv, calibration, None, jig_tolerance_mm, progress, options,
+                second="calibration path")
+
+
 def _run(fn: str, data_csv: PathLike, device_json: PathLike, effects: Optional[Union[str, Iterable[str]]],
-         jig_tolerance_mm: Optional[float], progress: Optional[Progress], options: Dict[str, Any]) -> Dict[str, Any]:
+         jig_tolerance_mm: Optional[float], progress: Optional[Progress], options: Dict[str, Any],
+         second: str = "device path") -> Dict[str, Any]:
     if effects is not None:
         if isinstance(effects, str):
             effects = [effects]
@@ -156,7 +175,7 @@ def _run(fn: str, data_csv: PathLike, device_json: PathLike, effects: Optional[U
     L = _native.lib()
     out = ctypes.c_void_p()
     _effects._take_errors()
-    data_path, device_path = _native.c_path(data_csv, "dataset path"), _native.c_path(device_json, "device path")
+    data_path, device_path = _native.c_path(data_csv, "dataset path"), _native.c_path(device_json, second)
     previous = None
     if (threading.current_thread() is threading.main_thread()
             and signal.getsignal(signal.SIGINT) is signal.default_int_handler):

@@ -150,6 +150,22 @@ bool add_ellipsoid(const std::string &name, CalibrationFit &out, std::string &er
     return true;
 }
 
+// A check's model: the calibration with a Jig-stage effect (jig_misalignment
+// added at zero when it has none), every other parameter held.
+bool hold_all_but_the_jig(const Model &calibration, CalibrationFit &out, std::string &err) {
+    out.model = calibration;
+    bool jig = false;
+    for (size_t e = 0; e < out.model.effect_count(); ++e) jig = jig || out.model.effect_desc(e).stage == Stage::Jig;
+    if (!jig) {
+        if (!out.model.add_effect("jig_misalignment", {}, err)) return false;
+        out.jig_added = true;
+    }
+    for (size_t e = 0; e < out.model.effect_count(); ++e)
+        if (out.model.effect_desc(e).stage != Stage::Jig)
+            for (size_t q = 0; q < out.model.effect_desc(e).params.size(); ++q) out.fit_options.hold.push_back({e, q});
+    return true;
+}
+
 } // namespace
 
 bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCalibrationOptions &opt,
@@ -196,17 +212,24 @@ bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCali
     }
 
     Model &model = out.model;
-    model = Model(g);
-    for (auto &e : opt.effects) {
-        if (on_position(e)) continue; // fitted in position space below
-        if (!model.add_effect(e, {}, err)) return false;
+    if (opt.check) {
+        if (!hold_all_but_the_jig(*opt.check, out, err)) return false;
+    } else {
+        model = Model(g);
+        for (auto &e : opt.effects) {
+            if (on_position(e)) continue; // fitted in position space below
+            if (!model.add_effect(e, {}, err)) return false;
+        }
     }
     const bool user_jig = opt.jig_tolerance_mm >= 0;
     out.jig = V3::Constant(user_jig ? opt.jig_tolerance_mm : 0.03);
     out.fit_options.jig_sigma = out.jig;
     auto fit = [&]() {
         FitOptions f = out.fit_options;
-        f.progress = [&](double fr) { return progress("fitting the model", fr); };
+        f.progress = [&](double fr) { return progress(opt.check ? "placing the jig" : "fitting the model", fr); };
+        // A check fits the jig alone: a sub-model's fit would not hold the
+        // device's parameters (FitOptions::hold names effects by index).
+        if (opt.check) return fit_model(model, pos, f, out.report);
         return fit_not_worse_than_nested(model, pos, f, out.report, out.restarted_from);
     };
     if (!fit()) {

@@ -18,6 +18,14 @@ namespace cdm {
 
 struct FitCalibrationOptions {
     std::vector<std::string> effects; // "ellipsoid" is fitted in position space on top
+    // Not null: a calibration checked on this data instead of one fitted
+    // (effects ignored). The model is taken as it is and only the jig is
+    // fitted: its placement (the model's Jig-stage effects, jig_misalignment
+    // added at zero when it has none) and the fixture heights' offsets, for
+    // a jig is placed anew at every session; every other parameter stays the
+    // calibration's. The noise model (reading noise, jig tolerance) is
+    // estimated from this data as a fit's is.
+    const Model *check = nullptr;
     double jig_tolerance_mm = -1;     // < 0: estimated from the data
     // Each reading's own white error (CalibrationFit::reading): none,
     // estimated from the fitted model's misclosure; given, this estimate
@@ -65,10 +73,14 @@ struct CalibrationFit {
     // fit ended above that sub-model fitted alone (fit_not_worse_than_nested):
     // its effects; empty when the first fit stood.
     std::vector<std::string> restarted_from;
+    // A check (FitCalibrationOptions::check) whose calibration had no
+    // Jig-stage effect: jig_misalignment was added to place the jig.
+    bool jig_added = false;
 };
 
 // False + err (naming what is wrong) on too few positions, an unknown
 // effect, cancellation through progress, or rows that cannot be read again.
+// A check's model (FitCalibrationOptions::check) must be on g's geometry.
 bool fit_calibration(const Dataset &data, const DeviceGeometry &g, const FitCalibrationOptions &opt,
                      CalibrationFit &out, std::string &err);
 

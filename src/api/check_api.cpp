@@ -1,0 +1,184 @@
+// extern "C" cdm_check: a calibration applied as it is to another jig
+// session, the jig placed anew. Thin: the logic is fit_calibration() with
+// FitCalibrationOptions::check, and the diagnosis's judge().
+#include <cmath>
+
+#include "api/errors.h"
+#include "api/jobs.h"
+#include "calib/calibration/fit_calibration.h"
+#include "calib/evaluation/stats.h"
+#include "cdm/cdm.h"
+#include "io/calibration_json.h"
+#include "io/file.h"
+#include "io/json.h"
+#include "model/effect.h"
+
+namespace {
+
+using nlohmann::json;
+using cdm::diag::Acc;
+
+// The calibration's own figures from its "fit" block (what `cdm calib fit`
+// wrote): the data it was fitted on and its per-sample error; null when
+// the file has none.
+json fitted_on(const cdm::io::JsonValue &cal) {
+    const auto *fit = cal.find("fit");
+    if (!fit || fit->type != cdm::io::JsonValue::Object) return nullptr;
+    json out = json::object();
+    if (const auto *d = fit->find("data"); d && d->type == cdm::io::JsonValue::String) out["data"] = d->str;
+    if (const auto *e = fit->find("error_mm"); e && e->type == cdm::io::JsonValue::Object) {
+        for (const char *axis : {"x", "y", "z"}) {
+            const auto *a = e->find(axis);
+            const auto *r = a ? a->find("rms") : nullptr;
+            if (r && r->type == cdm::io::JsonValue::Number) out["error_mm"][axis]["rms"] = r->number;
+        }
+    }
+    return out;
+}
+
+// The jig's placement as fitted here: the Jig-stage effects' values and
+// standard errors, the fixture heights' offsets, the tolerance estimated.
+json jig_json(const cdm::CalibrationFit &cf) {
+    json eff = json::array();
+    for (size_t k = 0; k < cf.model.effect_count(); ++k) {
+        const auto &d = cf.model.effect_desc(k);
+        if (d.stage != cdm::Stage::Jig) continue;
+        json pj = json::object();
+        for (size_t q = 0; q < d.params.size(); ++q) {
+            const auto &sd = cf.report.std;
+            const double s = (k < sd.size() && q < sd[k].size()) ? sd[k][q] : 0.0;
+            pj[d.params[q].name] = {{"value", cf.model.effect_params(k)[q]}, {"std", s}, {"unit", d.params[q].unit}};
+        }
+        eff.push_back({{"name", d.name}, {"params", pj}});
+    }
+    return {{"re_estimated", true},
+            {"text", "the jig's placement was fitted on this session (a jig is placed anew at every session); "
+                     "every other parameter is the calibration's"},
+            {"effects", eff},
+            {"added", cf.jig_added},
+            {"fixture_mm", cf.report.fixture_mm},
+            {"tolerance_mm", {cf.jig(0), cf.jig(1), cf.jig(2)}},
+            {"plate_holes_mm", {cf.fit_options.hole_sigma(0), cf.fit_options.hole_sigma(1), cf.fit_options.hole_sigma(2)}}};
+}
+
+// The calibration's systematic error: each position's mean error (the
+// samples' noise averaged out), summarised over the positions.
+json position_error(const cdm::diag::Eval &E) {
+    Acc a[3];
+    for (size_t j = 0; j < E.res.size(); ++j)
+        if (E.ok[j])
+            for (int k = 0; k < 3; ++k) a[k].add(E.res[j](k));
+    json out = json::object();
+    const char *axes[] = {"x", "y", "z"};
+    for (int k = 0; k < 3; ++k) {
+        const json s = a[k].to_json();
+        out[axes[k]] = {{"mean", s["mean"]}, {"rms", s["rms"]}, {"max", s["max"]}};
+    }
+    return out;
+}
+
+// One position's entry in a list of positions.
+json position_entry(const cdm::CalibrationFit &cf, const cdm::Dataset &data, size_t j) {
+    const auto &h = data.pos[j];
+    const auto &r = cf.fitted.res[j];
+    return {{"point", h.point}, {"ref", {h.ref[0], h.ref[1], h.ref[2]}}, {"error_mm", {r(0), r(1), r(2)}}};
+}
+
+// Positions the calibration fails: the diagnosis's per-position test, and
+// beyond the user's tolerance when one is given.
+json failing_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const cdm::diag::Verdict &v,
+                  double max_error_mm) {
+    json stat = json::array(), tol = json::array();
+    for (size_t j = 0; j < cf.fitted.res.size() && j < data.pos.size(); ++j) {
+        if (!cf.fitted.ok[j]) continue;
+        if (v.failing[j]) stat.push_back(position_entry(cf, data, j));
+        if (max_error_mm >= 0 && cf.fitted.res[j].norm() > max_error_mm) tol.push_back(position_entry(cf, data, j));
+    }
+    json out = {{"count", stat.size()},
+                {"test", "each position's mean error against its noise and the jig's tolerance: a chi-square of 3 "
+                         "degrees of freedom beyond its 1 % family-wise quantile over the positions (the "
+                         "diagnosis's test)"},
+                {"positions", stat}};
+    if (max_error_mm >= 0)
+        out["beyond_max_error"] = {{"max_error_mm", max_error_mm}, {"count", tol.size()}, {"positions", tol}};
+    return out;
+}
+
+std::string check_words(const cdm::diag::Verdict &v, size_t failing) {
+    using cdm::diag::fmt_num;
+    using cdm::diag::fmt_p;
+    const std::string chi = "position chi2/dof " + fmt_num(v.chi2 / v.dof, 2) + " (" + fmt_p(v.chi2_p) +
+                            (v.chi2_widened() ? ", widened x" + fmt_num(v.chi2_scale, 2) + " for the plate's holes" : "") +
+                            "), spatial structure z = " + fmt_num(v.moran_z, 1) + " (" + fmt_p(v.moran_p) + ")";
+    if (v.explained)
+        return "the calibration holds on this session: its error is the noise and the jig's tolerance (" + chi + ")";
+    return "the calibration does not hold on this session: " + chi + ", " + std::to_string(failing) +
+           " positions failing; the device or its jig has changed since it was fitted, or the calibration misses "
+           "an effect this session shows (`cdm calib diagnose` on this data says which)";
+}
+
+json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const cdm::io::JsonValue &cal,
+                 double max_error_mm) {
+    // n_free: the jig's placement fitted here (the judge takes the fixture
+    // heights' offsets out itself, at their degrees of freedom)
+    const cdm::diag::Verdict v =
+        cdm::diag::judge(cf.fitted, cf.grid, cf.jig, cf.report.n_free, cf.fit_options.hole_sigma);
+    json names = json::array();
+    for (size_t k = 0; k < cf.model.effect_count(); ++k)
+        if (cf.model.effect_desc(k).stage != cdm::Stage::Jig) names.push_back(cf.model.effect_name(k));
+    size_t used = 0;
+    for (char ok : cf.fitted.ok) used += ok != 0;
+    return {{"effects", names},
+            {"positions", used},
+            {"jig", jig_json(cf)},
+            {"error_mm", cdm::diag::stats3(cf.fitted.err)},
+            {"position_error_mm", position_error(cf.fitted)},
+            {"nominal_error_mm", cdm::diag::stats3(cf.nominal.err)},
+            {"calibration_fit", fitted_on(cal)},
+            {"failing", failing_json(cf, data, v, max_error_mm)},
+            {"model_check",
+             {{"holds", v.explained},
+              {"chi2_per_dof", v.chi2 / v.dof},
+              {"chi2_p_value", v.chi2_p},
+              {"chi2_scale", v.chi2_scale},
+              {"structure", {{"statistic", v.moran_z}, {"p_value", v.moran_p}, {"variance_scale", v.moran_scale}}},
+              {"test", "the diagnosis's: position chi-square against noise + jig tolerance and Moran's I of the "
+                       "residual over the plate, each at p >= 1e-3"},
+              {"text", check_words(v, size_t(v.n_failing))}}},
+            {"reading_noise_mm", cdm::diag::reading_noise_json(cf.reading)},
+            {"glitches", cdm::glitches_json(data)}};
+}
+
+} // namespace
+
+extern "C" int cdm_check(const char *data_csv_path, const char *calibration_json_path, const char *options_json,
+                         cdm_progress_fn progress, void *user, char **result_json_out) {
+    return cdm::guarded("cdm_check", [&]() -> int {
+        if (!result_json_out) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_check: result_json is NULL");
+        *result_json_out = nullptr;
+        if (!data_csv_path || !calibration_json_path)
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_check: data and calibration paths are required");
+        cdm::api::JobArgs a;
+        if (int rc = cdm::api::parse_job_options(options_json, "cdm_check", cdm::api::JobKind::Check, a)) return rc;
+        std::string err;
+        std::string text;
+        if (!cdm::io::read_file(calibration_json_path, cdm::io::kJsonMaxBytes, text, err, "calibration"))
+            return cdm::fail(CDM_ERR_IO, err);
+        cdm::io::JsonValue cal;
+        if (!cdm::io::parse_json(text, calibration_json_path, cal, err)) return cdm::fail(CDM_ERR_PARSE, err);
+        cdm::Model calibration{cdm::DeviceGeometry{}};
+        if (!cdm::io::model_from_json(cal, calibration_json_path, calibration, err))
+            return cdm::fail(CDM_ERR_PARSE, err);
+        cdm::api::JobInputs in;
+        if (int rc = cdm::api::open_job_data(data_csv_path, calibration.geometry(), in)) return rc;
+        cdm::FitCalibrationOptions opt;
+        opt.check = &calibration;
+        opt.jig_tolerance_mm = a.jig_tolerance_mm;
+        if (progress)
+            opt.progress = [&](const std::string &s, double f) { return progress(user, s.c_str(), f) == 0; };
+        cdm::CalibrationFit cf(calibration.geometry());
+        if (!cdm::fit_calibration(in.data, calibration.geometry(), opt, cf, err))
+            return cdm::fail(CDM_ERR_INVALID_ARG, err);
+        return cdm::api::return_json(result_json(cf, in.data, cal, a.max_error_mm), "cdm_check", result_json_out);
+    });
+}

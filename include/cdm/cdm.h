@@ -672,6 +672,44 @@ CDM_API int cdm_diagnose(const char *data_csv_path, const char *device_json_path
 CDM_API int cdm_fit(const char *data_csv_path, const char *device_json_path, const char *options_json,
                     cdm_progress_fn progress, void *user, char **result_json);
 
+/* ---- cdm_calibration_position_covariance (experimental, since 1.2) ----
+ * The covariance (mm^2, 3x3 row-major, device frame) of the position the
+ * calibration gives at position_mm (device frame): its fitted parameters'
+ * uncertainty (the file's fit.covariance, written by cdm_fit and by
+ * cdm_diagnose's calibration_out) propagated to first order, at t = 0 s
+ * for effects that drift in time. Its 1-sigma per axis is the square root
+ * of the diagonal; the 95 % ellipsoid is {e : e' C^-1 e <= 7.815}.
+ * CDM_ERR_UNSUPPORTED when the calibration carries no covariance,
+ * CDM_ERR_NUMERIC where the model cannot place the position. Allocates:
+ * not for the haptic path. Any thread. */
+CDM_API int cdm_calibration_position_covariance(const cdm_calibration *cal, const double position_mm[3],
+                                                double cov_mm2[9]);
+
+/* ---- cdm_plan (experimental, since 1.2) ----
+ * Plans a jig session before any data (`cdm calib plan`): which of the
+ * plate's positions (holes x heights) to measure, from the geometry and the
+ * catalogue alone. options_json: {"positions": N (required), "samples": per
+ * position (100), "holes": per side (25), "pitch_mm" (5), "heights_mm"
+ * ([30,40,50,60,70]), "effects": the model to plan for (default: every
+ * built-in effect on the cables' geometry, path and pots), "noise_mm":
+ * per-sample pot noise (0.05), "jig_tolerance_mm": each visit's seating
+ * error (0.03), "alpha" (1e-3), "power" (0.9), "device": device JSON path
+ * (default: the nominal)}. First, while an effect's likelihood-ratio test
+ * against the nominal model has power below "power" at its typical size
+ * (and the whole plate reaches it), the position adding most to the
+ * weakest one's non-centrality; then greedy I-optimal picks (the predicted
+ * position variance averaged over the plate's box at every height).
+ * *result_json (free with cdm_free_string): {"positions": [[x_ref, y_ref,
+ * z_ref, samples]] in walking order (height by height, rows along y, back
+ * and forth along z), "points": their point ids in the whole plate's plan,
+ * "samples", "plate_positions", "design": {effects, excluded [{effect,
+ * why}], detectability_picks}, "predicted_sigma_mm": {plan, whole_plate},
+ * "detectability": [{effect, dof, lambda, power, lambda_whole_plate,
+ * power_whole_plate, detectable, reachable}], "test", "alpha",
+ * "target_power", "order"}. CDM_ERR_INVALID_ARG names a bad option or more
+ * positions than the plate has. Any thread. */
+CDM_API int cdm_plan(const char *options_json, cdm_progress_fn progress, void *user, char **result_json);
+
 /* ---- cdm_check (experimental, since 1.2) ----
  * Checks a calibration (cdm_fit's calibration_out) on another jig session
  * of the same device, without refitting it: the calibration as it is, with
@@ -690,7 +728,10 @@ CDM_API int cdm_fit(const char *data_csv_path, const char *device_json_path, con
  * mean error (the calibration's systematic error, the noise averaged out),
  * "calibration_fit": {data, error_mm: {x,y,z: {rms}}} from the calibration's
  * "fit" block or null, "failing": {count, test, positions: [{point, ref,
- * error_mm}], beyond_max_error (with max_error_mm)}, "model_check": {holds,
+ * error_mm}], beyond_max_error (with max_error_mm)}, "predicted":
+ * {available, calibration_rms_mm, noise_and_jig_rms_mm, chi2_per_dof,
+ * p_value, as_predicted, test, text} (the error against the calibration's
+ * own covariance, cdm_calibration_position_covariance's), "model_check": {holds,
  * chi2_per_dof, chi2_p_value, chi2_scale, structure, test, text},
  * "reading_noise_mm", "glitches"}. Errors as cdm_diagnose's (the
  * calibration's: CDM_ERR_IO unreadable, CDM_ERR_PARSE malformed or naming
@@ -863,7 +904,9 @@ CDM_API int cdm_simulate_jig_defaults(char **options_json);
  * effect_seed (numbers); device (device JSON path;
  * default the nominal geometry), truth (calibration JSON as the true model),
  * effects [..] (hidden effects with random realistic magnitudes), truth_out
- * (where to write the true model). An unknown key or a bad value is
+ * (where to write the true model), plan [[x_ref, y_ref, z_ref, samples], ..]
+ * (since 1.2: only these positions of the plate, in this order, each a
+ * hole at one of the heights; cdm_plan's "positions"). An unknown key or a bad value is
  * CDM_ERR_INVALID_ARG naming it; other errors name the file. Any thread.
  */
 CDM_API int cdm_simulate_jig_dataset(const char *out_csv, const char *options_json);

@@ -14,6 +14,7 @@
 #include "api/errors.h"
 #include "api/jobs.h"
 #include "calib/diagnosis/diagnose.h"
+#include "calib/evaluation/accuracy.h"
 #include "io/calibration_json.h"
 #include "io/device_json.h"
 #include "io/file.h"
@@ -25,7 +26,14 @@ int parse_calibration(const std::string &text, const std::string &source, cdm_ca
     std::string err;
     cdm::Model m{cdm::DeviceGeometry{}};
     if (!cdm::io::parse_calibration_json(text, source, m, err)) return cdm::fail(CDM_ERR_PARSE, err);
-    *out = new cdm_calibration{std::make_shared<const cdm::Model>(m)};
+    // The covariance, checked against the model it is for (the text is
+    // valid JSON: parse_calibration_json read it).
+    Eigen::MatrixXd cov;
+    const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+    if (j.is_object() && j.contains("fit") && j["fit"].is_object() && j["fit"].contains("covariance") &&
+        !j["fit"]["covariance"].is_null() && !cdm::diag::covariance_from_json(j["fit"]["covariance"], m, cov, err))
+        return cdm::fail(CDM_ERR_PARSE, source + ": " + err);
+    *out = new cdm_calibration{std::make_shared<const cdm::Model>(m), std::move(cov)};
     return CDM_OK;
 }
 
@@ -49,7 +57,8 @@ int diagnose_body(const char *data_csv_path, const char *device_json_path, const
     std::string err;
     if (!cdm::diagnose(in.data, in.geometry, opt, out, fitted, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
     if (int rc = cdm::api::commit_calibration(in, fitted, data_csv_path, out["error_mm"], out["data"]["outliers"],
-                                                     out["data"]["glitches"])) return rc;
+                                              out["data"]["glitches"], out["covariance"]))
+        return rc;
     return cdm::api::return_json(out, "cdm_diagnose", result_json);
 }
 
@@ -95,6 +104,35 @@ int cdm_calibration_position(const cdm_calibration *cal, const double lengths_mm
         if (cal->model->position(lengths_mm, p) != 0)
             return cdm::fail(CDM_ERR_NUMERIC, "cdm_calibration_position: no position gives these lengths");
         for (int k = 0; k < 3; ++k) position_mm[k] = p[k];
+        return CDM_OK;
+    });
+}
+
+int cdm_calibration_position_covariance(const cdm_calibration *cal, const double position_mm[3],
+                                        double cov_mm2[9]) {
+    return cdm::guarded("cdm_calibration_position_covariance", [&]() -> int {
+        if (!cal || !position_mm || !cov_mm2)
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_position_covariance: NULL argument");
+        for (int k = 0; k < 3; ++k)
+            if (!std::isfinite(position_mm[k]))
+                return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_calibration_position_covariance: position_mm[" +
+                                                          std::to_string(k) + "] is not finite");
+        if (cal->cov.size() == 0)
+            return cdm::fail(CDM_ERR_UNSUPPORTED, "cdm_calibration_position_covariance: the calibration carries "
+                                                  "no covariance (its fit block has none): fit it with `cdm calib "
+                                                  "fit` or cdm_fit to get one");
+        std::vector<Eigen::Matrix3d> c;
+        std::vector<char> ok;
+        std::string err;
+        if (!cdm::diag::position_covariances(*cal->model, cal->cov, {Eigen::Vector3d(position_mm[0], position_mm[1],
+                                                                                    position_mm[2])},
+                                             0.0, c, ok, err))
+            return cdm::fail(CDM_ERR_NUMERIC, "cdm_calibration_position_covariance: " + err);
+        if (!ok[0])
+            return cdm::fail(CDM_ERR_NUMERIC, "cdm_calibration_position_covariance: the model cannot place this "
+                                              "position (outside its workspace)");
+        for (int r = 0; r < 3; ++r)
+            for (int k = 0; k < 3; ++k) cov_mm2[3 * r + k] = c[0](r, k);
         return CDM_OK;
     });
 }

@@ -6,6 +6,7 @@
 #include "api/errors.h"
 #include "api/jobs.h"
 #include "calib/calibration/fit_calibration.h"
+#include "calib/evaluation/accuracy.h"
 #include "calib/evaluation/stats.h"
 #include "cdm/cdm.h"
 #include "io/calibration_json.h"
@@ -104,6 +105,68 @@ json failing_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const
     return out;
 }
 
+// Whether the calibration's error on this session is what its own
+// covariance predicted (the accuracy map's, at each position): each
+// position's mean error against its noise, the jig's tolerance and the
+// predicted calibration error together, a chi-square over the positions.
+// The jig's placement, fitted here, takes up the part of the calibration's
+// error that moves every position alike, so the test leans towards
+// "as predicted" (it sees no more than the rest).
+json predicted_json(const cdm::CalibrationFit &cf, const cdm::Model &calibration, const Eigen::MatrixXd &cov) {
+    if (cov.size() == 0) return {{"available", false}, {"text", "the calibration carries no covariance"}};
+    std::vector<cdm::diag::V3> at;
+    std::vector<size_t> idx;
+    for (size_t j = 0; j < cf.fitted.res.size(); ++j)
+        if (cf.fitted.ok[j]) at.push_back(cf.fitted.est[j]), idx.push_back(j);
+    std::vector<Eigen::Matrix3d> S;
+    std::vector<char> ok;
+    std::string err;
+    if (!cdm::diag::position_covariances(calibration, cov, at, 0.0, S, ok, err))
+        return {{"available", false}, {"text", err}};
+    // The fixture heights' offsets out, as the judge takes them out (at
+    // their degrees of freedom): they are the jig's.
+    const cdm::diag::FixtureOffsets fixture = cdm::diag::fixture_offsets(cf.fitted, cf.grid, cf.jig);
+    double chi2 = 0, pred[3] = {0, 0, 0}, noise[3] = {0, 0, 0};
+    long n = 0;
+    for (size_t i = 0; i < idx.size(); ++i) {
+        if (!ok[i]) continue;
+        const size_t j = idx[i];
+        Eigen::Matrix3d C = S[i];
+        for (int k = 0; k < 3; ++k) {
+            const double w = cf.fitted.var_mean[j](k) + cf.jig(k) * cf.jig(k);
+            C(k, k) += w;
+            pred[k] += S[i](k, k);
+            noise[k] += w;
+        }
+        cdm::diag::V3 e = cf.fitted.res[j];
+        for (int k = 0; k < 3; ++k) {
+            const auto it = fixture.find({cf.grid.height_index[j], k});
+            if (it != fixture.end()) e(k) -= it->second;
+        }
+        chi2 += e.dot(C.ldlt().solve(e));
+        ++n;
+    }
+    if (n == 0) return {{"available", false}, {"text", "no position placed"}};
+    const int dof = std::max(1, int(3 * n) - cf.report.n_free - int(fixture.size()));
+    const double p = cdm::diag::chi2_sf(chi2, dof);
+    auto rms = [n](const double *v) {
+        return json{{"x", std::sqrt(v[0] / double(n))}, {"y", std::sqrt(v[1] / double(n))}, {"z", std::sqrt(v[2] / double(n))}};
+    };
+    const bool as_predicted = p >= 1e-3;
+    return {{"available", true},
+            {"calibration_rms_mm", rms(pred)},
+            {"noise_and_jig_rms_mm", rms(noise)},
+            {"chi2_per_dof", chi2 / dof},
+            {"p_value", p},
+            {"as_predicted", as_predicted},
+            {"test", "each position's mean error against its noise, the jig's tolerance and the calibration's "
+                     "predicted error there (its covariance propagated), a chi-square over the positions at "
+                     "p >= 1e-3; the jig's placement, fitted here, takes up any error common to every position"},
+            {"text", std::string(as_predicted ? "as the calibration's accuracy map predicted"
+                                              : "larger than the calibration's accuracy map predicted") +
+                         " (chi2/dof " + cdm::diag::fmt_num(chi2 / dof, 2) + ", " + cdm::diag::fmt_p(p) + ")"}};
+}
+
 std::string check_words(const cdm::diag::Verdict &v, size_t failing) {
     using cdm::diag::fmt_num;
     using cdm::diag::fmt_p;
@@ -118,7 +181,7 @@ std::string check_words(const cdm::diag::Verdict &v, size_t failing) {
 }
 
 json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const cdm::io::JsonValue &cal,
-                 double max_error_mm) {
+                 const cdm::Model &calibration, const Eigen::MatrixXd &cov, double max_error_mm) {
     // n_free: the jig's placement fitted here (the judge takes the fixture
     // heights' offsets out itself, at their degrees of freedom)
     const cdm::diag::Verdict v =
@@ -136,6 +199,7 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
             {"nominal_error_mm", cdm::diag::stats3(cf.nominal.err)},
             {"calibration_fit", fitted_on(cal)},
             {"failing", failing_json(cf, data, v, max_error_mm)},
+            {"predicted", predicted_json(cf, calibration, cov)},
             {"model_check",
              {{"holds", v.explained},
               {"chi2_per_dof", v.chi2 / v.dof},
@@ -169,6 +233,13 @@ extern "C" int cdm_check(const char *data_csv_path, const char *calibration_json
         cdm::Model calibration{cdm::DeviceGeometry{}};
         if (!cdm::io::model_from_json(cal, calibration_json_path, calibration, err))
             return cdm::fail(CDM_ERR_PARSE, err);
+        // The covariance of its fit, when it has one (checked as on load).
+        Eigen::MatrixXd cov;
+        const nlohmann::json whole = nlohmann::json::parse(text, nullptr, false);
+        if (whole.is_object() && whole.contains("fit") && whole["fit"].is_object() &&
+            whole["fit"].contains("covariance") && !whole["fit"]["covariance"].is_null() &&
+            !cdm::diag::covariance_from_json(whole["fit"]["covariance"], calibration, cov, err))
+            return cdm::fail(CDM_ERR_PARSE, std::string(calibration_json_path) + ": " + err);
         cdm::api::JobInputs in;
         if (int rc = cdm::api::open_job_data(data_csv_path, calibration.geometry(), in)) return rc;
         cdm::FitCalibrationOptions opt;
@@ -179,6 +250,6 @@ extern "C" int cdm_check(const char *data_csv_path, const char *calibration_json
         cdm::CalibrationFit cf(calibration.geometry());
         if (!cdm::fit_calibration(in.data, calibration.geometry(), opt, cf, err))
             return cdm::fail(CDM_ERR_INVALID_ARG, err);
-        return cdm::api::return_json(result_json(cf, in.data, cal, a.max_error_mm), "cdm_check", result_json_out);
+        return cdm::api::return_json(result_json(cf, in.data, cal, calibration, cov, a.max_error_mm), "cdm_check", result_json_out);
     });
 }

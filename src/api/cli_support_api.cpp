@@ -3,6 +3,7 @@
 // the simulator's truth, recordings, the jig plan, the effect catalogue and
 // jig-dataset simulation. Thin fences around the modules: no logic of their
 // own beyond argument checks.
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <cstddef>
@@ -151,6 +152,17 @@ bool parse_sim_options(const char *text, SimRequest &r, std::string &err) {
         else if (k == "heights_mm" && v.is_array() && !v.empty()) {
             r.o.heights.clear();
             for (const auto &h : v) ok = ok && number(h, "heights_mm", 1e-3, 1e4, d, err) && (r.o.heights.push_back(d), true);
+        } else if (k == "plan" && v.is_array()) {
+            // [[x_ref, y_ref, z_ref, samples], ...]: a planned session (cdm_plan)
+            for (const auto &row : v) {
+                std::array<double, 4> q{};
+                if (!row.is_array() || row.size() != 4)
+                    return err = "option \"plan\": each position is [x_ref, y_ref, z_ref, samples], not " +
+                                 row.dump().substr(0, 80), false;
+                for (size_t c = 0; c < 4 && ok; ++c)
+                    ok = number(row[c], "plan", c == 3 ? 1 : -5000, c == 3 ? 1e6 : 5000, q[c], err);
+                r.o.plan.push_back(q);
+            }
         } else if (k == "effects" && v.is_array()) {
             for (const auto &e : v) {
                 if (!e.is_string()) return err = "option \"effects\" must be a list of effect names", false;
@@ -158,11 +170,13 @@ bool parse_sim_options(const char *text, SimRequest &r, std::string &err) {
             }
         } else if ((k == "device" || k == "truth" || k == "truth_out") && v.is_string()) {
             (k == "device" ? r.device : k == "truth" ? r.truth : r.truth_out) = v.get<std::string>();
-        } else if (k == "heights_mm" || k == "effects" || k == "device" || k == "truth" || k == "truth_out") {
+        } else if (k == "heights_mm" || k == "effects" || k == "device" || k == "truth" || k == "truth_out" ||
+                   k == "plan") {
             return err = "option \"" + k + "\" has the wrong type: " + v.dump(), false;
         } else {
             return err = "unknown option \"" + k + "\" (known: holes, pitch_mm, heights_mm, samples, noise_mm, "
-                         "quant_mm, jig_tolerance_mm, jig_hole_mm, jig_fixture_mm, seed, effect_seed, device, truth, effects, truth_out)", false;
+                         "quant_mm, jig_tolerance_mm, jig_hole_mm, jig_fixture_mm, seed, effect_seed, device, truth, effects, truth_out, "
+                         "plan)", false;
         }
         if (!ok) return false;
     }

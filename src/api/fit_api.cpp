@@ -4,6 +4,7 @@
 
 #include "api/errors.h"
 #include "api/jobs.h"
+#include "calib/evaluation/accuracy.h"
 #include "calib/evaluation/stats.h"
 #include "calib/diagnosis/diagnose.h"
 #include "calib/calibration/fit_calibration.h"
@@ -58,6 +59,9 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
             {"reading_noise_mm", cdm::diag::reading_noise_json(cf.reading)},
             {"nominal_error_mm", cdm::diag::stats3(cf.nominal.err)},
             {"error_mm", cdm::diag::stats3(cf.fitted.err)},
+            // The predicted error over the workspace and what it comes from (since 1.2).
+            {"accuracy_map", cdm::diag::accuracy_map_json(cf.model, cf.report, cf.pos, cf.grid)},
+            {"covariance", cdm::diag::covariance_json(cf.model, cf.report.cov_by_hole)},
             // The samples the dataset's screen set aside (the diagnosis' data.glitches).
             {"glitches", cdm::glitches_json(data)},
             // The positions set aside (the diagnosis' data.outliers, the same test).
@@ -95,7 +99,9 @@ extern "C" int cdm_fit(const char *data_csv_path, const char *device_json_path, 
         if (!cdm::run_setting_aside_outliers(in.data, a.outliers, round, outliers, err))
             return cdm::fail(CDM_ERR_INVALID_ARG, err);
         const json out = result_json(cf, in.data, outliers);
-        if (int rc = cdm::api::commit_calibration(in, cf.model, data_csv_path, out["error_mm"], out["outliers"], out["glitches"])) return rc;
+        if (int rc = cdm::api::commit_calibration(in, cf.model, data_csv_path, out["error_mm"], out["outliers"],
+                                                  out["glitches"], out["covariance"]))
+            return rc;
         return cdm::api::return_json(out, "cdm_fit", result_json_out);
     });
 }

@@ -144,7 +144,8 @@ int open_job_data(const char *data_path, const DeviceGeometry &g, JobInputs &in)
 }
 
 int commit_calibration(JobInputs &in, const Model &fitted, const char *data_path, const nlohmann::json &error_mm,
-                       const nlohmann::json &outliers, const nlohmann::json &glitches) {
+                       const nlohmann::json &outliers, const nlohmann::json &glitches,
+                       const nlohmann::json &covariance) {
     if (!in.calib_out.is_open()) return CDM_OK;
     auto cj = cdm::io::model_to_json(fitted);
     nlohmann::json positions = nlohmann::json::array();
@@ -157,7 +158,8 @@ int commit_calibration(JobInputs &in, const Model &fitted, const char *data_path
                    {"positions", positions},
                    {"glitch_samples", glitches.value("count", 0)},
                    {"glitch_positions", glitches.value("positions", 0)},
-                   {"glitches_listed", glitches.value("samples", nlohmann::json::array())}}}};
+                   {"glitches_listed", glitches.value("samples", nlohmann::json::array())}}},
+                 {"covariance", covariance}};
     std::string err;
     if (!in.calib_out.write(cj.dump(2) + "\n", err) || !in.calib_out.commit(err)) return cdm::fail(CDM_ERR_IO, err);
     return CDM_OK;

@@ -51,8 +51,12 @@ int open_job_data(const char *data_path, const DeviceGeometry &g, JobInputs &in)
 // error, and what of the data the fit did not use (`outliers`, `glitches`:
 // the job's blocks, calib/calibration/fit_outliers.h and glitches_json), so a reader of
 // the calibration alone knows which positions and samples were left out.
+// `covariance`: the fitted parameters' (calib/evaluation/accuracy.h's
+// covariance_json), kept in the "fit" block for
+// cdm_calibration_position_covariance.
 int commit_calibration(JobInputs &in, const Model &fitted, const char *data_path, const nlohmann::json &error_mm,
-                       const nlohmann::json &outliers, const nlohmann::json &glitches);
+                       const nlohmann::json &outliers, const nlohmann::json &glitches,
+                       const nlohmann::json &covariance);
 
 // A malloc'ed copy of j.dump() into *out (freed with cdm_free_string).
 int return_json(const nlohmann::json &j, const char *fn, char **out);

@@ -1,4 +1,4 @@
-// `cdm calib simulate|diagnose|fit|check|effects`: the model-debugging workflow
+// `cdm calib simulate|diagnose|fit|check|effects` (`plan`: plan_cmd.cpp): the model-debugging workflow
 // (docs/calibration.md). The numbers come from libcdm (cdm_diagnose,
 // cdm_simulate_jig_dataset); the figures from the Python package
 // (python3 -m cdm.report, report_spawn.cpp).
@@ -132,6 +132,26 @@ void print_summary(const nlohmann::json &r) {
     std::printf("\nVerdict: %s\n", r["verdict"].get<std::string>().c_str());
 }
 
+// The accuracy map's summary: the calibration's predicted error over the
+// jig's volume, and past it.
+void print_accuracy(const nlohmann::json &a) {
+    if (!a.is_object() || !a.contains("summary") || a["summary"]["inside"].is_null()) {
+        if (a.is_object() && a.contains("error"))
+            std::printf("accuracy map: not computed (%s)\n", a["error"].get<std::string>().c_str());
+        return;
+    }
+    const auto &in = a["summary"]["inside"];
+    const auto &s = in["sigma_mm"];
+    std::printf("predicted error (1-sigma) over the jig's volume: mean x %.4f y %.4f z %.4f, worst x %.4f y %.4f "
+                "z %.4f mm; 95 %% ellipsoid's longest semi-axis mean %.4f, worst %.4f mm",
+                s["x"]["mean"].get<double>(), s["y"]["mean"].get<double>(), s["z"]["mean"].get<double>(),
+                s["x"]["max"].get<double>(), s["y"]["max"].get<double>(), s["z"]["max"].get<double>(),
+                in["radius95_mm"]["mean"].get<double>(), in["radius95_mm"]["max"].get<double>());
+    const auto &out = a["summary"]["outside"];
+    if (!out.is_null()) std::printf(" (past it, to a fifth of the plate beyond: worst %.4f mm)", out["radius95_mm"]["max"].get<double>());
+    std::printf("\n");
+}
+
 // Through libcdm's one atomic writer: the old file survives any failure,
 // and the command's inputs (`protect`) are never written over.
 bool write_atomic(const std::string &path, const std::string &text, const std::vector<std::string> &protect) {
@@ -255,6 +275,7 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
         std::printf("fitted %s on %s: x rms %.4f y %.4f z %.4f mm (jig tolerance x %.4f mm)\n", a.effects.c_str(),
                     a.data.c_str(), r["error_mm"]["x"]["rms"].get<double>(), r["error_mm"]["y"]["rms"].get<double>(),
                     r["error_mm"]["z"]["rms"].get<double>(), r["jig_tolerance_mm"][0].get<double>());
+        print_accuracy(r["accuracy_map"]);
         const auto &out = r["outliers"];
         if (out["count"].get<size_t>() > 0) {
             // The first 20 by name; --json lists every one.
@@ -313,6 +334,8 @@ void print_check(const CheckArgs &a, const nlohmann::json &r) {
     if (f.contains("beyond_max_error"))
         std::printf("  positions beyond %s mm: %zu\n", num(f["beyond_max_error"]["max_error_mm"].get<double>()).c_str(),
                     f["beyond_max_error"]["count"].get<size_t>());
+    if (r["predicted"].value("available", false))
+        std::printf("  against its accuracy map: %s\n", r["predicted"]["text"].get<std::string>().c_str());
     std::printf("\nVerdict: %s\n", r["model_check"]["text"].get<std::string>().c_str());
 }
 
@@ -350,7 +373,7 @@ void add_check(CLI::App *calib) {
 }
 
 struct SimArgs {
-    std::string out, effects, truth, device, heights, truth_out;
+    std::string out, effects, truth, device, heights, truth_out, plan;
     std::vector<std::string> plugins;
     int holes = 0, samples = 0;
     double pitch_mm = 0, noise_mm = 0, quant_mm = 0, jig_tolerance_mm = 0, jig_hole_mm = 0, jig_fixture_mm = 0;
@@ -385,12 +408,16 @@ int cmd_simulate(const SimArgs &a) {
     if (!a.device.empty()) o["device"] = a.device;
     if (!a.truth.empty()) o["truth"] = a.truth;
     if (!a.truth_out.empty()) o["truth_out"] = a.truth_out;
+    if (!a.plan.empty()) o["plan"] = read_plan_csv(a.plan);
     if (int rc = load_plugins(a.plugins); rc != kExitOk) return rc;
     if (int rc = cdm_simulate_jig_dataset(a.out.c_str(), o.dump().c_str()); rc != CDM_OK)
         return report_error("calib simulate", rc);
     const size_t n_heights = o.contains("heights_mm") ? o["heights_mm"].size() : 5;
-    std::printf("wrote %s (%zu positions x %d samples)\n", a.out.c_str(), n_heights * size_t(a.holes) * size_t(a.holes),
-                a.samples);
+    if (o.contains("plan"))
+        std::printf("wrote %s (%zu planned positions of %s)\n", a.out.c_str(), o["plan"].size(), a.plan.c_str());
+    else
+        std::printf("wrote %s (%zu positions x %d samples)\n", a.out.c_str(),
+                    n_heights * size_t(a.holes) * size_t(a.holes), a.samples);
     return kExitOk;
 }
 
@@ -463,6 +490,9 @@ void add_simulate(CLI::App *calib) {
     sim->add_option("--holes", s.holes, "Holes per side of the plate")->check(range(1, 1000));
     sim->add_option("--pitch-mm", s.pitch_mm, "Hole pitch (mm)")->check(range(1e-3, 1000));
     sim->add_option("--heights", s.heights, "Comma-separated fixture heights (mm) (default: 30,40,50,60,70)");
+    sim->add_option("--plan", s.plan,
+                    "Only the positions of this PLAN.csv (`cdm calib plan`), each with its samples; the plate and "
+                    "heights as given here");
     sim->callback([] { select_command([] { return cmd_simulate(s); }); });
 }
 
@@ -509,6 +539,7 @@ void add_calib_commands(CLI::App &app) {
 
     add_simulate(calib);
     add_check(calib);
+    add_plan(calib);
 
     auto *eff = calib->add_subcommand("effects", "List the effect catalogue with each effect's physics");
     static bool e_json = false;

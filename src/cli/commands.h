@@ -3,6 +3,7 @@
 // (with its experimental block), as any application would.
 #pragma once
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <functional>
@@ -59,5 +60,11 @@ int report_error(const std::string &what, int rc);
 // does not embed Python).
 void add_plugin_option(CLI::App *app, std::vector<std::string> &plugins);
 int load_plugins(const std::vector<std::string> &plugins);
+
+// `cdm calib plan` (plan_cmd.cpp), and its PLAN.csv read back for
+// `cdm calib simulate --plan`: [[x_ref, y_ref, z_ref, samples], ...];
+// throws UsageError naming the file, line and what is wrong.
+void add_plan(CLI::App *calib);
+nlohmann::json read_plan_csv(const std::string &path);
 
 } // namespace cdm::cli

@@ -64,6 +64,10 @@ def test_a_calibration_holds_on_a_new_session_with_the_jig_moved(sessions):
         assert r["position_error_mm"][a]["rms"] < 2 * floor, (a, r["position_error_mm"][a])
         # per sample, as the seed's Table 1: the nominal triangulation is worse
         assert r["error_mm"][a]["rms"] <= r["nominal_error_mm"][a]["rms"] + 1e-12
+    # ... and as its own accuracy map predicted (the chi-square of the
+    # positions' errors against noise, jig and the propagated covariance).
+    assert r["predicted"]["available"] and r["predicted"]["as_predicted"], r["predicted"]
+    assert r["predicted"]["p_value"] >= 1e-3
     assert r["calibration_fit"]["data"].endswith("a.csv")
     assert set(r["calibration_fit"]["error_mm"]) == {"x", "y", "z"}
 
@@ -76,6 +80,8 @@ def test_a_calibration_that_misses_an_effect_does_not_hold(sessions):
     # The verdict and the numbers beside it agree: its test fails (p < 1e-3).
     assert min(r["model_check"]["chi2_p_value"], r["model_check"]["structure"]["p_value"]) < 1e-3
     assert r["failing"]["count"] > good["failing"]["count"]
+    # Its error is beyond what its own covariance allows, too.
+    assert not r["predicted"]["as_predicted"] and r["predicted"]["p_value"] < 1e-3
     assert r["position_error_mm"]["x"]["rms"] > good["position_error_mm"]["x"]["rms"]
 
 

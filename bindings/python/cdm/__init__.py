@@ -21,7 +21,7 @@ from .calibration import Calibration
 from .constants import *  # noqa: F401,F403 - the header's constants
 from .constants import Button, EffectStage, Error, EventKind, LogLevel, PoseFlag, WatchFlag, WatchKind
 from .device import Device, enumerate_devices, open  # noqa: A004
-from .diagnosis import Diagnosis, check, diagnose, fit, load_diagnosis
+from .diagnosis import Diagnosis, accuracy_map, check, diagnose, fit, load_diagnosis, plan
 from .effects import EffectGeometry, effect_names, load_plugin, register_effect, unregister_effect
 from .errors import (CdmError, CdmFileNotFoundError, CdmIOError, CdmMemoryError, CdmTimeoutError,
                      DisconnectedError, InvalidArgumentError, LibraryNotFoundError, NoDeviceError, ParseError)
@@ -29,7 +29,7 @@ from .records import DeviceInfo, Pose, Raw, Sample, Stats
 from .watch import Watcher, watch
 
 __all__ = ["open", "enumerate", "enumerate_devices", "Device", "DeviceInfo", "Pose", "Raw", "Sample", "Stats",
-           "Calibration", "Diagnosis", "check", "diagnose", "fit", "load_diagnosis",
+           "Calibration", "Diagnosis", "accuracy_map", "check", "diagnose", "fit", "load_diagnosis", "plan",
            "effect_names", "load_plugin", "register_effect", "unregister_effect", "EffectGeometry",
            "CdmError", "InvalidArgumentError", "ParseError", "NoDeviceError", "CdmIOError", "CdmFileNotFoundError",
            "CdmTimeoutError", "DisconnectedError", "CdmMemoryError", "LibraryNotFoundError",

@@ -227,6 +227,7 @@ PROTOTYPES: Dict[str, Tuple[Any, List[Any]]] = {
     "cdm_calibration_free": (None, [_handle]),
     "cdm_calibration_position": (_int, [_handle, c_double_p, c_double_p]),
     "cdm_calibration_lengths": (_int, [_handle, c_double_p, c_double_p]),
+    "cdm_calibration_position_covariance": (_int, [_handle, c_double_p, c_double_p]),
     "cdm_calibration_effect_count": (_size, [_handle]),
     "cdm_calibration_effect_name": (_str, [_handle, _size]),
     "cdm_set_calibration": (_int, [_handle, _handle]),
@@ -244,6 +245,7 @@ PROTOTYPES: Dict[str, Tuple[Any, List[Any]]] = {
     "cdm_diagnose": (_int, [_str, _str, _str, cdm_progress_fn, ctypes.c_void_p, _handle_p]),
     "cdm_fit": (_int, [_str, _str, _str, cdm_progress_fn, ctypes.c_void_p, _handle_p]),
     "cdm_check": (_int, [_str, _str, _str, cdm_progress_fn, ctypes.c_void_p, _handle_p]),
+    "cdm_plan": (_int, [_str, cdm_progress_fn, ctypes.c_void_p, _handle_p]),
     "cdm_free_string": (None, [ctypes.c_void_p]),
     # since 1.1: the one dataset writer
     "cdm_dataset_writer_open": (_int, [_str, ctypes.POINTER(ctypes.c_char_p), ctypes.c_size_t, _handle_p]),
@@ -347,6 +349,7 @@ class Library:
     cdm_calibration_free: Callable[..., None]
     cdm_calibration_position: Callable[..., int]
     cdm_calibration_lengths: Callable[..., int]
+    cdm_calibration_position_covariance: Callable[..., int]
     cdm_calibration_effect_count: Callable[..., int]
     cdm_calibration_effect_name: Callable[..., Optional[bytes]]
     cdm_set_calibration: Callable[..., int]
@@ -361,6 +364,7 @@ class Library:
     cdm_diagnose: Callable[..., int]
     cdm_fit: Callable[..., int]
     cdm_check: Callable[..., int]
+    cdm_plan: Callable[..., int]
     cdm_free_string: Callable[..., None]
     cdm_dataset_writer_open: Callable[..., int]
     cdm_dataset_writer_add: Callable[..., int]

@@ -79,6 +79,21 @@ class Calibration(_native.Closing):
             raise _native.fail(rc, "cdm_calibration_position")
         return (float(out[0]), float(out[1]), float(out[2]))
 
+    def position_covariance(self, position: Iterable[float]) -> Tuple[Tuple[float, float, float], ...]:
+        """The covariance (mm^2, 3 x 3, device frame) of the position this
+        calibration gives at `position` (x, y, z) mm: its fitted parameters'
+        uncertainty propagated to first order (experimental, since 1.2;
+        cdm_calibration_position_covariance). The 1-sigma per axis is the
+        square root of the diagonal. CdmError CDM_ERR_UNSUPPORTED when the
+        file carries no covariance, CDM_ERR_NUMERIC outside the workspace."""
+        h = self._handle("cdm_calibration_position_covariance")
+        inp = _vector(position, 3, "Calibration.position_covariance: position")
+        out = (ctypes.c_double * 9)()
+        rc = _native.lib().cdm_calibration_position_covariance(h, inp, out)
+        if rc < 0:
+            raise _native.fail(rc, "cdm_calibration_position_covariance")
+        return tuple((float(out[3 * r]), float(out[3 * r + 1]), float(out[3 * r + 2])) for r in range(3))
+
     def lengths(self, position: Iterable[float]) -> Tuple[float, float, float, float]:
         """The 4 readings (mm) the calibrated model predicts at position (x, y, z) mm."""
         h = self._handle("cdm_calibration_lengths")

@@ -92,6 +92,36 @@ def _arrays(obj: Any) -> Any:
     return obj
 
 
+def accuracy_map(result: Dict[str, Any]) -> Dict[str, Any]:
+    """The accuracy map of a diagnosis or a fit (its "accuracy_map") as numpy
+    arrays over the grid's N points (device frame, mm): "x", "y", "z" (N),
+    "sigma" (N x 3, 1-sigma per axis), "radius95" (N, the 95 % ellipsoid's
+    longest semi-axis), "cov" (N x 3 x 3, mm^2), "inside" and "placed" (N,
+    bool: within the jig's volume; placed by the model), NaN where a point
+    is not placed; "levels" (the x levels), "ny", "nz" (points per level,
+    y fastest) and "summary" as in the JSON. Needs numpy."""
+    if _np is None:
+        raise ImportError("cdm.accuracy_map needs numpy")
+    a = result.get("accuracy_map") if isinstance(result, dict) else None
+    if not isinstance(a, dict) or "grid" not in a:
+        why = a.get("error") if isinstance(a, dict) else None
+        raise ValueError("no accuracy map in this result" + (": %s" % why if why else ""))
+    g = a["grid"]
+
+    def rows(key: str, width: int) -> Any:
+        return _np.asarray([v if v is not None else [float("nan")] * width for v in a[key]], dtype=float)
+    c6 = rows("cov_mm2", 6)
+    cov = _np.empty((len(c6), 3, 3))
+    for k, (r, q) in enumerate([(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]):
+        cov[:, r, q] = cov[:, q, r] = c6[:, k]
+    return {"x": _np.asarray(g["x_mm"], dtype=float), "y": _np.asarray(g["y_mm"], dtype=float),
+            "z": _np.asarray(g["z_mm"], dtype=float), "sigma": rows("sigma_mm", 3),
+            "radius95": _np.asarray([v if v is not None else float("nan") for v in a["radius95_mm"]], dtype=float),
+            "cov": cov, "inside": _np.asarray(a["inside"], dtype=bool), "placed": _np.asarray(a["placed"], dtype=bool),
+            "levels": _np.asarray(g["levels_mm"], dtype=float), "ny": int(g["ny"]), "nz": int(g["nz"]),
+            "summary": a["summary"]}
+
+
 def diagnose(data_csv: PathLike, device_json: PathLike, effects: Optional[Union[str, Iterable[str]]] = None,
              jig_tolerance_mm: Optional[float] = None, progress: Optional[Progress] = None,
              **options: Any) -> Diagnosis:
@@ -139,6 +169,38 @@ def check(data_csv: PathLike, calibration: PathLike, jig_tolerance_mm: Optional[
         options["max_error_mm"] = float(max_error_mm)
     return _run("cdm_check", data_csv, calibration, None, jig_tolerance_mm, progress, options,
                 second="calibration path")
+
+
+def plan(positions: int, samples: int = 100, holes: int = 25, pitch_mm: float = 5.0,
+         heights_mm: Optional[Iterable[float]] = None, effects: Optional[Union[str, Iterable[str]]] = None,
+         device_json: Optional[PathLike] = None, **options: Any) -> Dict[str, Any]:
+    """Runs cdm_plan (experimental, since 1.2): which `positions` of the plate
+    (holes x heights) to measure, from the geometry and the catalogue alone.
+    Returns {"positions": [[x_ref, y_ref, z_ref, samples], ...] in walking
+    order, "points", "predicted_sigma_mm": {plan, whole_plate},
+    "detectability": [...], ...}; `effects` plans for that model instead of
+    the catalogue; **options: noise_mm, jig_tolerance_mm, alpha, power."""
+    o: Dict[str, Any] = {"positions": int(positions), "samples": int(samples), "holes": int(holes),
+                         "pitch_mm": float(pitch_mm), **options}
+    if heights_mm is not None:
+        o["heights_mm"] = [float(h) for h in heights_mm]
+    if effects is not None:
+        o["effects"] = [effects] if isinstance(effects, str) else list(effects)
+    if device_json is not None:
+        o["device"] = os.fspath(device_json)
+    L = _native.lib()
+    out = ctypes.c_void_p()
+    rc: int = L.cdm_plan(json.dumps(o).encode("utf-8"), _native.cdm_progress_fn(), None, ctypes.byref(out))
+    if rc < 0:
+        raise _native.fail(rc, "cdm_plan")
+    try:
+        if not out.value:
+            raise CdmError(Error.CDM_ERR_INTERNAL, "cdm_plan returned CDM_OK and no result", function="cdm_plan")
+        text = ctypes.string_at(out.value).decode("utf-8")
+    finally:
+        L.cdm_free_string(out)
+    result: Dict[str, Any] = json.loads(text)
+    return result
 
 
 def _run(fn: str, data_csv: PathLike, device_json: PathLike, effects: Optional[Union[str, Iterable[str]]],

@@ -10,6 +10,40 @@
 namespace cdm {
 
 namespace {
+
+// The positions to simulate: the whole plan, or o.plan's rows matched to
+// the plan's positions.
+bool planned_visits(const std::vector<JigPosition> &plan, const JigSimOptions &o,
+                    std::vector<std::pair<size_t, int>> &visits, std::string &err) {
+    if (o.plan.empty()) {
+        for (size_t k = 0; k < plan.size(); ++k) visits.emplace_back(k, o.samples);
+        return true;
+    }
+    if (o.scattered) {
+        err = "a planned session is on the plate's holes, not a scattered layout";
+        return false;
+    }
+    for (size_t i = 0; i < o.plan.size(); ++i) {
+        const auto &r = o.plan[i];
+        const auto it = std::find_if(plan.begin(), plan.end(), [&](const JigPosition &p) {
+            return std::fabs(p.ref[0] - r[0]) < 1e-6 && std::fabs(p.ref[1] - r[1]) < 1e-6 && std::fabs(p.ref[2] - r[2]) < 1e-6;
+        });
+        if (it == plan.end()) {
+            char b[160];
+            std::snprintf(b, sizeof b, "plan position %zu (%g, %g, %g mm) is not a hole of the plate at one of its heights",
+                          i + 1, r[0], r[1], r[2]);
+            err = b;
+            return false;
+        }
+        if (!(r[3] >= 1 && r[3] <= 1e6) || r[3] != std::floor(r[3])) {
+            err = "plan position " + std::to_string(i + 1) + ": samples must be a whole number in 1..1000000";
+            return false;
+        }
+        visits.emplace_back(size_t(it - plan.begin()), int(r[3]));
+    }
+    return true;
+}
+
 template <class Sink> bool run(const Model &truth, const JigSimOptions &o, Sink sink, std::string &err) {
     JigPlanOptions po;
     po.n = o.n;
@@ -24,10 +58,12 @@ template <class Sink> bool run(const Model &truth, const JigSimOptions &o, Sink 
     je.seat_mm = o.jig_tolerance_mm;
     je.seed = o.seed ^ 0xBB67AE8584CAA73Bull;
     const auto where = jig_true_positions(plan, o.n, je);
+    std::vector<std::pair<size_t, int>> visits; // (plan index, samples), in the order walked
+    if (!planned_visits(plan, o, visits, err)) return false;
     std::mt19937_64 rng(o.seed);
     std::normal_distribution<double> g(0.0, 1.0);
     size_t row = 0; // data rows written so far: a row's time is row * kDatasetNominalRowPeriodS
-    for (size_t k = 0; k < plan.size(); ++k) {
+    for (const auto &[k, samples] : visits) {
         double p[3], L[4], L1[4];
         truth.jig_to_device(where[k].data(), p);
         // Readings at the position's first and last sample time: an effect
@@ -35,7 +71,7 @@ template <class Sink> bool run(const Model &truth, const JigSimOptions &o, Sink 
         // are interpolated linearly (exact for a linear drift; the common
         // curvature's error over one position's samples is below 1e-8 mm).
         const double t0 = double(row) * kDatasetNominalRowPeriodS;
-        const double t1 = double(row + size_t(std::max(0, o.samples - 1))) * kDatasetNominalRowPeriodS;
+        const double t1 = double(row + size_t(std::max(0, samples - 1))) * kDatasetNominalRowPeriodS;
         if (truth.readings(p, t0, L) != 0 || truth.readings(p, t1, L1) != 0) {
             err = "a user effect of the true model failed at point " + std::to_string(plan[k].point);
             return false;
@@ -45,9 +81,9 @@ template <class Sink> bool run(const Model &truth, const JigSimOptions &o, Sink 
                 err = "simulated readings are not finite at point " + std::to_string(plan[k].point);
                 return false;
             }
-        for (int s = 0; s < o.samples; ++s, ++row) {
+        for (int s = 0; s < samples; ++s, ++row) {
             double l[4];
-            const double f = o.samples > 1 ? double(s) / double(o.samples - 1) : 0.0;
+            const double f = samples > 1 ? double(s) / double(samples - 1) : 0.0;
             for (int c = 0; c < 4; ++c) {
                 l[c] = L[c] + f * (L1[c] - L[c]) + o.noise_mm * g(rng);
                 if (o.quant_mm > 0) l[c] = std::round(l[c] / o.quant_mm) * o.quant_mm;

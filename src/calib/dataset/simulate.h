@@ -7,6 +7,7 @@
 // dataset instead of going through the HID protocol.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -34,6 +35,12 @@ struct JigSimOptions {
     // Instead of the plate: as many positions drawn uniformly in the same
     // box (x over the heights' range), as a robot arm or tracker would give.
     bool scattered = false;
+    // A planned session (`cdm calib plan`): only these positions of the
+    // plate, in this order, each {x_ref, y_ref, z_ref, samples}; each must
+    // be one of the plate's holes at one of the heights (within 1e-6 mm),
+    // and keeps that position's point id and jig errors (the same plate as
+    // the whole session's with the same seed). Empty: the whole plate.
+    std::vector<std::array<double, 4>> plan;
 };
 
 // Streams the CSV through DatasetWriter (atomic; `protect_paths`, the

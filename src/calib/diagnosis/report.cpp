@@ -5,6 +5,7 @@
 #include <string>
 
 #include "calib/diagnosis/diagnose_json.h"
+#include "calib/evaluation/accuracy.h"
 #include "calib/diagnosis/panels.h"
 #include "calib/diagnosis/stages.h"
 #include "cdm/cdm.h"
@@ -239,6 +240,8 @@ json to_json(const Diagnosis &d) {
                   {"converged", rep.converged}, {"free_parameters", rep.n_free}, {"message", rep.message},
                   {"fixture_x_mm", rep.fixture_mm}, {"restarted_from", cf.restarted_from}};
     out["error_mm"] = stats3(cf.fitted.err);
+    out["accuracy_map"] = accuracy_map_json(model, rep, cf.pos, cf.grid);
+    out["covariance"] = covariance_json(model, rep.cov_by_hole);
     out["nominal_error_mm"] = stats3(cf.nominal.err);
     out["ellipsoid_error_mm"] = stats3(d.seed.E.err);
     out["ellipsoid"] = {{"L", d.seed.ell.L}, {"M", d.seed.ell.M}, {"N", d.seed.ell.N}};

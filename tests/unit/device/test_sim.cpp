@@ -301,7 +301,7 @@ void test_set_calibration(void **) {
     // put the poses elsewhere and flag them COMPENSATED.
     cdm::DeviceGeometry g;
     g.a_mm = 140;
-    cdm_calibration other{std::make_shared<const cdm::Model>(g)};
+    cdm_calibration other{std::make_shared<const cdm::Model>(g), {}};
     assert_int_equal(cdm_set_calibration(dev, &other), CDM_ERR_INVALID_ARG);
     assert_non_null(std::strstr(cdm_thread_error(), "a_mm 140 (calibration) vs 150 (device"));
     // Pots reading 5 mm short (cable_offset -5 mm each): same readings,
@@ -312,7 +312,7 @@ void test_set_calibration(void **) {
         assert_true(m.add_effect("cable_offset", {{"o1", o}, {"o2", o}, {"o3", o}, {"o4", o}}, err));
         return std::make_shared<const cdm::Model>(m);
     };
-    cdm_calibration cal{with_offsets(-5.0)};
+    cdm_calibration cal{with_offsets(-5.0), {}};
     assert_int_equal(cdm_set_calibration(dev, &cal), CDM_OK);
     cal.model.reset(); // the device keeps its own reference
     assert_true(cdm_test::wait_until(
@@ -323,7 +323,7 @@ void test_set_calibration(void **) {
     // in the plane: no position. No NaN: the last good position is held and
     // flagged.
     const double held_x = p.position[0];
-    cdm_calibration wide{with_offsets(20.0)};
+    cdm_calibration wide{with_offsets(20.0), {}};
     assert_int_equal(cdm_set_calibration(dev, &wide), CDM_OK);
     assert_true(cdm_test::wait_until(
         [&] { cdm_get_pose(dev, &p); return (p.flags & CDM_POSE_OUT_OF_WORKSPACE) != 0; }, 2000));

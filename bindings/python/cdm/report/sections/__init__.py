@@ -10,6 +10,7 @@ if TYPE_CHECKING:
 
 from ..loading import Diag
 
+from .accuracy import section_accuracy
 from .beyond import section_beyond
 from .candidates import section_candidates, section_search
 from .comparison import section_comparison
@@ -18,7 +19,7 @@ from .maps import section_cut, section_maps
 from .summary import section_summary
 from .variables import section_variables
 
-__all__ = ["section_summary", "section_maps", "section_cut", "section_candidates",
+__all__ = ["section_summary", "section_maps", "section_cut", "section_accuracy", "section_candidates",
            "section_search", "section_fingerprints", "section_variables", "section_beyond", "section_comparison",
            "in_order"]
 
@@ -28,6 +29,7 @@ def in_order(runs: List[Tuple[str, Diag]], page: Page, P: Positions) -> Any:
     diag = runs[-1][1]
     sections = [lambda: section_summary(diag, page),
                 lambda: section_maps(diag, page, P),
+                lambda: section_accuracy(diag, page),
                 lambda: section_candidates(diag, page),
                 lambda: section_search(diag, page),
                 lambda: section_fingerprints(diag, page, P),

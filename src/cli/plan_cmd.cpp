@@ -1,0 +1,156 @@
+// `cdm calib plan`: a jig session planned before any data (cdm_plan), written
+// as PLAN.csv (x_ref,y_ref,z_ref,samples, in walking order); and the reader
+// of that file for `cdm calib simulate --plan`.
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include <cdm/cdm.h>
+#include "commands.h"
+
+namespace cdm::cli {
+
+namespace {
+
+// The plan file's header: the jig frame's reference (mm) and the samples
+// to take there.
+constexpr const char *kPlanHeader = "x_ref,y_ref,z_ref,samples";
+constexpr size_t kPlanMaxBytes = size_t(16) << 20; // 16 MiB: ~500,000 positions
+
+struct PlanArgs {
+    std::string out, json_out, effects, heights, device;
+    int positions = 0, samples = 100, n = 25;
+    double pitch = 5, noise = 0.05, jig = 0.03;
+    bool quiet = false;
+};
+
+int progress_plan(void *, const char *, double f) {
+    std::fprintf(stderr, "\r  planning %3d%%", int(std::lround(100 * f)));
+    return 0;
+}
+
+std::string plan_csv(const nlohmann::json &r) {
+    std::string text = std::string(kPlanHeader) + "\n";
+    char b[160];
+    for (const auto &p : r["positions"]) {
+        std::snprintf(b, sizeof b, "%.4f,%.4f,%.4f,%d\n", p[0].get<double>(), p[1].get<double>(), p[2].get<double>(),
+                      p[3].get<int>());
+        text += b;
+    }
+    return text;
+}
+
+void print_plan(const PlanArgs &a, const nlohmann::json &r) {
+    const auto &s = r["predicted_sigma_mm"];
+    std::printf("planned %zu of the plate's %zu positions x %d samples, in walking order, into %s\n",
+                r["positions"].size(), r["plate_positions"].get<size_t>(), r["samples"].get<int>(), a.out.c_str());
+    std::printf("predicted error over the workspace (1-sigma, the design model's): %.4f mm with the plan, %.4f mm "
+                "with every position (x%.2f)\n",
+                s["plan"].get<double>(), s["whole_plate"].get<double>(),
+                s["plan"].get<double>() / s["whole_plate"].get<double>());
+    std::printf("each effect's test against the nominal model at its typical size (power at alpha %s; %d positions "
+                "chosen for it first):\n",
+                num(r["alpha"].get<double>()).c_str(), r["design"]["detectability_picks"].get<int>());
+    for (const auto &e : r["detectability"])
+        std::printf("  %-20s power %.3f (whole plate %.3f)%s\n", e["effect"].get<std::string>().c_str(),
+                    e["power"].get<double>(), e["power_whole_plate"].get<double>(),
+                    e["reachable"].get<bool>() ? (e["detectable"].get<bool>() ? "" : "  below the target")
+                                               : "  not detectable at its typical size even on the whole plate");
+    for (const auto &e : r["design"]["excluded"])
+        std::printf("  %-20s left out: %s\n", e["effect"].get<std::string>().c_str(), e["why"].get<std::string>().c_str());
+}
+
+int write_text(const std::string &path, const std::string &text) {
+    if (cdm_write_file_atomic(path.c_str(), text.data(), text.size(), nullptr, 0) == CDM_OK) return kExitOk;
+    std::fprintf(stderr, "cdm: %s\n", cdm_thread_error());
+    return kExitFailure;
+}
+
+int cmd_plan(const PlanArgs &a) {
+    nlohmann::json o = {{"positions", a.positions}, {"samples", a.samples}, {"holes", a.n},
+                        {"pitch_mm", a.pitch},      {"noise_mm", a.noise},   {"jig_tolerance_mm", a.jig}};
+    if (!a.heights.empty()) o["heights_mm"] = parse_number_list(a.heights, "--jig-heights");
+    if (!a.effects.empty()) o["effects"] = split_list(a.effects);
+    if (!a.device.empty()) o["device"] = a.device;
+    char *res = nullptr;
+    const bool shown = !a.quiet && isatty(2); // a bar, on a terminal only
+    const int rc = cdm_plan(o.dump().c_str(), shown ? progress_plan : nullptr, nullptr, &res);
+    if (shown) std::fprintf(stderr, "\n");
+    if (rc != CDM_OK) return report_error("calib plan", rc);
+    const auto r = nlohmann::json::parse(res);
+    cdm_free_string(res);
+    if (int w = write_text(a.out, plan_csv(r)); w != kExitOk) return w;
+    if (!a.json_out.empty())
+        if (int w = write_text(a.json_out, r.dump(1) + "\n"); w != kExitOk) return w;
+    print_plan(a, r);
+    return kExitOk;
+}
+
+} // namespace
+
+nlohmann::json read_plan_csv(const std::string &path) {
+    std::ifstream f(path, std::ios::binary);
+    if (!f) throw UsageError("--plan: cannot read " + path);
+    std::string line;
+    if (!std::getline(f, line) || (line.erase(line.find_last_not_of("\r") + 1), line != kPlanHeader))
+        throw UsageError("--plan: " + path + ":1: the header must be " + std::string(kPlanHeader) +
+                         " (a file of `cdm calib plan`)");
+    nlohmann::json rows = nlohmann::json::array();
+    size_t bytes = line.size();
+    for (size_t no = 2; std::getline(f, line); ++no) {
+        bytes += line.size() + 1;
+        if (bytes > kPlanMaxBytes) throw UsageError("--plan: " + path + " is over 16 MiB");
+        if (!line.empty() && line.back() == '\r') line.pop_back();
+        if (line.empty()) continue;
+        std::vector<double> v;
+        std::stringstream ss(line);
+        std::string cell;
+        while (std::getline(ss, cell, ',')) {
+            char *end = nullptr;
+            const double d = std::strtod(cell.c_str(), &end);
+            if (cell.empty() || *end != '\0' || !std::isfinite(d))
+                throw UsageError("--plan: " + path + ":" + std::to_string(no) + ": \"" + cell.substr(0, 40) +
+                                 "\" is not a number");
+            v.push_back(d);
+        }
+        if (v.size() != 4)
+            throw UsageError("--plan: " + path + ":" + std::to_string(no) + ": 4 values expected (" + kPlanHeader +
+                             "), got " + std::to_string(v.size()));
+        rows.push_back(v);
+    }
+    if (rows.empty()) throw UsageError("--plan: " + path + " lists no position");
+    return rows;
+}
+
+void add_plan(CLI::App *calib) {
+    static PlanArgs p;
+    auto *c = calib->add_subcommand("plan", "Plan a jig session before any data: which positions to measure "
+                                            "(I-optimal, every catalogued effect detectable)");
+    c->add_option("--positions", p.positions, "How many positions to choose")->required()->check(CLI::Range(1, 1000000));
+    c->add_option("--samples", p.samples, "Samples at each position")->capture_default_str()->check(CLI::Range(1, 1000000));
+    c->add_option("--jig-n", p.n, "Holes per side of the plate")->capture_default_str()->check(CLI::Range(1, 1000));
+    c->add_option("--jig-pitch", p.pitch, "Hole pitch (mm)")->capture_default_str()->check(range(1e-3, 1000));
+    c->add_option("--jig-heights", p.heights, "Comma-separated fixture heights (mm) (default: 30,40,50,60,70)");
+    c->add_option("--effects", p.effects,
+                  "The model to plan for, a comma-separated list (default: every catalogued effect on the cables' "
+                  "geometry, path and pots)");
+    c->add_option("--device", p.device, "Device description JSON (default: the nominal a=b=150, m=30 mm)");
+    c->add_option("--noise-mm", p.noise, "Per-sample pot noise (mm, std)")->capture_default_str()->check(range(1e-6, 100));
+    c->add_option("--jig-tolerance-mm", p.jig, "Each visit's seating error (mm, std per axis)")
+        ->capture_default_str()
+        ->check(range(0, 100));
+    c->add_option("--out", p.out, "PLAN.csv to write: x_ref,y_ref,z_ref,samples, in walking order")->required();
+    c->add_option("--json", p.json_out, "Also write the plan's JSON (predictions, each effect's test)");
+    c->add_flag("--quiet", p.quiet, "No progress output");
+    c->callback([] { select_command([] { return cmd_plan(p); }); });
+}
+
+} // namespace cdm::cli

@@ -1,0 +1,96 @@
+"""cdm_plan (experimental, since 1.2), `cdm calib plan` and `cdm calib
+simulate --plan`: a planned session's positions are the plate's, distinct,
+in walking order, each effect's test reported; the simulator measures
+exactly them; bad plans are refused naming the line. How well a planned
+session calibrates against random and regular subsets is measured by
+tests/bench/bench_plan.py (docs/calibration.md, "Planning a session")."""
+import os
+import subprocess
+
+import pytest
+
+import cdm
+
+JIG = {"holes": 7, "pitch_mm": 10.0, "heights_mm": [40, 55, 70], "samples": 20}
+CLI_JIG = ["--jig-n", "7", "--jig-pitch", "10", "--jig-heights", "40,55,70", "--samples", "20"]
+
+
+def cli(*args, **kw):
+    return subprocess.run([os.environ["CDM_CLI"], *map(str, args)], capture_output=True, text=True, timeout=120, **kw)
+
+
+def test_a_plan_is_on_the_plate_distinct_and_walkable():
+    r = cdm.plan(30, **JIG)
+    pos = r["positions"]
+    assert len(pos) == 30 == len(set(map(tuple, pos))) == len(set(r["points"]))
+    assert r["plate_positions"] == 7 * 7 * 3 and r["samples"] == 20
+    grid = {-30 + 10 * i for i in range(7)}
+    for x, y, z, s in pos:
+        assert x in (40, 55, 70) and y in grid and z in grid and s == 20
+    # Walking order: heights never go back down; within a height, rows
+    # (y) never go back.
+    heights = [p[0] for p in pos]
+    assert heights == sorted(heights)
+    for h in (40, 55, 70):
+        ys = [p[1] for p in pos if p[0] == h]
+        assert ys == sorted(ys)
+    # Every effect the whole plate detects at its typical size, the plan
+    # detects too (stage 1's job), and the report says how it was tested.
+    for e in r["detectability"]:
+        if e["reachable"]:
+            assert e["detectable"] and e["power"] >= r["target_power"], e
+    assert "non-central chi-square" in r["test"]
+    assert {e["effect"] for e in r["design"]["excluded"]} == {"pot_drift"}
+    # More positions predict a smaller error, and the whole plate the smallest.
+    bigger = cdm.plan(120, **JIG)
+    assert r["predicted_sigma_mm"]["whole_plate"] <= bigger["predicted_sigma_mm"]["plan"] <= \
+        r["predicted_sigma_mm"]["plan"]
+    assert cdm.plan(30, **JIG)["positions"] == pos  # deterministic
+
+
+def test_simulate_measures_exactly_the_planned_positions(tmp_path):
+    plan = tmp_path / "plan.csv"
+    r = cli("calib", "plan", "--positions", 25, *CLI_JIG, "--out", plan, "--json", tmp_path / "plan.json", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "predicted error over the workspace" in r.stdout
+    lines = plan.read_text().splitlines()
+    assert lines[0] == "x_ref,y_ref,z_ref,samples" and len(lines) == 26
+    data = tmp_path / "d.csv"
+    r = cli("calib", "simulate", data, "--holes", 7, "--pitch-mm", 10, "--heights", "40,55,70", "--plan", plan)
+    assert r.returncode == 0, r.stderr
+    rows = data.read_text().splitlines()[1:]
+    assert len(rows) == 25 * 20
+    seen = []
+    for row in rows:
+        ref = tuple(float(v) for v in row.split(",")[1:4])
+        if not seen or seen[-1] != ref:
+            seen.append(ref)
+    assert seen == [tuple(float(v) for v in line.split(",")[:3]) for line in lines[1:]]
+
+
+@pytest.mark.parametrize("text, words", [
+    ("x,y,z,n\n40,0,0,5\n", "header"),
+    ("x_ref,y_ref,z_ref,samples\n40,0,zero,5\n", ":2: \"zero\" is not a number"),
+    ("x_ref,y_ref,z_ref,samples\n40,0,0\n", ":2: 4 values expected"),
+    ("x_ref,y_ref,z_ref,samples\n", "lists no position"),
+])
+def test_a_bad_plan_file_is_refused_naming_the_line(tmp_path, text, words):
+    plan = tmp_path / "plan.csv"
+    plan.write_text(text)
+    r = cli("calib", "simulate", tmp_path / "d.csv", "--holes", 7, "--pitch-mm", 10, "--plan", plan)
+    assert r.returncode == 2 and words in r.stderr, r.stderr
+    assert not (tmp_path / "d.csv").exists()
+
+
+def test_a_position_off_the_plate_or_too_many_positions(tmp_path):
+    plan = tmp_path / "plan.csv"
+    plan.write_text("x_ref,y_ref,z_ref,samples\n40,0,0,5\n40,3,0,5\n")
+    r = cli("calib", "simulate", tmp_path / "d.csv", "--holes", 7, "--pitch-mm", 10, "--heights", "40,55", "--plan",
+            plan)
+    assert r.returncode == 1 and "plan position 2 (40, 3, 0 mm) is not a hole" in r.stderr, r.stderr
+    with pytest.raises(cdm.InvalidArgumentError) as e:
+        cdm.plan(1000, **JIG)
+    assert "positions must be in 1..147" in str(e.value)
+    with pytest.raises(cdm.InvalidArgumentError) as e:
+        cdm.plan(5, effects=["no_such_effect"], **JIG)
+    assert "no_such_effect" in str(e.value)

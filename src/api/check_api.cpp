@@ -112,7 +112,8 @@ json failing_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const
 // The jig's placement, fitted here, takes up the part of the calibration's
 // error that moves every position alike, so the test leans towards
 // "as predicted" (it sees no more than the rest).
-json predicted_json(const cdm::CalibrationFit &cf, const cdm::Model &calibration, const Eigen::MatrixXd &cov) {
+json predicted_json(const cdm::CalibrationFit &cf, const cdm::Model &calibration, const Eigen::MatrixXd &cov,
+                    const cdm::diag::Verdict &v) {
     if (cov.size() == 0) return {{"available", false}, {"text", "the calibration carries no covariance"}};
     std::vector<cdm::diag::V3> at;
     std::vector<size_t> idx;
@@ -133,6 +134,8 @@ json predicted_json(const cdm::CalibrationFit &cf, const cdm::Model &calibration
         const size_t j = idx[i];
         Eigen::Matrix3d C = S[i];
         for (int k = 0; k < 3; ++k) {
+            // the judge's weights: the mean's noise and the jig's white
+            // scatter (its holes' part in it, CalibrationFit::jig)
             const double w = cf.fitted.var_mean[j](k) + cf.jig(k) * cf.jig(k);
             C(k, k) += w;
             pred[k] += S[i](k, k);
@@ -147,8 +150,13 @@ json predicted_json(const cdm::CalibrationFit &cf, const cdm::Model &calibration
         ++n;
     }
     if (n == 0) return {{"available", false}, {"text", "no position placed"}};
+    if (!(chi2 >= 0) || !std::isfinite(chi2))
+        return {{"available", false}, {"text", "the calibration's covariance gives no finite test here"}};
     const int dof = std::max(1, int(3 * n) - cf.report.n_free - int(fixture.size()));
-    const double p = cdm::diag::chi2_sf(chi2, dof);
+    // The plate's holes correlate their positions' errors: the judge's
+    // Satterthwaite scale widens this test as it widens the judge's.
+    const double scale = std::max(1.0, v.chi2_scale);
+    const double p = cdm::diag::chi2_sf(chi2 / scale, dof / scale);
     auto rms = [n](const double *v) {
         return json{{"x", std::sqrt(v[0] / double(n))}, {"y", std::sqrt(v[1] / double(n))}, {"z", std::sqrt(v[2] / double(n))}};
     };
@@ -158,10 +166,12 @@ json predicted_json(const cdm::CalibrationFit &cf, const cdm::Model &calibration
             {"noise_and_jig_rms_mm", rms(noise)},
             {"chi2_per_dof", chi2 / dof},
             {"p_value", p},
+            {"chi2_scale", scale},
             {"as_predicted", as_predicted},
-            {"test", "each position's mean error against its noise, the jig's tolerance and the calibration's "
-                     "predicted error there (its covariance propagated), a chi-square over the positions at "
-                     "p >= 1e-3; the jig's placement, fitted here, takes up any error common to every position"},
+            {"test", "each position's mean error against its noise, the jig's tolerance and the "
+                     "calibration's predicted error there (its covariance propagated), a chi-square over the "
+                     "positions (widened as the judge's for the holes' correlation) at p >= 1e-3; the jig's "
+                     "placement, fitted here, takes up any error common to every position"},
             {"text", std::string(as_predicted ? "as the calibration's accuracy map predicted"
                                               : "larger than the calibration's accuracy map predicted") +
                          " (chi2/dof " + cdm::diag::fmt_num(chi2 / dof, 2) + ", " + cdm::diag::fmt_p(p) + ")"}};
@@ -199,7 +209,7 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
             {"nominal_error_mm", cdm::diag::stats3(cf.nominal.err)},
             {"calibration_fit", fitted_on(cal)},
             {"failing", failing_json(cf, data, v, max_error_mm)},
-            {"predicted", predicted_json(cf, calibration, cov)},
+            {"predicted", predicted_json(cf, calibration, cov, v)},
             {"model_check",
              {{"holds", v.explained},
               {"chi2_per_dof", v.chi2 / v.dof},

@@ -363,7 +363,8 @@ void add_check(CLI::App *calib) {
     chk->add_option("data", c.data, "Jig dataset CSV: point,x_ref,y_ref,z_ref,l1,l2,l3,l4")->required();
     chk->add_option("--calibration", c.calibration, "Calibration JSON to check (`cdm calib fit --out`)")->required();
     chk->add_option("--json", c.json_out, "Write the check's JSON here");
-    chk->add_option("--jig-tolerance-mm", c.jig, "Std of the jig's own position error (-1: estimated from the data)");
+    chk->add_option("--jig-tolerance-mm", c.jig, "Std of the jig's own position error (-1: estimated from the data)")
+        ->check(range(-1, 5000));
     chk->add_option("--max-error-mm", c.max_error,
                     "List the positions whose mean error is longer than this (mm; default: none)")
         ->check(range(1e-6, 5000));

@@ -1,8 +1,10 @@
 // `cdm calib plan`: a jig session planned before any data (cdm_plan), written
 // as PLAN.csv (x_ref,y_ref,z_ref,samples, in walking order); and the reader
 // of that file for `cdm calib simulate --plan`.
+#include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -41,8 +43,9 @@ std::string plan_csv(const nlohmann::json &r) {
     std::string text = std::string(kPlanHeader) + "\n";
     char b[160];
     for (const auto &p : r["positions"]) {
-        std::snprintf(b, sizeof b, "%.4f,%.4f,%.4f,%d\n", p[0].get<double>(), p[1].get<double>(), p[2].get<double>(),
-                      p[3].get<int>());
+        // Every digit: simulate --plan matches them to the plate's holes.
+        std::snprintf(b, sizeof b, "%.17g,%.17g,%.17g,%d\n", p[0].get<double>(), p[1].get<double>(),
+                      p[2].get<double>(), p[3].get<int>());
         text += b;
     }
     return text;
@@ -68,8 +71,11 @@ void print_plan(const PlanArgs &a, const nlohmann::json &r) {
         std::printf("  %-20s left out: %s\n", e["effect"].get<std::string>().c_str(), e["why"].get<std::string>().c_str());
 }
 
-int write_text(const std::string &path, const std::string &text) {
-    if (cdm_write_file_atomic(path.c_str(), text.data(), text.size(), nullptr, 0) == CDM_OK) return kExitOk;
+// Atomically; never over the command's input (`protect`, may be empty).
+int write_text(const std::string &path, const std::string &text, const std::string &protect) {
+    const char *p[] = {protect.c_str()};
+    if (cdm_write_file_atomic(path.c_str(), text.data(), text.size(), p, protect.empty() ? 0 : 1) == CDM_OK)
+        return kExitOk;
     std::fprintf(stderr, "cdm: %s\n", cdm_thread_error());
     return kExitFailure;
 }
@@ -87,9 +93,9 @@ int cmd_plan(const PlanArgs &a) {
     if (rc != CDM_OK) return report_error("calib plan", rc);
     const auto r = nlohmann::json::parse(res);
     cdm_free_string(res);
-    if (int w = write_text(a.out, plan_csv(r)); w != kExitOk) return w;
+    if (int w = write_text(a.out, plan_csv(r), a.device); w != kExitOk) return w;
     if (!a.json_out.empty())
-        if (int w = write_text(a.json_out, r.dump(1) + "\n"); w != kExitOk) return w;
+        if (int w = write_text(a.json_out, r.dump(1) + "\n", a.device); w != kExitOk) return w;
     print_plan(a, r);
     return kExitOk;
 }
@@ -97,6 +103,10 @@ int cmd_plan(const PlanArgs &a) {
 } // namespace
 
 nlohmann::json read_plan_csv(const std::string &path) {
+    struct stat st {};
+    if (stat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode))
+        throw UsageError("--plan: " + path + " is not a regular file that can be read");
+    if (size_t(st.st_size) > kPlanMaxBytes) throw UsageError("--plan: " + path + " is over 16 MiB");
     std::ifstream f(path, std::ios::binary);
     if (!f) throw UsageError("--plan: cannot read " + path);
     std::string line;
@@ -111,19 +121,23 @@ nlohmann::json read_plan_csv(const std::string &path) {
         if (!line.empty() && line.back() == '\r') line.pop_back();
         if (line.empty()) continue;
         std::vector<double> v;
-        std::stringstream ss(line);
-        std::string cell;
-        while (std::getline(ss, cell, ',')) {
+        const std::string at = "--plan: " + path + ":" + std::to_string(no) + ": ";
+        for (size_t b = 0, e;; b = e + 1) { // every field, an empty last one included
+            e = std::min(line.find(',', b), line.size());
+            const std::string cell = line.substr(b, e - b);
             char *end = nullptr;
             const double d = std::strtod(cell.c_str(), &end);
-            if (cell.empty() || *end != '\0' || !std::isfinite(d))
-                throw UsageError("--plan: " + path + ":" + std::to_string(no) + ": \"" + cell.substr(0, 40) +
-                                 "\" is not a number");
+            if (cell.empty() || *end != '\0' || !std::isfinite(d) || cell.find_first_of("xXpP") != std::string::npos)
+                throw UsageError(at + "\"" + cell.substr(0, 40) + "\" is not a number");
             v.push_back(d);
+            if (e == line.size()) break;
         }
         if (v.size() != 4)
-            throw UsageError("--plan: " + path + ":" + std::to_string(no) + ": 4 values expected (" + kPlanHeader +
-                             "), got " + std::to_string(v.size()));
+            throw UsageError(at + "4 values expected (" + kPlanHeader + "), got " + std::to_string(v.size()));
+        for (int c = 0; c < 3; ++c)
+            if (std::fabs(v[size_t(c)]) > 5000) throw UsageError(at + "a reference beyond +-5000 mm");
+        if (!(v[3] >= 1 && v[3] <= 1e6) || v[3] != std::floor(v[3]))
+            throw UsageError(at + "samples must be a whole number in 1..1000000");
         rows.push_back(v);
     }
     if (rows.empty()) throw UsageError("--plan: " + path + " lists no position");

@@ -69,7 +69,12 @@ def test_a_calibration_without_or_with_a_wrong_covariance(fitted, tmp_path):
     for bad, words in [({**good, "parameters": ["x"] + good["parameters"][1:]}, "parameter 0"),
                        ({**good, "matrix": good["matrix"][:-1]}, "must be"),
                        ({**good, "matrix": [[-1.0] + row[1:] if i == 0 else row
-                                            for i, row in enumerate(good["matrix"])]}, "negative")]:
+                                            for i, row in enumerate(good["matrix"])]}, "negative"),
+                       ({**good, "matrix": good["matrix"] + [good["matrix"][0]]}, "must be"),
+                       # symmetric, positive diagonal, but no covariance: a correlation of 5
+                       ({**good, "matrix": [[1.0 if i == k else (5.0 if {i, k} == {0, 1} else 0.0)
+                                             for k in range(len(good["matrix"]))]
+                                            for i in range(len(good["matrix"]))]}, "not a covariance")]:
         cal["fit"]["covariance"] = bad
         (tmp_path / "bad.json").write_text(json.dumps(cal))
         with pytest.raises(cdm.ParseError) as e:

@@ -73,6 +73,9 @@ def test_simulate_measures_exactly_the_planned_positions(tmp_path):
     ("x_ref,y_ref,z_ref,samples\n40,0,zero,5\n", ":2: \"zero\" is not a number"),
     ("x_ref,y_ref,z_ref,samples\n40,0,0\n", ":2: 4 values expected"),
     ("x_ref,y_ref,z_ref,samples\n", "lists no position"),
+    ("x_ref,y_ref,z_ref,samples\n40,0,0,5,\n", ':2: "" is not a number'),
+    ("x_ref,y_ref,z_ref,samples\n40,0,0,2.5\n", ":2: samples must be a whole number"),
+    ("x_ref,y_ref,z_ref,samples\n6000,0,0,5\n", ":2: a reference beyond"),
 ])
 def test_a_bad_plan_file_is_refused_naming_the_line(tmp_path, text, words):
     plan = tmp_path / "plan.csv"
@@ -80,6 +83,41 @@ def test_a_bad_plan_file_is_refused_naming_the_line(tmp_path, text, words):
     r = cli("calib", "simulate", tmp_path / "d.csv", "--holes", 7, "--pitch-mm", 10, "--plan", plan)
     assert r.returncode == 2 and words in r.stderr, r.stderr
     assert not (tmp_path / "d.csv").exists()
+
+
+def test_the_order_starts_at_the_lowest_height_and_rows_alternate():
+    pos = cdm.plan(40, holes=7, pitch_mm=10.0, heights_mm=[70, 40, 55], samples=20)["positions"]
+    assert [p[0] for p in pos] == sorted(p[0] for p in pos)
+    rows = []  # (height, y) of each visited row, in order, with its z's
+    for x, y, z, _ in pos:
+        if not rows or rows[-1][0] != (x, y):
+            rows.append(((x, y), []))
+        rows[-1][1].append(z)
+    for k, ((x, _), zs) in enumerate(rows):
+        first = k == 0 or rows[k - 1][0][0] != x
+        rank = 0 if first else rank + 1  # noqa: F821 - set on the first row of each height
+        if len(zs) > 1:
+            assert zs == (sorted(zs) if rank % 2 == 0 else sorted(zs, reverse=True)), (x, zs)
+
+
+def test_odd_pitches_quiet_pots_and_nothing_to_plan(tmp_path):
+    # Every digit of a reference goes into PLAN.csv: a pitch of 3.33333 mm
+    # simulates back.
+    plan = tmp_path / "plan.csv"
+    r = cli("calib", "plan", "--positions", 20, "--jig-n", 7, "--jig-pitch", "3.33333", "--jig-heights", "40,55",
+            "--out", plan, "--quiet")
+    assert r.returncode == 0, r.stderr
+    r = cli("calib", "simulate", tmp_path / "d.csv", "--holes", 7, "--pitch-mm", "3.33333", "--heights", "40,55",
+            "--plan", plan)
+    assert r.returncode == 0, r.stderr
+    # Quiet pots and many samples: a non-centrality past the
+    # non-central chi-square's series is power 1, not an error.
+    q = cdm.plan(10, holes=25, pitch_mm=5.0, samples=1000, noise_mm=0.01, jig_tolerance_mm=0.005)
+    assert all(e["power"] == 1.0 for e in q["detectability"] if e["reachable"])
+    for effects in (["ellipsoid"], ["pot_drift"]):
+        with pytest.raises(cdm.InvalidArgumentError) as e:
+            cdm.plan(5, effects=effects, **JIG)
+        assert "nothing to plan for" in str(e.value) and effects[0] in str(e.value)
 
 
 def test_a_position_off_the_plate_or_too_many_positions(tmp_path):
@@ -91,6 +129,9 @@ def test_a_position_off_the_plate_or_too_many_positions(tmp_path):
     with pytest.raises(cdm.InvalidArgumentError) as e:
         cdm.plan(1000, **JIG)
     assert "positions must be in 1..147" in str(e.value)
+    with pytest.raises(cdm.InvalidArgumentError) as e:
+        cdm.plan(10, holes=100, heights_mm=[30, 40, 50])
+    assert "over the planner's 20000" in str(e.value)
     with pytest.raises(cdm.InvalidArgumentError) as e:
         cdm.plan(5, effects=["no_such_effect"], **JIG)
     assert "no_such_effect" in str(e.value)

@@ -119,7 +119,9 @@ bool accuracy_map(const Model &m, const FitReport &rep, const std::vector<Prepar
                   AccuracyMap &out, std::string &err) {
     out = AccuracyMap();
     if (pos.empty() || rep.cov_by_hole.size() == 0) {
-        err = pos.empty() ? "no positions" : "the fit has no covariance (FitOptions::statistics off)";
+        err = pos.empty() ? "no positions"
+                          : "no fitted parameter to propagate (a model of position-space effects alone, or a fit "
+                            "without statistics)";
         return false;
     }
     std::vector<V3> dev(pos.size());
@@ -236,8 +238,13 @@ bool covariance_from_json(const nlohmann::json &j, const Model &m, Eigen::Matrix
         }
     const auto &mj = j["matrix"];
     cov.resize(Eigen::Index(n), Eigen::Index(n));
+    if (mj.size() != n) {
+        err = "fit.covariance: the matrix must be " + std::to_string(n) + " x " + std::to_string(n) + ", it has " +
+              std::to_string(mj.size()) + " rows";
+        return false;
+    }
     for (size_t i = 0; i < n; ++i) {
-        if (i >= mj.size() || !mj[i].is_array() || mj[i].size() != n) {
+        if (!mj[i].is_array() || mj[i].size() != n) {
             err = "fit.covariance: the matrix must be " + std::to_string(n) + " x " + std::to_string(n);
             return false;
         }
@@ -257,11 +264,22 @@ bool covariance_from_json(const nlohmann::json &j, const Model &m, Eigen::Matrix
         }
         for (size_t k = 0; k < i; ++k) {
             const auto b = Eigen::Index(k);
-            if (std::fabs(cov(a, b) - cov(b, a)) > 1e-9 * std::sqrt(cov(a, a) * cov(b, b)) + 1e-300) {
+            if (std::fabs(cov(a, b) - cov(b, a)) > 1e-9 * std::sqrt(cov(a, a)) * std::sqrt(cov(b, b)) + 1e-300) {
                 err = "fit.covariance: the matrix is not symmetric at [" + std::to_string(i) + "][" + std::to_string(k) + "]";
                 return false;
             }
         }
+    }
+    // A covariance: no direction of negative variance (beyond round-off of
+    // its largest, scaled by the diagonal so units do not matter).
+    Eigen::VectorXd d = cov.diagonal().cwiseSqrt();
+    for (Eigen::Index i = 0; i < d.size(); ++i) d(i) = d(i) > 0 ? 1.0 / d(i) : 0.0;
+    const Eigen::MatrixXd R = d.asDiagonal() * cov * d.asDiagonal();
+    const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(R, Eigen::EigenvaluesOnly).eigenvalues();
+    if (ev.size() > 0 && !(ev.minCoeff() >= -1e-9 * std::max(1.0, ev.maxCoeff()))) {
+        err = "fit.covariance: the matrix is not a covariance (an eigenvalue of its correlation matrix is " +
+              std::to_string(ev.minCoeff()) + ")";
+        return false;
     }
     return true;
 }

@@ -112,7 +112,10 @@ bool evaluate_candidates(const Model &m, Design &D, std::string &err) {
             const int c = ev.offset(e) + int(q);
             D.prior(c) = 1.0 / std::pow(10 * d.params[q].scale, 2); // the fit's weak prior (problem.h)
             eff.cols.push_back(c);
-            eff.typical(Eigen::Index(q)) = std::fabs(m.effect_params(e)[q]);
+            // A period is where the effect is, not how large it is: no size
+            // of its own in the test (its amplitudes carry the effect).
+            eff.typical(Eigen::Index(q)) =
+                d.params[q].role == ParamRole::LengthPeriod ? 0.0 : std::fabs(m.effect_params(e)[q]);
         }
         if (d.stage == Stage::Jig) D.jig.insert(D.jig.end(), eff.cols.begin(), eff.cols.end());
         else D.eff.push_back(std::move(eff));
@@ -176,6 +179,18 @@ std::vector<std::string> determined(const Design &D, std::vector<std::pair<std::
 // its parameters (the simulator draws each sign at random: the cross terms
 // average out, so it is sum_i t_i^2 V_ii, V the test's information on the
 // effect's parameters through its gauge), and the power at level alpha.
+// The power of a chi-square test of k degrees of freedom at level alpha
+// when its non-centrality is lambda: the non-central chi-square's tail past
+// the central one's 1 - alpha quantile. Past 40 standard deviations of
+// the non-central law beyond the quantile it is 1 (Boost's series also
+// stops converging there, near lambda = 4e9).
+double test_power(int k, double lambda, double alpha) {
+    if (!(lambda > 0)) return alpha;
+    const double q = boost::math::quantile(boost::math::complement(boost::math::chi_squared(k), alpha));
+    if (lambda + k - q > 40 * std::sqrt(2.0 * (k + 2 * lambda))) return 1.0;
+    return boost::math::cdf(boost::math::complement(boost::math::non_central_chi_squared(k, lambda), q));
+}
+
 // The columns a test of e looks at: the jig's placement's, then e's.
 std::vector<int> test_cols(const Design &D, const Design::Eff &e) {
     std::vector<int> c = D.jig;
@@ -204,10 +219,7 @@ std::pair<double, double> power_of(const Design &D, const Design::Eff &e, const 
     for (Eigen::Index i = 0; i < ne; ++i) lambda += e.typical(i) * e.typical(i) * V(i, i);
     lambda = std::max(0.0, lambda);
     const int k = std::max<int>(1, int(B.cols()));
-    const double q = boost::math::quantile(boost::math::complement(boost::math::chi_squared(k), alpha));
-    const double power =
-        lambda > 0 ? boost::math::cdf(boost::math::complement(boost::math::non_central_chi_squared(k, lambda), q)) : alpha;
-    return {lambda, power};
+    return {lambda, test_power(k, lambda, alpha)};
 }
 
 // The chosen positions' information and the priors': on every parameter
@@ -278,8 +290,8 @@ bool i_optimal_stage(const PlanOptions &o, const std::vector<const Design *> &Ds
             err = "plan cancelled";
             return false;
         }
-        double best = -1;
-        size_t star = 0;
+        double best = -INFINITY; // (round-off can make a gain that is nothing a little below zero)
+        size_t star = nc;
         for (size_t k = 0; k < nc; ++k) {
             if (chosen[k]) continue;
             double gain = 0;
@@ -288,7 +300,11 @@ bool i_optimal_stage(const PlanOptions &o, const std::vector<const Design *> &Ds
                 const Eigen::Matrix4d M = D.Winv[k] + Z[m][k] * D.Jr[k].transpose();
                 gain += M.ldlt().solve(Y[m][k] * Z[m][k].transpose()).trace() / scale[m];
             }
-            if (gain > best) best = gain, star = k;
+            if (std::isfinite(gain) && gain > best) best = gain, star = k;
+        }
+        if (star == nc) {
+            err = "the I-optimal criterion is not finite at any position left (the design model is degenerate)";
+            return false;
         }
         chosen[star] = 1;
         for (size_t m = 0; m < Ds.size(); ++m) {
@@ -311,18 +327,39 @@ double mean_sigma(const Design &D, const std::vector<char> &chosen) {
     return std::sqrt(std::max(0.0, (C * D.L).trace()));
 }
 
-// Height by height (lowest first), rows along y, each row's holes along z
-// back and forth.
+// Height by height (lowest first), rows along y, each visited row's holes
+// along z the other way from the row visited before it.
 void walking_order(std::vector<JigPosition> &v) {
     std::sort(v.begin(), v.end(), [](const JigPosition &a, const JigPosition &b) {
-        if (a.height_index != b.height_index) return a.height_index < b.height_index;
+        if (a.ref[0] != b.ref[0]) return a.ref[0] < b.ref[0];
         if (a.row != b.row) return a.row < b.row;
-        return (a.row % 2 == 0) ? a.col < b.col : a.col > b.col;
+        return a.col < b.col;
     });
+    size_t rank = 0; // of the visited row within its height
+    for (size_t i = 0; i < v.size();) {
+        size_t j = i;
+        while (j < v.size() && v[j].ref[0] == v[i].ref[0] && v[j].row == v[i].row) ++j;
+        if (i > 0 && v[i].ref[0] != v[i - 1].ref[0]) rank = 0; // each height starts forward
+        if (rank % 2 == 1) std::reverse(v.begin() + long(i), v.begin() + long(j));
+        ++rank;
+        i = j;
+    }
 }
 
-bool check_options(const PlanOptions &o, size_t plate, std::string &err) {
+// The plate's positions a plan chooses from: beyond this the candidates'
+// Jacobians and updates take gigabytes (100 x 100 holes x 5 heights took
+// 0.9 GB).
+constexpr double kMaxCandidates = 20000;
+
+bool check_options(const PlanOptions &o, std::string &err) {
     if (!check_jig_options(o.jig, err)) return false;
+    const double plate_d = double(o.jig.n) * double(o.jig.n) * double(o.jig.heights_mm.size());
+    if (plate_d > kMaxCandidates) {
+        err = "the plate's positions (holes " + std::to_string(o.jig.n) + " x " + std::to_string(o.jig.n) + " x " +
+              std::to_string(o.jig.heights_mm.size()) + " heights) are over the planner's 20000";
+        return false;
+    }
+    const size_t plate = size_t(plate_d);
     if (o.positions < 1 || size_t(o.positions) > plate) {
         err = "positions must be in 1.." + std::to_string(plate) + " (the plate's holes at every height), not " +
               std::to_string(o.positions);
@@ -340,16 +377,33 @@ bool check_options(const PlanOptions &o, size_t plate, std::string &err) {
 
 bool plan_session(const DeviceGeometry &g, const PlanOptions &o, PlanResult &out, std::string &err) {
     out = PlanResult();
+    if (!check_options(o, err)) return false;
     Design D;
     D.cand = make_jig_plan(o.jig);
-    if (!check_options(o, D.cand.size(), err)) return false;
     std::vector<std::string> names = o.effects;
     if (names.empty())
         for (const auto &d : all_effects())
             if (!d->is_user() && plannable_stage(d->stage)) names.push_back(d->name);
+    for (auto it = names.begin(); it != names.end();) {
+        const auto d = find_effect(*it);
+        if (d && (d->stage == Stage::Jig || d->stage == Stage::Position)) {
+            out.excluded.push_back({*it, d->stage == Stage::Jig ? "the jig's placement is in every design already"
+                                                                : "fitted in position space after the readings"});
+            it = names.erase(it);
+        } else {
+            ++it;
+        }
+    }
     Model m(g);
     if (!design_model(g, names, m, err) || !evaluate_candidates(m, D, err)) return false;
     out.effects = determined(D, out.excluded);
+    if (out.effects.empty()) {
+        err = "nothing to plan for: no effect whose readings the positions determine (left out: ";
+        for (size_t i = 0; i < out.excluded.size(); ++i)
+            err += (i ? ", " : "") + out.excluded[i].first + ": " + out.excluded[i].second;
+        err += ")";
+        return false;
+    }
     if (out.effects.size() != names.size()) { // again without the effects positions do not determine
         D = Design();
         D.cand = make_jig_plan(o.jig);
@@ -363,9 +417,7 @@ bool plan_session(const DeviceGeometry &g, const PlanOptions &o, PlanResult &out
     std::vector<char> chosen(D.cand.size(), 0);
     out.detect_picks = detect_stage(o, D, power_all, chosen, o.positions);
     // The I-criterion's models: the one given; else each effect beside the
-    // jig's placement (the device has some of them, nobody knows which: a
-    // design for the whole catalogue at once spends its positions on the
-    // combinations of sixty parameters no calibration fits).
+    // jig's placement (the device has some of them, nobody knows which).
     std::vector<Design> singles;
     std::vector<const Design *> Ds{&D};
     if (o.effects.empty()) {
@@ -387,7 +439,7 @@ bool plan_session(const DeviceGeometry &g, const PlanOptions &o, PlanResult &out
     for (size_t e = 0; e < D.eff.size(); ++e) {
         const auto [l, p] = power_of(D, D.eff[e], sub(F, test_cols(D, D.eff[e])), o.alpha);
         const auto [la, pa] = power_of(D, D.eff[e], sub(Fall, test_cols(D, D.eff[e])), o.alpha);
-        out.power.push_back({D.eff[e].name, int(D.eff[e].cols.size()), l, p, la, pa});
+        out.power.push_back({D.eff[e].name, std::max<int>(1, int(D.eff[e].basis.cols())), l, p, la, pa});
     }
     out.sigma_mm = mean_sigma(D, chosen);
     out.sigma_all_mm = mean_sigma(D, all);

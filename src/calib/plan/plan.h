@@ -21,9 +21,8 @@
 //     placement left out). For the model given; without one, for each
 //     catalogued effect beside the jig's placement at once (the sum of
 //     each one's gain over its variance with the whole plate): the device
-//     has some of them and nobody knows which, and a design for the whole
-//     catalogue as one model spent its positions on combinations of sixty
-//     parameters no calibration fits (tests/bench/bench_plan.py).
+//     has some of them and nobody knows which (docs/calibration.md,
+//     "Planning a session", compares the two with random subsets).
 // The chosen positions are returned in an order a person can walk: height
 // by height (lowest first), rows along y, each row's holes along z going
 // back and forth.
@@ -51,7 +50,7 @@ struct PlanOptions {
 
 struct EffectPower {
     std::string name;
-    int dof = 0;
+    int dof = 0; // the test's degrees of freedom: the effect's parameters in its gauge beside the jig
     double lambda = 0, power = 0;         // with the plan
     double lambda_all = 0, power_all = 0; // with every position of the plate
 };

@@ -381,6 +381,7 @@ int cdm_simulate_jig_dataset(const char *out_csv, const char *options_json) {
         std::string err;
         if (options_json && *options_json && !parse_sim_options(options_json, req, err))
             return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_simulate_jig_dataset: " + err);
+        if (!cdm::check_jig_sim(req.o, err)) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_simulate_jig_dataset: " + err);
         cdm::DeviceGeometry g;
         std::string text;
         if (!req.device.empty()) {

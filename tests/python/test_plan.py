@@ -125,7 +125,9 @@ def test_a_position_off_the_plate_or_too_many_positions(tmp_path):
     plan.write_text("x_ref,y_ref,z_ref,samples\n40,0,0,5\n40,3,0,5\n")
     r = cli("calib", "simulate", tmp_path / "d.csv", "--holes", 7, "--pitch-mm", 10, "--heights", "40,55", "--plan",
             plan)
+    # refused before any file is written, as a bad option (exit 1: the library's refusal)
     assert r.returncode == 1 and "plan position 2 (40, 3, 0 mm) is not a hole" in r.stderr, r.stderr
+    assert "invalid argument" in r.stderr and not (tmp_path / "d.csv").exists()
     with pytest.raises(cdm.InvalidArgumentError) as e:
         cdm.plan(1000, **JIG)
     assert "positions must be in 1..147" in str(e.value)

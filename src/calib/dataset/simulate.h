@@ -43,6 +43,11 @@ struct JigSimOptions {
     std::vector<std::array<double, 4>> plan;
 };
 
+// The options' jig and plan as the simulator would take them (the plate's
+// fields; each plan position a hole at a height, whole samples): false +
+// err naming the first that is not, before any file is opened.
+bool check_jig_sim(const JigSimOptions &o, std::string &err);
+
 // Streams the CSV through DatasetWriter (atomic; `protect_paths`, the
 // caller's inputs, are refused as the target); false + err on I/O or model
 // failure.

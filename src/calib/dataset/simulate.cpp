@@ -62,12 +62,18 @@ bool planned_visits(const std::vector<JigPosition> &plan, const JigSimOptions &o
     return true;
 }
 
-template <class Sink> bool run(const Model &truth, const JigSimOptions &o, Sink sink, std::string &err) {
+// The plate of the simulator's options.
+JigPlanOptions plate_of(const JigSimOptions &o) {
     JigPlanOptions po;
     po.n = o.n;
     po.pitch_mm = o.pitch_mm;
     po.heights_mm = o.heights;
     po.samples = o.samples;
+    return po;
+}
+
+template <class Sink> bool run(const Model &truth, const JigSimOptions &o, Sink sink, std::string &err) {
+    const JigPlanOptions po = plate_of(o);
     if (!check_jig_options(po, err)) return false;
     const auto plan = o.scattered ? make_scattered_plan(po, o.seed ^ 0x3C6EF372FE94F82Bull) : make_jig_plan(po);
     JigErrorOptions je;
@@ -114,11 +120,7 @@ template <class Sink> bool run(const Model &truth, const JigSimOptions &o, Sink 
 } // namespace
 
 bool check_jig_sim(const JigSimOptions &o, std::string &err) {
-    JigPlanOptions po;
-    po.n = o.n;
-    po.pitch_mm = o.pitch_mm;
-    po.heights_mm = o.heights;
-    po.samples = o.samples;
+    const JigPlanOptions po = plate_of(o);
     if (!check_jig_options(po, err)) return false;
     if (o.plan.empty()) return true;
     std::vector<std::pair<size_t, int>> visits;

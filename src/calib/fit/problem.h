@@ -484,4 +484,11 @@ struct Problem {
     }
 };
 
+// The parameters' covariance robust to errors a plate hole's positions
+// share beyond the weights (covariance.cpp): C M C, C the model's
+// covariance (n_params x n_params, gauge and priors in it), J and res the
+// whitened Jacobian and residuals at the end of a fit.
+Eigen::MatrixXd clustered_covariance(const Problem &pb, const Eigen::MatrixXd &C, const Eigen::MatrixXd &J,
+                                     const Eigen::VectorXd &res);
+
 } // namespace cdm::fit_detail

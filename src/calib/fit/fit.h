@@ -128,16 +128,13 @@ struct FitReport {
     // per effect (model order), per parameter
     std::vector<std::vector<double>> std;
     // The fitted parameters' covariance (FitOptions::statistics; empty
-    // without), inflated by chi2/dof as `std` is: rows and columns in the
-    // order of ReadingEvaluator's full vector (every effect in model order
-    // but the Position-stage ones, each effect's parameters in order); a
-    // parameter fixed by the gauge or held has zero variance. The fixture
-    // offsets are left out (marginalised: this is their block's complement
-    // of the whole covariance).
-    Eigen::MatrixXd cov;
-    // The same, robust to errors a plate hole's positions share beyond the
-    // weights (a sandwich clustered by FitOptions::hole; optimiser.cpp),
-    // not inflated: what the accuracy map propagates.
+    // without), robust to errors a plate hole's positions share beyond the
+    // weights (a sandwich clustered by FitOptions::hole; fit/covariance.cpp):
+    // what the accuracy map propagates. Rows and columns in the order of
+    // ReadingEvaluator's full vector (every effect in model order but the
+    // Position-stage ones, each effect's parameters in order); a parameter
+    // fixed by the gauge or held has zero variance; the fixture offsets
+    // marginalised out (their block left off the whole covariance).
     Eigen::MatrixXd cov_by_hole;
     std::string message;
     std::vector<double> fixture_mm; // fitted per-height x offsets (FitOptions::fixture)

@@ -552,7 +552,6 @@ bool FitRun::finish() {
         Eigen::MatrixXd C = pb.Q * H.ldlt().solve(Eigen::MatrixXd::Identity(nfree, nfree)) * pb.Q.transpose();
         const double dof = std::max(1, rep.n_obs - nfree);
         const double infl = std::max(1.0, rep.chi2 / dof);
-        rep.cov = C.topLeftCorner(pb.ev.size(), pb.ev.size()) * infl;
         rep.cov_by_hole = clustered_covariance(pb, C, J, res).topLeftCorner(pb.ev.size(), pb.ev.size());
         rep.std.clear();
         for (size_t e = 0; e < m.effect_count(); ++e) {

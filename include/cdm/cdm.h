@@ -271,13 +271,41 @@ typedef struct cdm_event {
  */
 typedef void (*cdm_event_fn)(void *user, const cdm_event *event);
 
-/** Options for cdm_open_ex. Zero-initialise, set struct_size. Size 24 (1.0), 32 (1.1). */
+/** since 1.2: why the reader discarded a report (cdm_rejected.kind). */
+typedef enum cdm_rejected_kind {
+    CDM_REJECTED_MALFORMED = 1,   /**< the protocol parser refused it (cdm_stats.malformed) */
+    CDM_REJECTED_OUT_OF_ORDER = 2 /**< a duplicate or a late report (cdm_stats.out_of_order) */
+} cdm_rejected_kind;
+
+/** since 1.2: a report the reader received and discarded. Valid only
+ *  during the callback. */
+typedef struct cdm_rejected {
+    uint32_t struct_size;
+    uint32_t kind;            /**< cdm_rejected_kind */
+    const uint8_t *report;    /**< the bytes as received, report ID first */
+    uint32_t report_len;
+    uint32_t reserved0;
+    /** when it was first received, ns (as cdm_sample.source_time_ns) */
+    uint64_t source_time_ns;
+    const char *reason;       /**< in words (never NULL) */
+} cdm_rejected;
+
+/**
+ * since 1.2. Called on the device's reader thread, in arrival order with
+ * the samples, for every report the reader discarded, so that a recorder
+ * keeps every report the device sent (cdm_recorder_write_rejected). The
+ * same rules as cdm_sample_fn.
+ */
+typedef void (*cdm_rejected_fn)(void *user, const cdm_rejected *rejected);
+
+/** Options for cdm_open_ex. Zero-initialise, set struct_size. Size 24 (1.0), 32 (1.1), 40 (1.2). */
 typedef struct cdm_open_options {
     uint32_t struct_size;
     uint32_t stale_timeout_us;  /**< 0: the default, 50000 */
     cdm_sample_fn on_sample;    /**< optional; installed before the first report */
-    void *user;                 /**< passed to on_sample and on_event */
+    void *user;                 /**< passed to on_sample, on_event and on_rejected */
     cdm_event_fn on_event;      /**< since 1.1, optional: state changes (cdm_event_kind) */
+    cdm_rejected_fn on_rejected; /**< since 1.2, optional: the reports discarded */
 } cdm_open_options;
 
 /**
@@ -374,7 +402,7 @@ CDM_API int cdm_get_info(cdm_device *dev, cdm_device_info *out);
 /** A pose older than this (host clock) is flagged stale. 0 restores the default (50 ms). Any thread. */
 CDM_API int cdm_set_stale_timeout(cdm_device *dev, uint32_t timeout_us);
 
-/** Counters of the reader thread. Size 48 (1.0), 72 (1.1). */
+/** Counters of the reader thread. Size 48 (1.0), 72 (1.1), 80 (1.2). */
 typedef struct cdm_stats {
     uint32_t struct_size;
     uint32_t reserved0;
@@ -394,6 +422,12 @@ typedef struct cdm_stats {
     /** since 1.1: bytes of an incomplete last record a replay dropped (a
      *  recording cut by a kill or a full disk); 0 otherwise. */
     uint64_t replay_truncated_bytes;
+    /** since 1.2: the device restarted its counter (a firmware restart or
+     *  a brown-out, docs/protocol.md "Sequence numbers"): a backward step to
+     *  a number the device could have counted to from 0 since the last
+     *  report. Not counted in sequence_jumps; the numbers below the new one
+     *  are counted in dropped. */
+    uint64_t restarts;
 } cdm_stats;
 
 /** Any thread. */
@@ -845,6 +879,11 @@ CDM_API int cdm_recorder_write(cdm_recorder *rec, uint64_t host_time_ns, const u
 /** since 1.1: one on_sample sample: its report at source_time_ns and (MCAP,
  *  CSV) its pose. Times as cdm_recorder_write's, in every format. */
 CDM_API int cdm_recorder_write_sample(cdm_recorder *rec, const cdm_sample *sample);
+/** since 1.2: one on_rejected report, its bytes at source_time_ns as
+ *  cdm_recorder_write's, so a replay discards it as the live reader did and
+ *  its counters come out the same; MCAP also logs the reason (channel
+ *  `/cdm/rejected`). A CSV, which holds poses only, skips it (CDM_OK). */
+CDM_API int cdm_recorder_write_rejected(cdm_recorder *rec, const cdm_rejected *rejected);
 CDM_API int cdm_recorder_close(cdm_recorder *rec);
 
 /**

@@ -274,6 +274,30 @@ int cdm_recorder_write_sample(cdm_recorder *rec, const cdm_sample *sample) {
     });
 }
 
+int cdm_recorder_write_rejected(cdm_recorder *rec, const cdm_rejected *rejected) {
+    return cdm::guarded("cdm_recorder_write_rejected", [&] {
+        if (!rec) return null_arg("cdm_recorder_write_rejected", "rec");
+        if (!rejected || !rejected->report || !rejected->reason)
+            return null_arg("cdm_recorder_write_rejected", "rejected (or its report, reason)");
+        if (rejected->struct_size < sizeof(cdm_rejected))
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_recorder_write_rejected: cdm_rejected.struct_size is " +
+                                                      std::to_string(rejected->struct_size) + ", expected at least " +
+                                                      std::to_string(sizeof(cdm_rejected)));
+        const char *kind = rejected->kind == CDM_REJECTED_MALFORMED      ? "malformed"
+                           : rejected->kind == CDM_REJECTED_OUT_OF_ORDER ? "out_of_order"
+                                                                         : nullptr;
+        if (!kind)
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_recorder_write_rejected: kind " +
+                                                      std::to_string(rejected->kind) + " is not a cdm_rejected_kind");
+        std::string err;
+        if (int rc = rec->writer->write_rejected(rejected->source_time_ns, rejected->report, rejected->report_len, kind,
+                                                 rejected->reason, err);
+            rc != CDM_OK)
+            return cdm::fail(rc, err);
+        return int(CDM_OK);
+    });
+}
+
 int cdm_recorder_close(cdm_recorder *rec) {
     if (!rec) return CDM_OK;
     std::unique_ptr<cdm_recorder> owned(rec);

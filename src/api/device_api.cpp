@@ -21,9 +21,11 @@ static_assert(offsetof(cdm_pose, velocity) == 112 && sizeof(cdm_pose) == 136, "c
 static_assert(sizeof(cdm_raw) == 80, "cdm_raw 1.0 is 80 bytes");
 static_assert(sizeof(cdm_device_info) == 456, "cdm_device_info 1.0 is 456 bytes");
 static_assert(offsetof(cdm_stats, sequence_jumps) == 48, "cdm_stats 1.0 is 48 bytes");
-static_assert(sizeof(cdm_stats) == 72, "cdm_stats 1.1 is 72 bytes");
-static_assert(offsetof(cdm_open_options, on_event) == 24 && sizeof(cdm_open_options) == 32,
-              "cdm_open_options 1.0 is 24 bytes, 1.1 is 32");
+static_assert(offsetof(cdm_stats, restarts) == 72 && sizeof(cdm_stats) == 80, "cdm_stats 1.1 is 72 bytes, 1.2 80");
+static_assert(offsetof(cdm_open_options, on_event) == 24 && offsetof(cdm_open_options, on_rejected) == 32 &&
+                  sizeof(cdm_open_options) == 40,
+              "cdm_open_options 1.0 is 24 bytes, 1.1 is 32, 1.2 40");
+static_assert(sizeof(cdm_rejected) == 40, "cdm_rejected 1.2 is 40 bytes");
 static_assert(sizeof(cdm_sample) == 40, "cdm_sample 1.1 is 40 bytes (1.0: 32)");
 
 struct cdm_device_list {

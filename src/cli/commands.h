@@ -51,6 +51,10 @@ std::vector<std::string> split_list(const std::string &s);
 
 // "cdm: WHAT: <cdm_strerror>: <detail>" on stderr; returns kExitFailure.
 int report_error(const std::string &what, int rc);
+// A device's counters (cdm_stats) as the JSON summaries give them.
+nlohmann::json stats_json(const cdm_stats &st);
+// "D dropped, M malformed, O out of order, J sequence jumps, R restarts".
+std::string losses_text(const cdm_stats &st);
 
 // --plugin PATH, repeatable, on a command that evaluates a model (a
 // calibration, a sim: URI's effects= or truth=, --effects): the user-effect

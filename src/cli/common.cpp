@@ -69,6 +69,20 @@ std::vector<double> parse_number_list(const std::string &text, const std::string
     return out;
 }
 
+nlohmann::json stats_json(const cdm_stats &st) {
+    return {{"reports", st.reports},           {"dropped", st.dropped},
+            {"malformed", st.malformed},       {"out_of_order", st.out_of_order},
+            {"sequence_jumps", st.sequence_jumps}, {"restarts", st.restarts},
+            {"out_of_workspace", st.out_of_workspace}, {"reconnects", st.reconnects},
+            {"replay_truncated_bytes", st.replay_truncated_bytes}};
+}
+
+std::string losses_text(const cdm_stats &st) {
+    const auto n = [](uint64_t v) { return std::to_string(v); };
+    return n(st.dropped) + " dropped, " + n(st.malformed) + " malformed, " + n(st.out_of_order) + " out of order, " +
+           n(st.sequence_jumps) + " sequence jumps, " + n(st.restarts) + " restarts";
+}
+
 int report_error(const std::string &what, int rc) {
     std::fprintf(stderr, "cdm: %s: %s", what.c_str(), cdm_strerror(rc));
     std::string detail = cdm_thread_error() ? cdm_thread_error() : "";

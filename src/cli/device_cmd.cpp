@@ -298,16 +298,12 @@ void print_stream_summary(const StreamArgs &a, const StreamCtx &ctx, const cdm_s
                           bool ended, const char *err, bool tty) {
     const double n = double(ctx.truth_n);
     if (a.json) {
-        nlohmann::json j = {{"summary", true},
-                            {"reports", st.reports},
-                            {"seconds", elapsed},
-                            {"rate_hz", double(st.reports) / elapsed},
-                            {"dropped", st.dropped},
-                            {"malformed", st.malformed},
-                            {"out_of_workspace", st.out_of_workspace},
-                            {"reconnects", st.reconnects},
-                            {"end_of_stream", ended},
-                            {"last_device_message", err}};
+        nlohmann::json j = stats_json(st);
+        j["summary"] = true;
+        j["seconds"] = elapsed;
+        j["rate_hz"] = double(st.reports) / elapsed;
+        j["end_of_stream"] = ended;
+        j["last_device_message"] = err;
         if (a.truth && ctx.truth_n) {
             for (int k = 0; k < 3; ++k) {
                 j["truth_error_mean_mm"].push_back(ctx.err[k].sum / n);
@@ -317,12 +313,10 @@ void print_stream_summary(const StreamArgs &a, const StreamCtx &ctx, const cdm_s
         std::printf("%s\n", j.dump().c_str());
         return;
     }
-    std::printf("%s%llu reports in %.2f s (%.1f Hz), dropped %llu, malformed %llu, out of workspace %llu, "
-                "reconnects %llu%s\n",
+    std::printf("%s%llu reports in %.2f s (%.1f Hz), %s, out of workspace %llu, reconnects %llu%s\n",
                 tty ? "\n" : "", (unsigned long long)st.reports, elapsed, double(st.reports) / elapsed,
-                (unsigned long long)st.dropped, (unsigned long long)st.malformed,
-                (unsigned long long)st.out_of_workspace, (unsigned long long)st.reconnects,
-                ended ? " (end of stream)" : "");
+                losses_text(st).c_str(), (unsigned long long)st.out_of_workspace,
+                (unsigned long long)st.reconnects, ended ? " (end of stream)" : "");
     if (*err) std::printf("last device message: %s\n", err);
     if (!a.truth) return;
     if (ctx.truth_n == 0) {

@@ -58,6 +58,8 @@ struct RecordCtx {
         cdm_raw raw;
         cdm_pose pose;
         uint64_t source_ns;
+        uint32_t rejected_kind; // 0: a sample; else a cdm_rejected_kind
+        std::string reason;
     };
     std::vector<Pending> pending;
     bool write_failed = false;
@@ -83,6 +85,7 @@ struct RecordCtx {
     std::atomic<bool> done{false};
     // both
     uint64_t reports = 0;
+    uint64_t rejected = 0; // reports the reader discarded, kept in the recording
 };
 
 // A write's outcome. A sample the writer refused (CDM_ERR_INVALID_ARG:
@@ -119,6 +122,22 @@ void close_dwell(RecordCtx &c) {
     if (++c.next_point == c.plan_n) c.done = true;
 }
 
+// A report the reader discarded is kept too (not in a jig dataset, which
+// holds positions): a replay discards it again and counts it as the live
+// reader did.
+void record_rejected(void *user, const cdm_rejected *r) {
+    auto *c = static_cast<RecordCtx *>(user);
+    std::lock_guard<std::mutex> lock(c->mu);
+    if (c->jig) return;
+    ++c->rejected;
+    if (!c->rec) {
+        c->pending.push_back({std::vector<uint8_t>(r->report, r->report + r->report_len), cdm_raw{}, cdm_pose{},
+                              r->source_time_ns, r->kind, r->reason});
+        return;
+    }
+    if (!c->write_failed) after_write(*c, cdm_recorder_write_rejected(c->rec, r));
+}
+
 void record_sample(void *user, const cdm_sample *s) {
     auto *c = static_cast<RecordCtx *>(user);
     std::lock_guard<std::mutex> lock(c->mu);
@@ -126,7 +145,7 @@ void record_sample(void *user, const cdm_sample *s) {
     if (!c->jig) {
         if (!c->rec) {
             c->pending.push_back({std::vector<uint8_t>(s->report, s->report + s->report_len), *s->raw, *s->pose,
-                                  s->source_time_ns});
+                                  s->source_time_ns, 0, std::string()});
             return;
         }
         if (!c->write_failed) after_write(*c, cdm_recorder_write_sample(c->rec, s));
@@ -223,6 +242,17 @@ int open_recorder(cdm_device *dev, const std::string &tmp, const char *format, R
     std::lock_guard<std::mutex> lock(ctx.mu);
     ctx.rec = rec;
     for (const auto &r : ctx.pending) {
+        if (r.rejected_kind) {
+            cdm_rejected j{};
+            j.struct_size = sizeof j;
+            j.kind = r.rejected_kind;
+            j.report = r.report.data();
+            j.report_len = uint32_t(r.report.size());
+            j.source_time_ns = r.source_ns;
+            j.reason = r.reason.c_str();
+            if (!ctx.write_failed) after_write(ctx, cdm_recorder_write_rejected(rec, &j));
+            continue;
+        }
         cdm_sample s{};
         s.struct_size = sizeof s;
         s.report_len = uint32_t(r.report.size());
@@ -284,7 +314,7 @@ std::string sync_file(const std::string &path) {
 // Completes the file: flush, close, rename into place. After a write error
 // (a full disk, an I/O error) the target is never replaced: an existing FILE
 // stays as it was, and what was written stays in the temporary, named.
-int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, const cdm_stats &st) {
+int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, const cdm_stats &st, bool json) {
     std::string err = ctx.write_err;
     if (ctx.jig) {
         if (ctx.in_dwell) close_dwell(ctx); // the stream ended with MARK still held
@@ -327,15 +357,19 @@ int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, cons
             std::fprintf(stderr, "cdm: record: the session stopped before the jig plan was complete\n");
             return kExitFailure;
         }
+    } else if (json) {
+        nlohmann::json j = {{"file", file}, {"format", format_of(file)}, {"samples", ctx.reports},
+                            {"rejected", ctx.rejected}, {"stats", stats_json(st)}};
+        std::printf("%s\n", j.dump().c_str());
     } else {
-        std::printf("wrote %s (%s): %llu reports (%llu dropped, %llu malformed)\n", file.c_str(), format_of(file),
-                    (unsigned long long)ctx.reports, (unsigned long long)st.dropped, (unsigned long long)st.malformed);
+        std::printf("wrote %s (%s): %llu reports and %llu rejected ones (%s)\n", file.c_str(), format_of(file),
+                    (unsigned long long)ctx.reports, (unsigned long long)ctx.rejected, losses_text(st).c_str());
     }
     return kExitOk;
 }
 
 int cmd_record(const std::string &uri, const std::string &file, double seconds, const JigArgs &ja,
-               const std::string &compression, bool exporting = false) {
+               const std::string &compression, bool exporting = false, bool json = false) {
     check_output(uri, file);
     std::string format = format_of(file);
     if (!compression.empty()) {
@@ -364,6 +398,7 @@ int cmd_record(const std::string &uri, const std::string &file, double seconds, 
     cdm_open_options o{};
     o.struct_size = sizeof o;
     o.on_sample = record_sample;
+    o.on_rejected = record_rejected;
     o.user = &ctx;
     cdm_device *dev = nullptr;
     int rc = cdm_open_ex(uri.c_str(), &o, &dev);
@@ -387,7 +422,7 @@ int cmd_record(const std::string &uri, const std::string &file, double seconds, 
     st.struct_size = sizeof st;
     cdm_get_stats(dev, &st);
     cdm_close(dev); // no callback runs after this
-    rc = finish(ctx, tmp, file, st);
+    rc = finish(ctx, tmp, file, st, json);
     cdm_jig_plan_free(ctx.plan);
     return rc;
 }
@@ -425,10 +460,14 @@ void add_record_command(CLI::App &app) {
         ->check(CLI::IsMember({"zstd", "lz4", "none"}));
     static std::vector<std::string> r_plugins;
     add_plugin_option(record, r_plugins);
+    static bool r_json = false;
+    record->add_flag("--json", r_json,
+                     "print the summary as one JSON object: file, format, samples, rejected (the reports the "
+                     "reader discarded, kept in the file) and the device's counters (stats)");
     record->callback([] {
         select_command([] {
             if (int rc = load_plugins(r_plugins); rc != kExitOk) return rc;
-            return cmd_record(r_uri, r_file, r_seconds, ja, r_compression);
+            return cmd_record(r_uri, r_file, r_seconds, ja, r_compression, false, r_json);
         });
     });
 

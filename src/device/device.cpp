@@ -122,8 +122,7 @@ int open_device(const char *uri_c, const cdm_open_options *opts, cdm_device **ou
     }
     const uint32_t stale = opts && opts->stale_timeout_us ? opts->stale_timeout_us : kDefaultStaleTimeoutUs;
     const std::string warning = t->open_warning();
-    auto *dev = new cdm_device(std::move(t), info, stale, opts ? opts->on_sample : nullptr,
-                               opts ? opts->user : nullptr, opts ? opts->on_event : nullptr);
+    auto *dev = new cdm_device(std::move(t), info, stale, opts);
     if (!warning.empty()) dev->set_error("warning: " + warning);
     dev->start();
     *out = dev;
@@ -135,8 +134,9 @@ int open_device(const char *uri_c, const cdm_open_options *opts, cdm_device **ou
 using namespace cdm;
 
 cdm_device::cdm_device(TransportPtr t, const proto::DeviceInfoReport &info, uint32_t stale_timeout_us,
-                       cdm_sample_fn on_sample, void *user, cdm_event_fn on_event)
-    : transport_(std::move(t)), on_sample_(on_sample), user_(user), on_event_(on_event),
+                       const cdm_open_options *opts)
+    : transport_(std::move(t)), on_sample_(opts ? opts->on_sample : nullptr), user_(opts ? opts->user : nullptr),
+      on_event_(opts ? opts->on_event : nullptr), on_rejected_(opts ? opts->on_rejected : nullptr),
       stale_timeout_us_(stale_timeout_us) {
     truncated_bytes_ = transport_->truncated_bytes();
     device_info_from_report(info, transport_->name(), transport_->uri(), info_);
@@ -418,12 +418,9 @@ bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t hos
     const double bound = 2.0 * elapsed_reports + 64.0;
     if (d >= 1 && d < 0x80000000u && double(d - 1) <= bound) {
         n_dropped_.fetch_add(d - 1, std::memory_order_relaxed);
+        have_jump_ = false; // a counter that goes on from a jump is the device's now
     } else {
-        n_seq_jumps_.fetch_add(1, std::memory_order_relaxed);
-        // After an unplug the device may have restarted its counter (it lost
-        // power): what was missed is estimated from the host clock instead.
-        if (after_reconnect_ && elapsed_reports > 1.0)
-            n_dropped_.fetch_add(uint64_t(std::llround(elapsed_reports - 1.0)), std::memory_order_relaxed);
+        account_discontinuity(seq, host_ns, elapsed_reports);
     }
     if (after_reconnect_ || device_us < last_device_us_) {
         // A new stretch of the device's clock (it restarted, or wrapped).
@@ -437,7 +434,55 @@ bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t hos
     return true;
 }
 
-void cdm_device::reject_report(int reason, const uint8_t *buf, size_t len) {
+// A discontinuity is, in order:
+// - the return of the newest jump, right after it: the counter is back
+//   within the bound of the number before that jump (a flipped bit undone):
+//   a jump;
+// - a restart: a backward step to a number the device could have counted
+//   to from 0 since the last report (a firmware restart, a brown-out): the
+//   numbers below it were sent and never arrived (dropped += seq);
+// - a jump otherwise (a corrupted counter). After an unplug the device may
+//   have restarted its counter (it lost power): what was missed while it
+//   was away is estimated from the host clock instead.
+void cdm_device::account_discontinuity(uint32_t seq, uint64_t host_ns, double elapsed_reports) {
+    const double bound = 2.0 * elapsed_reports + 64.0;
+    const uint32_t since_jump = seq - jump_from_seq_;
+    const double jump_bound = 2.0 * double(host_ns - jump_from_host_ns_) * 1e-9 * conv_.rate_hz + 64.0;
+    const bool returned = have_jump_ && since_jump >= 1 && since_jump < 0x80000000u && double(since_jump) <= jump_bound;
+    const bool backward = seq - last_seq_ >= 0x80000000u;
+    if (!returned && backward && double(seq) <= bound) {
+        n_restarts_.fetch_add(1, std::memory_order_relaxed);
+        const double missed = after_reconnect_ ? std::max(double(seq), elapsed_reports - 1.0) : double(seq);
+        n_dropped_.fetch_add(uint64_t(std::llround(missed)), std::memory_order_relaxed);
+        have_jump_ = false;
+        return;
+    }
+    n_seq_jumps_.fetch_add(1, std::memory_order_relaxed);
+    if (returned) {
+        have_jump_ = false;
+    } else {
+        have_jump_ = true;
+        jump_from_seq_ = last_seq_;
+        jump_from_host_ns_ = last_host_ns_;
+    }
+    if (after_reconnect_ && elapsed_reports > 1.0)
+        n_dropped_.fetch_add(uint64_t(std::llround(elapsed_reports - 1.0)), std::memory_order_relaxed);
+}
+
+void cdm_device::tell_rejected(uint32_t kind, const uint8_t *buf, size_t len, uint64_t source_ns,
+                               const std::string &why) {
+    if (!on_rejected_ || stop_.load(std::memory_order_relaxed)) return;
+    cdm_rejected r{};
+    r.struct_size = sizeof r;
+    r.kind = kind;
+    r.report = buf;
+    r.report_len = uint32_t(len);
+    r.source_time_ns = source_ns;
+    r.reason = why.c_str();
+    on_rejected_(user_, &r);
+}
+
+std::string cdm_device::reject_report(int reason, const uint8_t *buf, size_t len) {
     const proto::Reject rej = proto::Reject(reason);
     // The reader thread is the only writer of the count: the text is stored
     // before the count rises (release), so a caller that sees the count
@@ -453,16 +498,29 @@ void cdm_device::reject_report(int reason, const uint8_t *buf, size_t len) {
     while (p10 * 10 <= k) p10 *= 10;
     set_error(text, k == p10 ? log::kWarning : -1);
     n_malformed_.store(k, std::memory_order_release);
+    return text;
 }
 
 void cdm_device::handle_report(const uint8_t *buf, size_t len, uint64_t host_ns) {
+    // A replay judges its counters by the recorded receipt times, so that
+    // they come out as the recorded device's did, at any replay speed.
+    const uint64_t recorded = transport_->record_time_ns();
+    const uint64_t source_ns = recorded != 0 ? recorded : host_ns;
     proto::InputReport r;
     const proto::Reject rej = proto::parse_input(buf, len, r);
     if (rej != proto::Reject::None) {
-        reject_report(int(rej), buf, len);
+        const std::string why = reject_report(int(rej), buf, len);
+        tell_rejected(CDM_REJECTED_MALFORMED, buf, len, source_ns, why);
         return;
     }
-    if (!account_sequence(r.sequence, r.device_time_us, host_ns)) return;
+    const uint32_t newest = last_seq_;
+    if (!account_sequence(r.sequence, r.device_time_us, source_ns)) {
+        if (on_rejected_)
+            tell_rejected(CDM_REJECTED_OUT_OF_ORDER, buf, len, source_ns,
+                          "sequence " + std::to_string(r.sequence) + " is the newest one's (" +
+                              std::to_string(newest) + ") or up to 64 behind it: a duplicate or a late report");
+        return;
+    }
 
     if (model_changed_.load(std::memory_order_acquire)) {
         std::lock_guard<std::mutex> lock(model_mu_);
@@ -539,8 +597,7 @@ void cdm_device::handle_report(const uint8_t *buf, size_t len, uint64_t host_ns)
         smp.report = buf;
         smp.raw = &raw;
         smp.pose = &cb_pose;
-        const uint64_t recorded = transport_->record_time_ns();
-        smp.source_time_ns = recorded != 0 ? recorded : host_ns;
+        smp.source_time_ns = source_ns;
         on_sample_(user_, &smp);
     }
 }

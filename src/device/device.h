@@ -66,9 +66,9 @@ int open_device(const char *uri, const cdm_open_options *opts, cdm_device **out,
 
 struct cdm_device {
 public:
+    // The callbacks and user pointer of `opts` (NULL: none).
     cdm_device(cdm::TransportPtr t, const cdm::proto::DeviceInfoReport &info, uint32_t stale_timeout_us,
-               cdm_sample_fn on_sample, void *user,
-               cdm_event_fn on_event = nullptr);
+               const cdm_open_options *opts);
     // Stops and joins the reader thread, after waking every cdm_wait_pose*
     // in progress (CDM_ERR_CLOSED) and waiting for those calls to leave.
     // On the reader thread itself (close_from_callback) it does not join.
@@ -132,10 +132,17 @@ private:
     // host_ns: CLOCK_MONOTONIC when the transport's read returned it.
     void handle_report(const uint8_t *buf, size_t len, uint64_t host_ns);
     // A report the parser rejected: counted by kind, its reason kept in the
-    // handle's error text (reader thread).
-    void reject_report(int reason, const uint8_t *buf, size_t len);
-    // false: discard (duplicate or late)
+    // handle's error text (reader thread). Returns the reason in words.
+    std::string reject_report(int reason, const uint8_t *buf, size_t len);
+    // Hands a discarded report to on_rejected (if any).
+    void tell_rejected(uint32_t kind, const uint8_t *buf, size_t len, uint64_t source_ns, const std::string &why);
+    // false: discard (duplicate or late). host_ns: the receipt time the
+    // counters are judged by (a replay's recorded one).
     bool account_sequence(uint32_t seq, uint64_t device_us, uint64_t host_ns);
+    // A discontinuity of the counter (not a gap, not out of order): a
+    // restart, or a jump. elapsed_reports: what the device could have sent
+    // since the last report.
+    void account_discontinuity(uint32_t seq, uint64_t host_ns, double elapsed_reports);
     bool device_clock_trusted(uint64_t device_us, uint64_t host_ns) const;
     bool wait_until(const std::function<bool()> &ready, int timeout_ms);
     // Counts a wait in progress for the destructor (RAII).
@@ -158,6 +165,7 @@ private:
     cdm_sample_fn on_sample_;
     void *user_;
     cdm_event_fn on_event_;
+    cdm_rejected_fn on_rejected_;
     // Reader thread only: the STALE/FRESH edge, and the newest report's time.
     bool stale_reported_ = false;
     uint64_t last_report_ns_ = 0;
@@ -171,7 +179,7 @@ private:
     std::atomic<uint32_t> stale_timeout_us_;
     std::atomic<uint64_t> events_{0}; // bumped on every publication and state change
     std::atomic<uint64_t> n_reports_{0}, n_malformed_{0}, n_dropped_{0}, n_oow_{0}, n_reconnects_{0};
-    std::atomic<uint64_t> n_seq_jumps_{0}, n_out_of_order_{0};
+    std::atomic<uint64_t> n_seq_jumps_{0}, n_out_of_order_{0}, n_restarts_{0};
     uint64_t truncated_bytes_ = 0; // set before start(), read-only after
     // host_sequence of the newest published pose (0: none yet).
     std::atomic<uint64_t> published_{0};
@@ -206,6 +214,12 @@ private:
     uint64_t last_device_us_ = 0;
     uint64_t anchor_device_us_ = 0, anchor_host_ns_ = 0; // device_clock_trusted
     bool after_reconnect_ = false;
+    // The last number before the newest jump, and when it came: a counter
+    // that comes back near it (a flipped bit undone) is the jump's return,
+    // not a restart.
+    bool have_jump_ = false;
+    uint32_t jump_from_seq_ = 0;
+    uint64_t jump_from_host_ns_ = 0;
     double last_good_p_[3] = {0, 0, 0};
     bool have_good_p_ = false;
     cdm::VelocityFilter velocity_;

@@ -179,5 +179,6 @@ void cdm_device::get_stats(cdm_stats &out) const {
     s.sequence_jumps = n_seq_jumps_.load(std::memory_order_relaxed);
     s.out_of_order = n_out_of_order_.load(std::memory_order_relaxed);
     s.replay_truncated_bytes = truncated_bytes_;
+    s.restarts = n_restarts_.load(std::memory_order_relaxed);
     out = s;
 }

@@ -217,7 +217,7 @@ namespace Cdm
                 Reports = n.reports, Malformed = n.malformed, Dropped = n.dropped,
                 OutOfWorkspace = n.out_of_workspace, Reconnects = n.reconnects,
                 SequenceJumps = n.sequence_jumps, OutOfOrder = n.out_of_order,
-                ReplayTruncatedBytes = n.replay_truncated_bytes,
+                ReplayTruncatedBytes = n.replay_truncated_bytes, Restarts = n.restarts,
             };
         }
 

@@ -94,6 +94,7 @@ namespace Cdm
         public ulong sequence_jumps; // since 1.1
         public ulong out_of_order; // since 1.1
         public ulong replay_truncated_bytes; // since 1.1
+        public ulong restarts; // since 1.2
     }
 
     [CStruct("cdm_sample"), StructLayout(LayoutKind.Sequential)]
@@ -115,6 +116,19 @@ namespace Cdm
         public IntPtr on_sample; // Marshal.GetFunctionPointerForDelegate(SampleFn), kept alive by DeviceHandle
         public IntPtr user;
         public IntPtr on_event;  // since 1.1: EventFn, kept alive by DeviceHandle
+        public IntPtr on_rejected; // since 1.2: not set by this binding
+    }
+
+    [CStruct("cdm_rejected"), StructLayout(LayoutKind.Sequential)]
+    internal struct NativeRejected
+    {
+        public uint struct_size;
+        public uint kind;
+        public IntPtr report;
+        public uint report_len;
+        public uint reserved0;
+        public ulong source_time_ns;
+        public IntPtr reason;
     }
 
     [CStruct("cdm_event"), StructLayout(LayoutKind.Sequential)]

@@ -207,5 +207,7 @@ namespace Cdm
         /// <summary>since 1.1: sequence-counter resets or corruptions (not in Dropped);
         /// duplicated or late reports discarded; bytes of a truncated recording's tail.</summary>
         public ulong SequenceJumps, OutOfOrder, ReplayTruncatedBytes;
+        /// <summary>since 1.2: the device restarted its counter (a firmware restart), not in SequenceJumps.</summary>
+        public ulong Restarts;
     }
 }

@@ -19,7 +19,7 @@ from . import log as log
 from . import records as records
 from .calibration import Calibration
 from .constants import *  # noqa: F401,F403 - the header's constants
-from .constants import Button, EffectStage, Error, EventKind, LogLevel, PoseFlag, WatchFlag, WatchKind
+from .constants import Button, EffectStage, Error, EventKind, LogLevel, PoseFlag, RejectedKind, WatchFlag, WatchKind
 from .device import Device, enumerate_devices, open  # noqa: A004
 from .diagnosis import Diagnosis, accuracy_map, check, diagnose, fit, load_diagnosis, plan
 from .effects import EffectGeometry, effect_names, load_plugin, register_effect, unregister_effect

@@ -93,6 +93,7 @@ class cdm_stats(_Sized):
         ("sequence_jumps", ctypes.c_uint64),  # since 1.1
         ("out_of_order", ctypes.c_uint64),  # since 1.1
         ("replay_truncated_bytes", ctypes.c_uint64),  # since 1.1
+        ("restarts", ctypes.c_uint64),  # since 1.2
     ]
 
 
@@ -123,6 +124,21 @@ cdm_event_fn = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(cdm_event)
 cdm_log_fn = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_int, ctypes.c_char_p)
 
 
+class cdm_rejected(_Sized):
+    _fields_ = [
+        ("struct_size", ctypes.c_uint32),
+        ("kind", ctypes.c_uint32),
+        ("report", ctypes.POINTER(ctypes.c_uint8)),
+        ("report_len", ctypes.c_uint32),
+        ("reserved0", ctypes.c_uint32),
+        ("source_time_ns", ctypes.c_uint64),
+        ("reason", ctypes.c_char_p),
+    ]
+
+
+cdm_rejected_fn = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(cdm_rejected))
+
+
 class cdm_open_options(_Sized):
     _fields_ = [
         ("struct_size", ctypes.c_uint32),
@@ -130,6 +146,7 @@ class cdm_open_options(_Sized):
         ("on_sample", cdm_sample_fn),
         ("user", ctypes.c_void_p),
         ("on_event", cdm_event_fn),  # since 1.1
+        ("on_rejected", cdm_rejected_fn),  # since 1.2: not set by this binding
     ]
 
 
@@ -191,7 +208,8 @@ class cdm_watch_event(_Sized):  # CDM_EXPERIMENTAL, since 1.1
 cdm_watch_fn = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(cdm_watch_event))
 
 STRUCTS: Dict[str, Type[_Sized]] = {cls.__name__: cls for cls in
-           (cdm_pose, cdm_raw, cdm_device_info, cdm_stats, cdm_sample, cdm_open_options, cdm_effect_context,
+           (cdm_pose, cdm_raw, cdm_device_info, cdm_stats, cdm_sample, cdm_rejected, cdm_open_options,
+            cdm_effect_context,
             cdm_effect_def, cdm_event, cdm_watch_event)}
 
 # Opaque handles travel as void pointers.
@@ -261,6 +279,7 @@ PROTOTYPES: Dict[str, Tuple[Any, List[Any]]] = {
     "cdm_recorder_close": (_int, [_handle]),
     "cdm_recorder_open_ex": (_int, [_str, _str, ctypes.POINTER(ctypes.c_uint8), _size, _handle_p]),
     "cdm_recorder_write_sample": (_int, [_handle, ctypes.POINTER(cdm_sample)]),
+    "cdm_recorder_write_rejected": (_int, [_handle, ctypes.POINTER(cdm_rejected)]),
     "cdm_jig_plan_create": (_int, [_str, _int, ctypes.c_double, c_double_p, _size, _int, _handle_p]),
     "cdm_jig_plan_count": (_size, [_handle]),
     "cdm_jig_plan_samples": (_int, [_handle]),
@@ -378,6 +397,7 @@ class Library:
     cdm_recorder_close: Callable[..., int]
     cdm_recorder_open_ex: Callable[..., int]
     cdm_recorder_write_sample: Callable[..., int]
+    cdm_recorder_write_rejected: Callable[..., int]
     cdm_jig_plan_create: Callable[..., int]
     cdm_jig_plan_count: Callable[..., int]
     cdm_jig_plan_samples: Callable[..., int]

@@ -102,6 +102,16 @@ class EventKind(enum.IntEnum):
     CDM_EVENT_END_OF_STREAM = END_OF_STREAM
 
 
+class RejectedKind(enum.IntEnum):
+    """cdm_rejected_kind (since 1.2): why the reader discarded a report.
+
+    Members drop the C prefix (RejectedKind.MALFORMED is CDM_REJECTED_MALFORMED); the C names stay as aliases."""
+    MALFORMED = 1
+    OUT_OF_ORDER = 2
+    CDM_REJECTED_MALFORMED = MALFORMED
+    CDM_REJECTED_OUT_OF_ORDER = OUT_OF_ORDER
+
+
 class LogLevel(enum.IntEnum):
     """cdm_log_level (since 1.1): levels of cdm_set_log_fn's messages.
 
@@ -144,7 +154,7 @@ class EffectStage(enum.IntEnum):
     CDM_EFFECT_STAGE_PATH = PATH
 
 
-_ENUMS = (Error, PoseFlag, Button, EventKind, LogLevel, WatchKind, WatchFlag, EffectStage)
+_ENUMS = (Error, PoseFlag, Button, EventKind, RejectedKind, LogLevel, WatchKind, WatchFlag, EffectStage)
 
 # The header's names, flat, as module attributes (cdm.CDM_ERR_NO_DEVICE, ...): plain ints.
 CDM_OK = int(Error.OK)
@@ -178,6 +188,8 @@ CDM_EVENT_RECONNECTED = int(EventKind.RECONNECTED)
 CDM_EVENT_STALE = int(EventKind.STALE)
 CDM_EVENT_FRESH = int(EventKind.FRESH)
 CDM_EVENT_END_OF_STREAM = int(EventKind.END_OF_STREAM)
+CDM_REJECTED_MALFORMED = int(RejectedKind.MALFORMED)
+CDM_REJECTED_OUT_OF_ORDER = int(RejectedKind.OUT_OF_ORDER)
 CDM_LOG_DEBUG = int(LogLevel.DEBUG)
 CDM_LOG_INFO = int(LogLevel.INFO)
 CDM_LOG_WARNING = int(LogLevel.WARNING)
@@ -188,7 +200,7 @@ CDM_WATCH_ENUMERATE = int(WatchFlag.ENUMERATE)
 CDM_EFFECT_STAGE_READING = int(EffectStage.READING)
 CDM_EFFECT_STAGE_PATH = int(EffectStage.PATH)
 
-__all__ = ["Error", "PoseFlag", "Button", "EventKind", "LogLevel", "WatchKind", "WatchFlag", "EffectStage",
+__all__ = ["Error", "PoseFlag", "Button", "EventKind", "RejectedKind", "LogLevel", "WatchKind", "WatchFlag", "EffectStage",
            "CDM_ERROR_COUNT", "CDM_VERSION_MAJOR", "CDM_VERSION_MINOR", "CDM_VERSION_PATCH", "CDM_VERSION_NUMBER",
            "CDM_OK", "CDM_ERR_INVALID_ARG", "CDM_ERR_NO_DEVICE", "CDM_ERR_IO", "CDM_ERR_TIMEOUT",
            "CDM_ERR_DISCONNECTED", "CDM_ERR_STALE", "CDM_ERR_NO_DATA", "CDM_ERR_PROTOCOL",
@@ -197,6 +209,7 @@ __all__ = ["Error", "PoseFlag", "Button", "EventKind", "LogLevel", "WatchKind", 
            "CDM_POSE_DISCONNECTED", "CDM_POSE_COMPENSATED", "CDM_POSE_OUT_OF_WORKSPACE",
            "CDM_POSE_END_OF_STREAM", "CDM_POSE_NO_POSITION", "CDM_BUTTON_CLUTCH", "CDM_BUTTON_AUX",
            "CDM_BUTTON_MARK", "CDM_EVENT_DISCONNECTED", "CDM_EVENT_RECONNECTED", "CDM_EVENT_STALE",
-           "CDM_EVENT_FRESH", "CDM_EVENT_END_OF_STREAM", "CDM_LOG_DEBUG", "CDM_LOG_INFO", "CDM_LOG_WARNING",
+           "CDM_EVENT_FRESH", "CDM_EVENT_END_OF_STREAM", "CDM_REJECTED_MALFORMED", "CDM_REJECTED_OUT_OF_ORDER",
+           "CDM_LOG_DEBUG", "CDM_LOG_INFO", "CDM_LOG_WARNING",
            "CDM_LOG_ERROR", "CDM_WATCH_ARRIVED", "CDM_WATCH_LEFT", "CDM_WATCH_ENUMERATE",
            "CDM_EFFECT_STAGE_READING", "CDM_EFFECT_STAGE_PATH"]

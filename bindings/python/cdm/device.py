@@ -217,7 +217,7 @@ class Device(_native.Closing):
             if rc < 0:
                 raise self._fail(rc, "cdm_get_stats")
             return Stats(s.reports, s.malformed, s.dropped, s.out_of_workspace, s.reconnects, s.sequence_jumps,
-                         s.out_of_order, s.replay_truncated_bytes)
+                         s.out_of_order, s.replay_truncated_bytes, s.restarts)
 
     def error_detail(self) -> str:
         """The handle's last asynchronous problem (cdm_device_error), "" if none."""

@@ -265,6 +265,7 @@ class Stats:
     sequence_jumps: int = 0  # counter resets or corruptions (not in dropped)
     out_of_order: int = 0  # duplicated or late reports, discarded
     replay_truncated_bytes: int = 0  # incomplete tail a replay dropped
+    restarts: int = 0  # the device restarted its counter (a firmware restart; not in sequence_jumps)
 
 
 @dataclass(frozen=True)

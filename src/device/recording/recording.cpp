@@ -94,6 +94,9 @@ public:
         ++rows_;
         return buf_.size() < (64u << 10) ? CDM_OK : flush(err);
     }
+    int write_rejected(uint64_t, const uint8_t *, size_t, const char *, const char *, std::string &) override {
+        return CDM_OK; // no pose, no row: a CSV is not replayed
+    }
     int close(std::string &err) override {
         if (fd_ < 0) return CDM_OK;
         int rc = flush(err);

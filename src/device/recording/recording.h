@@ -36,6 +36,15 @@ public:
     // the writer goes on): replay: refuses a file where time goes back.
     virtual int write(uint64_t host_ns, const uint8_t *report, size_t len, const cdm_pose *pose,
                       std::string &err) = 0;
+    // A report the reader discarded (kind "malformed" or "out_of_order",
+    // the reason in words): its bytes as write()'s without a pose, so a
+    // replay discards it again. MCAP also logs the reason; a CSV, which
+    // holds poses, skips it.
+    virtual int write_rejected(uint64_t host_ns, const uint8_t *report, size_t len, const char *kind,
+                               const char *reason, std::string &err) {
+        (void)kind, (void)reason;
+        return write(host_ns, report, len, nullptr, err);
+    }
     // Completes the file (MCAP: summary and footer) and fsyncs it. What was
     // written before an error stays.
     virtual int close(std::string &err) = 0;

@@ -74,6 +74,23 @@ float64 y
 float64 z
 )msg";
 
+// examples/ros2/cdm_msgs/msg/Rejected.msg, then its dependency.
+const char *const kRejectedDefinition = R"msg(# A report the reader discarded, in a cdm MCAP recording (docs/recording.md):
+# its bytes are on /cdm/report at the same log time, so a replay discards it
+# again; this says why.
+# cdm writes it from this file's text (tests/cli/test_mcap.py compares them).
+# Wall-clock time of the report (CLOCK_REALTIME), the recording's log time.
+builtin_interfaces/Time stamp
+# 1: the protocol parser refused it; 2: a duplicate or a late report.
+uint8 kind
+# Why, in words.
+string reason
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+)msg";
+
 namespace {
 
 // CDR as ROS 2 serialises (XCDR1, little endian): a 4-byte encapsulation
@@ -191,6 +208,25 @@ public:
         return CDM_OK;
     }
 
+    int write_rejected(uint64_t host_ns, const uint8_t *report, size_t len, const char *kind, const char *reason,
+                       std::string &err) override {
+        if (int rc = write(host_ns, report, len, nullptr, err); rc != CDM_OK) return rc;
+        // The channel appears with the first rejected report: a clean
+        // recording has none.
+        if (!rejected_)
+            rejected_ = w_.add_channel(w_.add_schema(kRejectedSchema, "ros2msg", kRejectedDefinition),
+                                       kRejectedTopic, "cdr");
+        Cdr c;
+        c.time(host_ns + offset_);
+        c.put(uint8_t(std::strcmp(kind, "malformed") == 0 ? 1 : 2));
+        c.str(reason);
+        const std::string body = c.take();
+        return w_.write_message(rejected_, host_ns + offset_, reinterpret_cast<const uint8_t *>(body.data()),
+                                body.size(), err)
+                   ? CDM_OK
+                   : CDM_ERR_IO;
+    }
+
     int close(std::string &err) override { return w_.close(err) ? CDM_OK : CDM_ERR_IO; }
     uint64_t reports() const override { return reports_; }
 
@@ -211,7 +247,7 @@ private:
     mcap::Writer w_;
     cdm_pose last_state_{};
     uint64_t states_ = 0;
-    uint16_t report_ = 0, pose_ = 0, state_ = 0;
+    uint16_t report_ = 0, pose_ = 0, state_ = 0, rejected_ = 0;
     uint64_t reports_ = 0;
     uint64_t last_ns_ = 0; // the last report's host time
     uint64_t offset_ = 0;  // CLOCK_REALTIME - CLOCK_MONOTONIC at open

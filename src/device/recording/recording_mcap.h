@@ -22,6 +22,8 @@ constexpr const char *kPoseTopic = "/cdm/pose";
 constexpr const char *kPoseSchema = "geometry_msgs/msg/PoseStamped"; // metres, quaternion x,y,z,w
 constexpr const char *kStateTopic = "/cdm/state";
 constexpr const char *kStateSchema = "cdm_msgs/msg/State"; // examples/ros2/cdm_msgs/msg/State.msg
+constexpr const char *kRejectedTopic = "/cdm/rejected";
+constexpr const char *kRejectedSchema = "cdm_msgs/msg/Rejected"; // examples/ros2/cdm_msgs/msg/Rejected.msg
 // A state every 10 ms of device time (100 Hz), and at every report where
 // buttons, flags or dropped change: the grip and velocity of a human hand
 // move well below 50 Hz, and 1 kHz of them would take a third of the file
@@ -42,6 +44,7 @@ void append_number(std::string &s, double v);
 // rosbag2 stores them) of the pose and state channels.
 extern const char *const kPoseDefinition;
 extern const char *const kStateDefinition;
+extern const char *const kRejectedDefinition;
 
 // The CDR messages (little-endian, ROS 2's encoding) of one pose stamped
 // `wall_ns` (ns since the epoch): geometry_msgs/PoseStamped in metres, and

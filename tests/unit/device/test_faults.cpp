@@ -89,15 +89,19 @@ void test_fault_malformed_each_kind_rejected(void **) {
     }
 }
 
-void test_fault_sequence_reset_is_a_jump_not_drops(void **) {
+// The firmware counts from 0 again: a restart, not a jump, and no number
+// below the new one went missing.
+void test_fault_sequence_reset_is_a_restart_not_drops(void **) {
     const cdm_stats s = run("seq_reset=20", 60);
-    assert_int_equal(s.sequence_jumps, 1);
+    assert_int_equal(s.restarts, 1);
+    assert_int_equal(s.sequence_jumps, 0);
     assert_int_equal(s.dropped, 0);
 }
 
 void test_fault_sequence_bit_flip_is_two_jumps(void **) {
     const cdm_stats s = run("seq_flip=20", 60);
     assert_int_equal(s.sequence_jumps, 2);
+    assert_int_equal(s.restarts, 0); // back near 20: the flip undone, not a restart
     assert_true(s.dropped <= 1); // the flipped report's own number is lost
 }
 
@@ -306,7 +310,7 @@ int main(void) {
         cmocka_unit_test(test_fault_duplicated_report_discarded),
         cmocka_unit_test(test_fault_reordered_report_discarded),
         cmocka_unit_test(test_fault_malformed_each_kind_rejected),
-        cmocka_unit_test(test_fault_sequence_reset_is_a_jump_not_drops),
+        cmocka_unit_test(test_fault_sequence_reset_is_a_restart_not_drops),
         cmocka_unit_test(test_fault_sequence_bit_flip_is_two_jumps),
         cmocka_unit_test(test_fault_device_clock_wrap_harmless),
         cmocka_unit_test(test_fault_adc_saturation_holds_position),

@@ -409,7 +409,8 @@ void test_no_report_orientation_is_identity(void **) {
 }
 
 // One flipped bit of the sequence number, or a counter reset, would add 4e9
-// or 3e8 to dropped as a gap. Both are sequence jumps, and dropped stays honest.
+// or 3e8 to dropped as a gap. The flip is two jumps (there and back), the
+// reset a restart, and dropped stays honest.
 void test_sequence_flipped_bit_not_counted_as_dropped(void **) {
     cdm_device *dev = open_ok("hid:/dev/hidraw7");
     const double at[3] = {40, 5, 5};
@@ -422,24 +423,39 @@ void test_sequence_flipped_bit_not_counted_as_dropped(void **) {
     cdm_stats s = stats(dev);
     assert_int_equal(s.dropped, 0);
     assert_int_equal(s.sequence_jumps, 2); // there and back
-    // The device restarts its counter (no unplug): one jump, nothing dropped.
+    assert_int_equal(s.restarts, 0);
+    // The device restarts its counter (no unplug): a restart, not a jump;
+    // its report 0 never arrived.
     push(report_at(1, at));
     settle(dev, ++n);
     push(report_at(2, at));
     settle(dev, ++n);
     s = stats(dev);
-    assert_int_equal(s.dropped, 0);
-    assert_int_equal(s.sequence_jumps, 3);
+    assert_int_equal(s.restarts, 1);
+    assert_int_equal(s.dropped, 1);
+    assert_int_equal(s.sequence_jumps, 2);
     // A real gap of 3 reports is still counted as 3 dropped (within the bound
     // of 2 x rate x elapsed + 64).
     push(report_at(6, at));
     settle(dev, ++n);
-    assert_int_equal(stats(dev).dropped, 3);
-    assert_int_equal(stats(dev).sequence_jumps, 3);
+    assert_int_equal(stats(dev).dropped, 4);
+    assert_int_equal(stats(dev).sequence_jumps, 2);
+    // A backward step to a number the device could not have counted to
+    // from 0 since the last report (past the bound) is a jump, not a restart.
+    push(report_at(3, at));
+    settle(dev, ++n);
+    assert_int_equal(stats(dev).out_of_order, 1); // within 64 behind: late
+    push(report_at(1000000, at));
+    settle(dev, ++n);
+    push(report_at(500000, at));
+    settle(dev, ++n);
+    s = stats(dev);
+    assert_int_equal(s.sequence_jumps, 4);
+    assert_int_equal(s.restarts, 1);
     cdm_pose p{};
     p.struct_size = sizeof p;
     cdm_get_pose(dev, &p);
-    assert_int_equal(p.dropped, 3);
+    assert_int_equal(p.dropped, 4);
     close_dev(dev);
 }
 

@@ -88,6 +88,21 @@ void close_in_event(void *user, const cdm_event *e) {
     c->closes.fetch_add(1);
 }
 
+// Closes on the first rejected report (a malformed one, then several more
+// that must reach no callback).
+void close_in_rejected(void *user, const cdm_rejected *) {
+    auto *c = static_cast<Closer *>(user);
+    cdm_device *d = c->dev.load();
+    if (!d) return;
+    if (c->closes.load() > 0) {
+        c->after.fetch_add(1);
+        return;
+    }
+    cdm_close(d);
+    c->text = cdm_thread_error();
+    c->closes.fetch_add(1);
+}
+
 // The reader thread is gone (the handle freed) once the thread count is
 // back to what it was before the open.
 void expect_reader_gone(int before) {
@@ -106,6 +121,29 @@ void test_close_from_on_sample_is_deferred(void **) {
     o.on_sample = close_in_sample;
     cdm_device *dev = nullptr;
     assert_int_equal(cdm_open_ex("sim:?rate=1000", &o, &dev), CDM_OK);
+    c.dev.store(dev);
+    assert_true(cdm_test::wait_until([&] { return c.closes.load() == 1; }, 3000));
+    expect_reader_gone(before);
+    assert_int_equal(c.after.load(), 0);
+    assert_non_null(std::strstr(c.text.c_str(), "cdm_close: deferred"));
+}
+
+// cdm_close from on_rejected (since 1.2): the same, and neither a
+// rejected report nor a sample reaches a callback after it.
+void test_close_from_on_rejected_is_deferred(void **) {
+    const int before = thread_count();
+    Closer c;
+    cdm_open_options o{};
+    o.struct_size = sizeof o;
+    o.user = &c;
+    o.on_rejected = close_in_rejected;
+    o.on_sample = [](void *user, const cdm_sample *) {
+        auto *cl = static_cast<Closer *>(user);
+        if (cl->closes.load() > 0) cl->after.fetch_add(1);
+    };
+    cdm_device *dev = nullptr;
+    assert_int_equal(cdm_open_ex("sim:?rate=1000&malformed=short:200,version:201,short:202&duplicate=210", &o, &dev),
+                     CDM_OK);
     c.dev.store(dev);
     assert_true(cdm_test::wait_until([&] { return c.closes.load() == 1; }, 3000));
     expect_reader_gone(before);
@@ -350,6 +388,7 @@ int main(void) {
     std::thread([] {}).join();
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_close_from_on_sample_is_deferred),
+        cmocka_unit_test(test_close_from_on_rejected_is_deferred),
         cmocka_unit_test(test_close_from_on_event_is_deferred),
         cmocka_unit_test(test_close_from_log_sink_on_reader_thread),
         cmocka_unit_test(test_close_from_log_sink_while_reader_logs),

@@ -364,7 +364,7 @@ void add_check(CLI::App *calib) {
     chk->add_option("--calibration", c.calibration, "Calibration JSON to check (`cdm calib fit --out`)")->required();
     chk->add_option("--json", c.json_out, "Write the check's JSON here");
     chk->add_option("--jig-tolerance-mm", c.jig, "Std of the jig's own position error (-1: estimated from the data)")
-        ->check(range(-1, 5000));
+        ->check(tolerance_or_estimate());
     chk->add_option("--max-error-mm", c.max_error,
                     "List the positions whose mean error is longer than this (mm; default: none)")
         ->check(range(1e-6, 5000));
@@ -458,7 +458,8 @@ void add_diagnose_options(CLI::App *c, DiagArgs &d) {
     c->add_option("--device", d.device,
                   "Device description JSON {\"a_mm\":..,\"b_mm\":..,\"m_mm\":..} (default: the nominal a=b=150, "
                   "m=30 mm)");
-    c->add_option("--jig-tolerance-mm", d.jig, "Std of the jig's own position error (-1: estimated from the data)");
+    c->add_option("--jig-tolerance-mm", d.jig, "Std of the jig's own position error (-1: estimated from the data)")
+        ->check(tolerance_or_estimate());
     add_plugin_option(c, d.plugins);
     c->add_flag("--quiet", d.quiet, "No progress output");
 }
@@ -472,11 +473,11 @@ void add_simulate(CLI::App *calib) {
     sim->add_option("--effects", s.effects,
                     "Hidden effects, a comma-separated list (e.g. exit_pulley,cable_gain), random realistic "
                     "magnitudes (default: none)");
-    sim->add_option("--effect-seed", s.effect_seed, "Seed of the hidden effects' magnitudes");
+    sim->add_option("--effect-seed", s.effect_seed, "Seed of the hidden effects' magnitudes")->check(range(0, kMaxSeed));
     sim->add_option("--truth", s.truth, "Calibration JSON to use as the true model (default: the nominal model)");
     add_plugin_option(sim, s.plugins);
     sim->add_option("--truth-out", s.truth_out, "Write the true model (with the hidden magnitudes) here");
-    sim->add_option("--seed", s.seed, "Noise seed");
+    sim->add_option("--seed", s.seed, "Noise seed")->check(range(0, kMaxSeed));
     sim->add_option("--noise-mm", s.noise_mm, "Per-sample pot noise std (mm)")->check(range(0, 100));
     sim->add_option("--quant-mm", s.quant_mm, "ADC step (mm)")->check(range(0, 100));
     sim->add_option("--jig-tolerance-mm", s.jig_tolerance_mm, "Std of each position's own error (mm)")

@@ -24,22 +24,47 @@ double now_s() { return double(now_ns()) * 1e-9; }
 std::string num(double v) {
     char b[32];
     // Whole numbers in full (1000000, not 1e+06), the rest as %g.
-    if (std::isfinite(v) && v == std::floor(v) && std::fabs(v) < 1e15)
+    if (std::isfinite(v) && v == std::floor(v) && std::fabs(v) <= 9007199254740992.0)
         std::snprintf(b, sizeof b, "%.0f", v);
     else
         std::snprintf(b, sizeof b, "%g", v);
     return b;
 }
 
+namespace {
+
+// A decimal number, finite, in a double's range: strtod alone also takes
+// hexadecimal ("0x10"), "inf", "nan(...)" and leading blanks, which CLI11's
+// own conversion of the value may read differently.
+bool decimal_number(const std::string &s, double &v) {
+    if (s.empty() || s.find_first_not_of("0123456789+-.eE") != std::string::npos) return false;
+    char *end = nullptr;
+    errno = 0;
+    v = std::strtod(s.c_str(), &end);
+    return *end == '\0' && errno != ERANGE && std::isfinite(v);
+}
+
+} // namespace
+
 CLI::Validator range(double lo, double hi) {
     const std::string desc = "in [" + num(lo) + ", " + num(hi) + "]";
     return CLI::Validator(
         [lo, hi, desc](std::string &s) -> std::string {
-            char *end = nullptr;
-            errno = 0;
-            const double v = std::strtod(s.c_str(), &end);
-            if (s.empty() || *end || errno == ERANGE || !std::isfinite(v)) return "\"" + s + "\" is not a number";
+            double v = 0;
+            if (!decimal_number(s, v)) return "\"" + s + "\" is not a decimal number";
             if (v < lo || v > hi) return s + " is not " + desc;
+            return std::string();
+        },
+        desc);
+}
+
+CLI::Validator tolerance_or_estimate() {
+    const std::string desc = "-1 (estimated) or in [0, 5000]";
+    return CLI::Validator(
+        [desc](std::string &s) -> std::string {
+            double v = 0;
+            if (!decimal_number(s, v)) return "\"" + s + "\" is not a decimal number";
+            if (v != -1 && !(v >= 0 && v <= 5000)) return s + " is not " + desc;
             return std::string();
         },
         desc);

@@ -148,9 +148,9 @@ void add_plan(CLI::App *calib) {
     static PlanArgs p;
     auto *c = calib->add_subcommand("plan", "Plan a jig session before any data: which positions to measure "
                                             "(I-optimal, every catalogued effect detectable)");
-    c->add_option("--positions", p.positions, "How many positions to choose")->required()->check(CLI::Range(1, 1000000));
-    c->add_option("--samples", p.samples, "Samples at each position")->capture_default_str()->check(CLI::Range(1, 1000000));
-    c->add_option("--jig-n", p.n, "Holes per side of the plate")->capture_default_str()->check(CLI::Range(1, 1000));
+    c->add_option("--positions", p.positions, "How many positions to choose")->required()->check(range(1, 1000000));
+    c->add_option("--samples", p.samples, "Samples at each position")->capture_default_str()->check(range(1, 1000000));
+    c->add_option("--jig-n", p.n, "Holes per side of the plate")->capture_default_str()->check(range(1, 1000));
     c->add_option("--jig-pitch", p.pitch, "Hole pitch (mm)")->capture_default_str()->check(range(1e-3, 1000));
     c->add_option("--jig-heights", p.heights, "Comma-separated fixture heights (mm) (default: 30,40,50,60,70)");
     c->add_option("--effects", p.effects,

@@ -99,8 +99,12 @@ int cdm_open_ex(const char *uri, const cdm_open_options *options, cdm_device **o
         if (options) {
             if (options->struct_size < kOptionsSize10)
                 return bad_size("cdm_open_ex", "cdm_open_options", options->struct_size, kOptionsSize10);
-            // The fields the caller's struct_size covers; the rest stay zero.
-            std::memcpy(&opts, options, std::min<size_t>(options->struct_size, sizeof opts));
+            // The fields of the newest size the caller's struct_size covers
+            // whole (24, 32, 40: never part of a pointer); the rest stay zero.
+            const size_t n = options->struct_size >= sizeof opts                          ? sizeof opts
+                             : options->struct_size >= offsetof(cdm_open_options, on_rejected) ? offsetof(cdm_open_options, on_rejected)
+                                                                                                : size_t(kOptionsSize10);
+            std::memcpy(&opts, options, n);
             opts.struct_size = sizeof opts;
         }
         std::string err;

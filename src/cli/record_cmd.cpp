@@ -86,6 +86,7 @@ struct RecordCtx {
     // both
     uint64_t reports = 0;
     uint64_t rejected = 0; // reports the reader discarded, kept in the recording
+    bool csv_file = false; // a pose CSV: no rejected report is kept
 };
 
 // A write's outcome. A sample the writer refused (CDM_ERR_INVALID_ARG:
@@ -122,6 +123,13 @@ void close_dwell(RecordCtx &c) {
     if (++c.next_point == c.plan_n) c.done = true;
 }
 
+// A rejected report written: counted when the file keeps it (a CSV, which
+// holds poses, does not).
+void kept_rejected(RecordCtx &c, int rc) {
+    if (rc == CDM_OK && !c.csv_file) ++c.rejected;
+    after_write(c, rc);
+}
+
 // A report the reader discarded is kept too (not in a jig dataset, which
 // holds positions): a replay discards it again and counts it as the live
 // reader did.
@@ -129,13 +137,12 @@ void record_rejected(void *user, const cdm_rejected *r) {
     auto *c = static_cast<RecordCtx *>(user);
     std::lock_guard<std::mutex> lock(c->mu);
     if (c->jig) return;
-    ++c->rejected;
     if (!c->rec) {
         c->pending.push_back({std::vector<uint8_t>(r->report, r->report + r->report_len), cdm_raw{}, cdm_pose{},
                               r->source_time_ns, r->kind, r->reason});
         return;
     }
-    if (!c->write_failed) after_write(*c, cdm_recorder_write_rejected(c->rec, r));
+    if (!c->write_failed) kept_rejected(*c, cdm_recorder_write_rejected(c->rec, r));
 }
 
 void record_sample(void *user, const cdm_sample *s) {
@@ -250,7 +257,7 @@ int open_recorder(cdm_device *dev, const std::string &tmp, const char *format, R
             j.report_len = uint32_t(r.report.size());
             j.source_time_ns = r.source_ns;
             j.reason = r.reason.c_str();
-            if (!ctx.write_failed) after_write(ctx, cdm_recorder_write_rejected(rec, &j));
+            if (!ctx.write_failed) kept_rejected(ctx, cdm_recorder_write_rejected(rec, &j));
             continue;
         }
         cdm_sample s{};
@@ -380,6 +387,7 @@ int cmd_record(const std::string &uri, const std::string &file, double seconds, 
     }
     RecordCtx ctx;
     ctx.jig = ja.jig;
+    ctx.csv_file = format == "csv";
     const std::string tmp = file + ".tmp";
     install_stop_handlers(); // before the first report: a stop at any moment finishes the file
     if (ja.jig) {
@@ -463,7 +471,7 @@ void add_record_command(CLI::App &app) {
     static bool r_json = false;
     record->add_flag("--json", r_json,
                      "print the summary as one JSON object: file, format, samples, rejected (the reports the "
-                     "reader discarded, kept in the file) and the device's counters (stats)");
+                     "reader discarded that the file keeps: none in a CSV) and the device's counters (stats)");
     record->callback([] {
         select_command([] {
             if (int rc = load_plugins(r_plugins); rc != kExitOk) return rc;

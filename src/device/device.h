@@ -143,6 +143,8 @@ private:
     // restart, or a jump. elapsed_reports: what the device could have sent
     // since the last report.
     void account_discontinuity(uint32_t seq, uint64_t host_ns, double elapsed_reports);
+    bool is_late(uint32_t seq, uint64_t device_us) const;
+    bool restart_undone(uint32_t seq, uint64_t device_us, uint64_t host_ns);
     bool device_clock_trusted(uint64_t device_us, uint64_t host_ns) const;
     bool wait_until(const std::function<bool()> &ready, int timeout_ms);
     // Counts a wait in progress for the destructor (RAII).
@@ -220,6 +222,15 @@ private:
     bool have_jump_ = false;
     uint32_t jump_from_seq_ = 0;
     uint64_t jump_from_host_ns_ = 0;
+    // The newest restart counted: the number before it, when that came,
+    // and the drops it booked (taken back if the counter comes back).
+    struct Restart {
+        uint32_t seq;
+        uint64_t host_ns;
+        uint64_t dropped;
+    };
+    bool have_restart_ = false;
+    Restart restart_{};
     double last_good_p_[3] = {0, 0, 0};
     bool have_good_p_ = false;
     cdm::VelocityFilter velocity_;

@@ -25,8 +25,12 @@ struct Uri {
     std::string path;   // between ':' and '?'
     std::vector<std::pair<std::string, std::string>> options; // in order, keys unique
 };
+// Longest URI accepted: a path (PATH_MAX is 4096) and every sim: option
+// with long fault lists fit many times over.
+constexpr size_t kMaxUriBytes = 65536;
 // Returns CDM_OK or a cdm_error (NO_DEVICE for a string that is no URI,
-// INVALID_ARG for a malformed option list) with err naming the culprit.
+// INVALID_ARG for a malformed option list or a URI past kMaxUriBytes) with
+// err naming the culprit.
 int parse_uri(const std::string &text, Uri &out, std::string &err);
 
 // "0x1f": a report ID as the transports' error messages name it.
@@ -80,9 +84,12 @@ public:
     // cdm_open puts it into cdm_device_error; truncated_bytes goes into
     // cdm_stats.replay_truncated_bytes.
     virtual std::string open_warning() const { return {}; }
-    // OPTIONAL (default: 0, live). After a read(): the host time the report
-    // was first received at, when the transport plays a recording, so that
-    // re-recording a replay keeps its times (cdm_sample.source_time_ns).
+    // OPTIONAL (default: false, live). After a read(): whether the report
+    // comes from a recording, and the host time it was first received at
+    // (0 is a time like any other), so that re-recording a replay keeps its
+    // times (cdm_sample.source_time_ns) and its counters come out as the
+    // recorded device's.
+    virtual bool plays_recording() const { return false; }
     virtual uint64_t record_time_ns() const { return 0; }
     virtual uint64_t truncated_bytes() const { return 0; }
 };

@@ -2,6 +2,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cstdlib>
+#include <set>
 #include <thread>
 
 #include "cdm/cdm.h"
@@ -53,6 +54,11 @@ std::string report_id_text(uint8_t id) {
 }
 
 int parse_uri(const std::string &text, Uri &out, std::string &err) {
+    if (text.size() > kMaxUriBytes) {
+        err = "a device URI of " + std::to_string(text.size()) + " bytes (at most " + std::to_string(kMaxUriBytes) +
+              "): \"" + text.substr(0, 64) + "...\"";
+        return CDM_ERR_INVALID_ARG;
+    }
     Uri u;
     u.text = text;
     std::string rest;
@@ -77,6 +83,7 @@ int parse_uri(const std::string &text, Uri &out, std::string &err) {
     u.path = rest.substr(0, q);
     if (q != std::string::npos) {
         const std::string query = rest.substr(q + 1);
+        std::set<std::string> seen; // a repeat found in O(log n), not by a scan of the options
         size_t start = 0;
         while (start < query.size()) {
             size_t end = query.find('&', start);
@@ -88,11 +95,9 @@ int parse_uri(const std::string &text, Uri &out, std::string &err) {
                 return CDM_ERR_INVALID_ARG;
             }
             const std::string key = item.substr(0, eq);
-            for (const auto &kv : u.options) {
-                if (kv.first == key) {
-                    err = "URI \"" + text + "\": option \"" + key + "\" given twice";
-                    return CDM_ERR_INVALID_ARG;
-                }
+            if (!seen.insert(key).second) {
+                err = "URI \"" + text + "\": option \"" + key + "\" given twice";
+                return CDM_ERR_INVALID_ARG;
             }
             u.options.emplace_back(key, item.substr(eq + 1));
             start = end + 1;

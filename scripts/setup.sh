@@ -31,7 +31,9 @@ DEB_PKGS=(build-essential cmake ninja-build pkg-config git
   clang libclang-rt-14-dev
   # `cdm bridge --dds` (src/bridge): Cyclone DDS's C library and its IDL
   # compiler; OpenSSL's libcrypto for the SHA-256 of ROS 2's type hashes
-  cyclonedds-dev cyclonedds-tools libssl-dev)
+  cyclonedds-dev cyclonedds-tools libssl-dev
+  # the man pages of cdm and its subcommands, from the command's own help
+  help2man)
 
 missing=()
 for p in "${DEB_PKGS[@]}"; do

@@ -24,6 +24,11 @@ test -f "$root/usr/lib/python3/dist-packages/cdm/report/__init__.py"
 test -f "$root/usr/lib/python3/dist-packages/cdm/py.typed"
 test ! -e "$root/usr/lib/python3/dist-packages/cdm/report.py"
 test -f "$root/usr/share/doc/cdm/README.md" && test -f "$root/usr/share/doc/cdm/docs/bindings.md"
+# Libraries in the multiarch directory; a man page for cdm and each subcommand.
+test -f "$root/usr/lib/x86_64-linux-gnu/libcdm.so.1" || test -n "$(find "$root/usr/lib" -path '*-linux-gnu/libcdm.so.1')"
+for page in cdm cdm-record cdm-calib cdm-calib-diagnose cdm-calib-check cdm-calib-plan cdm-bridge; do
+  zcat "$root/usr/share/man/man1/$page.1.gz" | grep -q '^\.TH' || { echo "deb_contents: no man page $page.1.gz"; exit 1; }
+done
 if dpkg-deb -f "$deb" Homepage | grep -q .; then
   dpkg-deb -f "$deb" Homepage | grep -qv 'example\.invalid'
 fi

@@ -8,11 +8,14 @@ rm -rf "$prefix" && mkdir -p "$prefix"
 cmake --install "$build" --prefix "$prefix" >/dev/null
 work=$(mktemp -d) && trap 'rm -rf "$work"' EXIT
 cd "$work"
+# The libraries' directory: the multiarch one (lib/x86_64-linux-gnu) on Debian.
+libdir=$(dirname "$(find "$prefix" -name libcdm.so.1 | head -1)")
+case "$libdir" in "$prefix"/lib/*-linux-gnu) ;; *) echo "prefix: libcdm in $libdir, not the multiarch directory"; exit 1;; esac
 # examples/c/README.md: the pkg-config command line.
-export PKG_CONFIG_PATH="$prefix/lib/pkgconfig"
+export PKG_CONFIG_PATH="$libdir/pkgconfig"
 # shellcheck disable=SC2046
 cc -o teleop_loop "$src/examples/c/teleop_loop.c" $(pkg-config --cflags --libs cdm) -lm \
-   -Wl,-rpath,"$prefix/lib"
+   -Wl,-rpath,"$libdir"
 ./teleop_loop sim: --seconds 1 | grep "loop period: mean" >/dev/null
 # examples/c/README.md: the CMake way (find_package(cdm)).
 cmake -S "$src/examples/c" -B cbuild -DCMAKE_PREFIX_PATH="$prefix" >/dev/null
@@ -20,8 +23,8 @@ cmake --build cbuild >/dev/null
 ./cbuild/teleop_loop sim: --seconds 1 | grep "loop period: mean" >/dev/null
 # examples/csharp/README.md: mcs against the installed Cdm.dll, mono with
 # MONO_PATH only (the installed Cdm.dll.config names the installed library).
-if command -v mcs >/dev/null && [ -f "$prefix/lib/cdm/csharp/Cdm.dll" ]; then
-  mcs -nologo -r:"$prefix/lib/cdm/csharp/Cdm.dll" -out:TeleopLoop.exe "$src/examples/csharp/TeleopLoop.cs"
-  MONO_PATH="$prefix/lib/cdm/csharp" mono TeleopLoop.exe sim: --seconds 1 | grep "loop period" >/dev/null
+if command -v mcs >/dev/null && [ -f "$libdir/cdm/csharp/Cdm.dll" ]; then
+  mcs -nologo -r:"$libdir/cdm/csharp/Cdm.dll" -out:TeleopLoop.exe "$src/examples/csharp/TeleopLoop.cs"
+  MONO_PATH="$libdir/cdm/csharp" mono TeleopLoop.exe sim: --seconds 1 | grep "loop period" >/dev/null
 fi
 echo "prefix examples: ok"

@@ -13,7 +13,7 @@ DEB_PKGS=(build-essential cmake ninja-build pkg-config git
   # what differs
   ccache
   libhidapi-dev libudev-dev libeigen3-dev libnlopt-dev libnlopt-cxx-dev libcmocka-dev
-  nlohmann-json3-dev libboost-math-dev libcli11-dev libfmt-dev libbenchmark-dev
+  nlohmann-json3-dev libboost-math-dev libcli11-dev libbenchmark-dev
   # CRC-32 and MCAP's chunk compressions (src/io/mcap*)
   zlib1g-dev libzstd-dev liblz4-dev
   mono-mcs mono-runtime python3 python3-pip

@@ -902,8 +902,28 @@ typedef struct cdm_jig_plan cdm_jig_plan;
 CDM_API int cdm_jig_plan_create(const char *uri, int holes, double pitch_mm, const double *heights_mm,
                                 size_t n_heights, int samples, cdm_jig_plan **out);
 CDM_API size_t cdm_jig_plan_count(const cdm_jig_plan *plan);
-/** Samples to keep at each position. */
+/** Samples to keep at each position (of the whole plate; a planned
+ *  session's own are cdm_jig_plan_samples_at's). */
 CDM_API int cdm_jig_plan_samples(const cdm_jig_plan *plan);
+/**
+ * since 1.2: a planned session (`cdm calib plan`'s PLAN.csv: x_ref, y_ref,
+ * z_ref, samples per row): the plan becomes the file's positions, in its
+ * order, each a hole of the plate at one of its heights (within 1e-6 mm)
+ * with its own samples. A sim: URI with jig_plan= set does this in
+ * cdm_jig_plan_create; another file then is CDM_ERR_INVALID_ARG (the labels
+ * would not match the positions). CDM_ERR_INVALID_ARG naming the file, line
+ * and fault, or the first row that is no hole; the plan is unchanged then.
+ */
+CDM_API int cdm_jig_plan_use_file(cdm_jig_plan *plan, const char *plan_csv);
+/**
+ * since 1.2: a PLAN.csv's rows as a JSON array of [x_ref, y_ref, z_ref,
+ * samples] (mm, jig frame), for cdm_simulate_jig_dataset's "plan" option.
+ * CDM_ERR_INVALID_ARG naming the file, line and fault. Free *rows_json with
+ * cdm_free_string.
+ */
+CDM_API int cdm_plan_file_read(const char *plan_csv, char **rows_json);
+/** since 1.2: samples to keep at position i (0 for an i past the end). */
+CDM_API int cdm_jig_plan_samples_at(const cdm_jig_plan *plan, size_t i);
 /** Position i: its dataset `point` id and reference x (height), y, z in mm, jig frame. */
 CDM_API int cdm_jig_plan_get(const cdm_jig_plan *plan, size_t i, int *point, double ref_mm[3]);
 CDM_API void cdm_jig_plan_free(cdm_jig_plan *plan);

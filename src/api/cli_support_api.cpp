@@ -24,6 +24,7 @@
 #include "io/device_json.h"
 #include "io/file.h"
 #include "jig/plan.h"
+#include "jig/planned.h"
 #include "calib/dataset/simulate.h"
 #include "cdm/cdm.h"
 #include "device/device.h"
@@ -40,7 +41,11 @@ struct cdm_recorder {
 
 struct cdm_jig_plan {
     cdm::JigPlanOptions options;
-    std::vector<cdm::JigPosition> positions;
+    std::vector<cdm::JigPosition> positions; // the whole plate
+    // A planned session's visits (cdm_jig_plan_use_file); empty: every
+    // position of the plate, options.samples each.
+    std::vector<cdm::PlannedVisit> visits;
+    std::vector<cdm::PlanRow> uri_plan; // a sim: URI's jig_plan rows, if any
 };
 
 namespace {
@@ -51,7 +56,8 @@ int null_arg(const char *fn, const char *arg) {
 
 // The jig_* options of a sim: URI, with the simulator's own ranges (the
 // same helpers the sim transport validates them with).
-int jig_options_from_uri(const std::string &text, cdm::JigPlanOptions &o, bool &is_sim, std::string &err) {
+int jig_options_from_uri(const std::string &text, cdm::JigPlanOptions &o, bool &is_sim,
+                         std::vector<cdm::PlanRow> &plan_rows, std::string &err) {
     cdm::Uri u;
     is_sim = false;
     if (int rc = cdm::parse_uri(text, u, err); rc != CDM_OK) return rc;
@@ -72,6 +78,10 @@ int jig_options_from_uri(const std::string &text, cdm::JigPlanOptions &o, bool &
             std::string herr;
             ok = cdm::parse_heights(kv.second, o.heights_mm, herr);
             if (!ok) err = "URI \"" + u.text + "\": option " + herr;
+        } else if (kv.first == "jig_plan") {
+            std::string perr;
+            ok = cdm::read_plan_csv(kv.second, plan_rows, perr);
+            if (!ok) err = "URI \"" + u.text + "\": option jig_plan: " + perr;
         }
         if (!ok) return CDM_ERR_INVALID_ARG;
     }
@@ -318,7 +328,8 @@ int cdm_jig_plan_create(const char *uri, int holes, double pitch_mm, const doubl
         std::string err;
         bool is_sim = false;
         if (uri) {
-            if (int rc = jig_options_from_uri(uri, o, is_sim, err); rc != CDM_OK) return cdm::fail(rc, err);
+            if (int rc = jig_options_from_uri(uri, o, is_sim, plan->uri_plan, err); rc != CDM_OK)
+                return cdm::fail(rc, err);
         }
         const cdm::JigPlanOptions from_uri = o;
         if (holes) o.n = holes;
@@ -335,22 +346,65 @@ int cdm_jig_plan_create(const char *uri, int holes, double pitch_mm, const doubl
                              "would not match the positions");
         if (!cdm::check_jig_options(o, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
         plan->positions = cdm::make_jig_plan(o);
+        if (!plan->uri_plan.empty() && !cdm::match_plan(plan->positions, plan->uri_plan, plan->visits, err))
+            return cdm::fail(CDM_ERR_INVALID_ARG, "the URI's jig_plan: " + err);
         *out = plan.release();
         return int(CDM_OK);
     });
 }
 
-size_t cdm_jig_plan_count(const cdm_jig_plan *plan) { return plan ? plan->positions.size() : 0; }
+int cdm_plan_file_read(const char *plan_csv, char **rows_json) {
+    return cdm::guarded("cdm_plan_file_read", [&] {
+        if (!rows_json) return null_arg("cdm_plan_file_read", "rows_json");
+        *rows_json = nullptr;
+        if (!plan_csv) return null_arg("cdm_plan_file_read", "plan_csv");
+        std::vector<cdm::PlanRow> rows;
+        std::string err;
+        if (!cdm::read_plan_csv(plan_csv, rows, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
+        nlohmann::json j = nlohmann::json::array();
+        for (const cdm::PlanRow &r : rows) j.push_back({r[0], r[1], r[2], r[3]});
+        return to_c_string(j.dump(), rows_json);
+    });
+}
+
+int cdm_jig_plan_use_file(cdm_jig_plan *plan, const char *plan_csv) {
+    return cdm::guarded("cdm_jig_plan_use_file", [&] {
+        if (!plan) return null_arg("cdm_jig_plan_use_file", "plan");
+        if (!plan_csv) return null_arg("cdm_jig_plan_use_file", "plan_csv");
+        std::vector<cdm::PlanRow> rows;
+        std::vector<cdm::PlannedVisit> visits;
+        std::string err;
+        if (!cdm::read_plan_csv(plan_csv, rows, err) || !cdm::match_plan(plan->positions, rows, visits, err))
+            return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_jig_plan_use_file: " + err);
+        if (!plan->uri_plan.empty() && rows != plan->uri_plan)
+            return cdm::fail(CDM_ERR_INVALID_ARG, std::string("cdm_jig_plan_use_file: ") + plan_csv +
+                                                      " is not the simulator's jig_plan in the URI: the labels "
+                                                      "would not match the positions");
+        plan->visits = std::move(visits);
+        return int(CDM_OK);
+    });
+}
+
+size_t cdm_jig_plan_count(const cdm_jig_plan *plan) {
+    if (!plan) return 0;
+    return plan->visits.empty() ? plan->positions.size() : plan->visits.size();
+}
 
 int cdm_jig_plan_samples(const cdm_jig_plan *plan) { return plan ? plan->options.samples : 0; }
+
+int cdm_jig_plan_samples_at(const cdm_jig_plan *plan, size_t i) {
+    if (!plan || i >= cdm_jig_plan_count(plan)) return 0;
+    return plan->visits.empty() ? plan->options.samples : plan->visits[i].samples;
+}
 
 int cdm_jig_plan_get(const cdm_jig_plan *plan, size_t i, int *point, double ref_mm[3]) {
     if (!plan || !point || !ref_mm)
         return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_jig_plan_get: plan, point or ref_mm is NULL");
-    if (i >= plan->positions.size())
+    const size_t n = cdm_jig_plan_count(plan);
+    if (i >= n)
         return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_jig_plan_get: position " + std::to_string(i) + " of " +
-                                                  std::to_string(plan->positions.size()));
-    const cdm::JigPosition &p = plan->positions[i];
+                                                  std::to_string(n));
+    const cdm::JigPosition &p = plan->positions[plan->visits.empty() ? i : plan->visits[i].index];
     *point = p.point;
     std::memcpy(ref_mm, p.ref, sizeof p.ref);
     return CDM_OK;

@@ -1,14 +1,12 @@
 // `cdm calib plan`: a jig session planned before any data (cdm_plan), written
 // as PLAN.csv (x_ref,y_ref,z_ref,samples, in walking order); and the reader
 // of that file for `cdm calib simulate --plan`.
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -22,10 +20,9 @@ namespace cdm::cli {
 
 namespace {
 
-// The plan file's header: the jig frame's reference (mm) and the samples
-// to take there.
+// The plan file's header (read back by the library: cdm_plan_file_read):
+// the jig frame's reference (mm) and the samples to take there.
 constexpr const char *kPlanHeader = "x_ref,y_ref,z_ref,samples";
-constexpr size_t kPlanMaxBytes = size_t(16) << 20; // 16 MiB: ~500,000 positions
 
 struct PlanArgs {
     std::string out, json_out, effects, heights, device;
@@ -103,45 +100,11 @@ int cmd_plan(const PlanArgs &a) {
 } // namespace
 
 nlohmann::json read_plan_csv(const std::string &path) {
-    struct stat st {};
-    if (stat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode))
-        throw UsageError("--plan: " + path + " is not a regular file that can be read");
-    if (size_t(st.st_size) > kPlanMaxBytes) throw UsageError("--plan: " + path + " is over 16 MiB");
-    std::ifstream f(path, std::ios::binary);
-    if (!f) throw UsageError("--plan: cannot read " + path);
-    std::string line;
-    if (!std::getline(f, line) || (line.erase(line.find_last_not_of("\r") + 1), line != kPlanHeader))
-        throw UsageError("--plan: " + path + ":1: the header must be " + std::string(kPlanHeader) +
-                         " (a file of `cdm calib plan`)");
-    nlohmann::json rows = nlohmann::json::array();
-    size_t bytes = line.size();
-    for (size_t no = 2; std::getline(f, line); ++no) {
-        bytes += line.size() + 1;
-        if (bytes > kPlanMaxBytes) throw UsageError("--plan: " + path + " is over 16 MiB");
-        if (!line.empty() && line.back() == '\r') line.pop_back();
-        if (line.empty()) continue;
-        std::vector<double> v;
-        const std::string at = "--plan: " + path + ":" + std::to_string(no) + ": ";
-        for (size_t b = 0, e;; b = e + 1) { // every field, an empty last one included
-            e = std::min(line.find(',', b), line.size());
-            const std::string cell = line.substr(b, e - b);
-            char *end = nullptr;
-            const double d = std::strtod(cell.c_str(), &end);
-            if (cell.empty() || *end != '\0' || !std::isfinite(d) || cell.find_first_of("xXpP") != std::string::npos)
-                throw UsageError(at + "\"" + cell.substr(0, 40) + "\" is not a number");
-            v.push_back(d);
-            if (e == line.size()) break;
-        }
-        if (v.size() != 4)
-            throw UsageError(at + "4 values expected (" + kPlanHeader + "), got " + std::to_string(v.size()));
-        for (int c = 0; c < 3; ++c)
-            if (std::fabs(v[size_t(c)]) > 5000) throw UsageError(at + "a reference beyond +-5000 mm");
-        if (!(v[3] >= 1 && v[3] <= 1e6) || v[3] != std::floor(v[3]))
-            throw UsageError(at + "samples must be a whole number in 1..1000000");
-        rows.push_back(v);
-    }
-    if (rows.empty()) throw UsageError("--plan: " + path + " lists no position");
-    return rows;
+    char *rows = nullptr;
+    if (cdm_plan_file_read(path.c_str(), &rows) != CDM_OK) throw UsageError(std::string("--plan: ") + cdm_thread_error());
+    const nlohmann::json j = nlohmann::json::parse(rows);
+    cdm_free_string(rows);
+    return j;
 }
 
 void add_plan(CLI::App *calib) {

@@ -45,6 +45,7 @@ struct JigArgs {
     double pitch = 0;
     std::string heights;
     int samples = 0;
+    std::string plan; // PLAN.csv of `cdm calib plan`: only its positions, in its order
 };
 
 struct RecordCtx {
@@ -68,7 +69,6 @@ struct RecordCtx {
     bool jig = false;
     cdm_jig_plan *plan = nullptr;
     size_t plan_n = 0;
-    int samples = 100;
     cdm_dataset_writer *csv = nullptr;
     size_t next_point = 0;
     bool in_dwell = false;
@@ -77,6 +77,7 @@ struct RecordCtx {
     bool have_t0 = false;
     uint64_t t0_us = 0;
     uint64_t short_dwells = 0;
+    uint64_t kept_samples = 0; // rows handed to the dataset writer
     // Samples the dataset writer refused (a reading the reader would
     // refuse: a glitch to a non-positive length): left out, the session
     // goes on; the first reason is told at the end.
@@ -106,7 +107,7 @@ void after_write(RecordCtx &c, int rc) {
 void close_dwell(RecordCtx &c) {
     c.in_dwell = false;
     if (c.next_point >= c.plan_n) return;
-    if (c.dwell.size() < size_t(c.samples)) {
+    if (c.dwell.size() < size_t(cdm_jig_plan_samples_at(c.plan, c.next_point))) {
         // Released too early: the same position is asked for again.
         ++c.short_dwells;
         c.dwell.clear();
@@ -116,8 +117,10 @@ void close_dwell(RecordCtx &c) {
     int point = 0;
     double ref[3] = {0, 0, 0};
     cdm_jig_plan_get(c.plan, c.next_point, &point, ref);
-    for (size_t k = 0; k < c.dwell.size() && !c.write_failed; ++k)
+    for (size_t k = 0; k < c.dwell.size() && !c.write_failed; ++k) {
         after_write(c, cdm_dataset_writer_add_at(c.csv, point, ref, c.dwell[k].data(), c.dwell_t[k]));
+        ++c.kept_samples;
+    }
     c.dwell.clear();
     c.dwell_t.clear();
     if (++c.next_point == c.plan_n) c.done = true;
@@ -169,7 +172,7 @@ void record_sample(void *user, const cdm_sample *s) {
             c->have_t0 = true;
             c->t0_us = s->raw->device_time_us;
         }
-        if (c->dwell.size() < size_t(c->samples)) {
+        if (c->dwell.size() < size_t(cdm_jig_plan_samples_at(c->plan, c->next_point))) {
             c->dwell.push_back({s->raw->lengths_mm[0], s->raw->lengths_mm[1], s->raw->lengths_mm[2],
                                 s->raw->lengths_mm[3]});
             // The device's own clock: acquisition time however fast the
@@ -233,6 +236,11 @@ cdm_jig_plan *jig_plan_for(const std::string &uri, const JigArgs &a) {
     cdm_jig_plan *plan = nullptr;
     if (cdm_jig_plan_create(uri.c_str(), a.n, a.pitch, heights.data(), heights.size(), a.samples, &plan) != CDM_OK)
         throw UsageError(std::string("record --jig: ") + cdm_thread_error());
+    if (!a.plan.empty() && cdm_jig_plan_use_file(plan, a.plan.c_str()) != CDM_OK) {
+        const std::string why = cdm_thread_error();
+        cdm_jig_plan_free(plan);
+        throw UsageError("record --jig --plan: " + why);
+    }
     return plan;
 }
 
@@ -275,11 +283,23 @@ int open_recorder(cdm_device *dev, const std::string &tmp, const char *format, R
 
 void progress(RecordCtx &ctx, bool jig, double t, uint32_t dropped, bool tty) {
     std::lock_guard<std::mutex> lock(ctx.mu);
-    if (jig)
-        std::fprintf(stderr, "%sjig position %zu/%zu (%s), %llu reports, %.1f s, drops %u%s", tty ? "\r" : "",
-                     ctx.next_point, ctx.plan_n, ctx.in_dwell ? "MARK held" : "moving",
-                     (unsigned long long)ctx.reports, t, dropped, tty ? "   " : "\n");
-    else
+    if (jig && ctx.next_point < ctx.plan_n) {
+        // Where the holder goes next, as the person at the bench reads it:
+        // the fixture height, the hole, the samples kept so far.
+        int point = 0;
+        double ref[3] = {0, 0, 0};
+        cdm_jig_plan_get(ctx.plan, ctx.next_point, &point, ref);
+        std::fprintf(stderr,
+                     "%sjig position %zu/%zu: height %s mm, hole y %s z %s mm: %zu/%d samples (%s), %.1f s, drops "
+                     "%u%s",
+                     tty ? "\r" : "", ctx.next_point + 1, ctx.plan_n, num(ref[0]).c_str(), num(ref[1]).c_str(),
+                     num(ref[2]).c_str(), ctx.in_dwell ? ctx.dwell.size() : size_t(0),
+                     cdm_jig_plan_samples_at(ctx.plan, ctx.next_point), ctx.in_dwell ? "MARK held" : "moving", t,
+                     dropped, tty ? "   " : "\n");
+    } else if (jig) {
+        std::fprintf(stderr, "%sjig plan complete (%zu positions), %.1f s%s", tty ? "\r" : "", ctx.plan_n, t,
+                     tty ? "   " : "\n");
+    } else
         std::fprintf(stderr, "%srecorded %llu reports, %.1f s, drops %u%s", tty ? "\r" : "",
                      (unsigned long long)ctx.reports, t, dropped, tty ? "   " : "\n");
 }
@@ -356,10 +376,11 @@ int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, cons
         std::fprintf(stderr, "cdm: record: %llu samples left out: the file could not hold them (first: %s)\n",
                      (unsigned long long)ctx.refused_samples, ctx.first_refusal.c_str());
     if (ctx.jig) {
-        std::printf("wrote %s: %zu of %zu jig positions x %d samples (%llu reports, %llu dwells too short and "
+        std::printf("wrote %s: %zu of %zu jig positions (%llu samples; %llu reports, %llu dwells too short and "
                     "repeated, %llu dropped)\n",
-                    file.c_str(), ctx.next_point, ctx.plan_n, ctx.samples, (unsigned long long)ctx.reports,
-                    (unsigned long long)ctx.short_dwells, (unsigned long long)st.dropped);
+                    file.c_str(), ctx.next_point, ctx.plan_n, (unsigned long long)ctx.kept_samples,
+                    (unsigned long long)ctx.reports, (unsigned long long)ctx.short_dwells,
+                    (unsigned long long)st.dropped);
         if (ctx.next_point < ctx.plan_n) {
             std::fprintf(stderr, "cdm: record: the session stopped before the jig plan was complete\n");
             return kExitFailure;
@@ -378,6 +399,7 @@ int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, cons
 int cmd_record(const std::string &uri, const std::string &file, double seconds, const JigArgs &ja,
                const std::string &compression, bool exporting = false, bool json = false) {
     check_output(uri, file);
+    if (!ja.plan.empty() && !ja.jig) throw UsageError("--plan " + ja.plan + ": a planned session is recorded with --jig");
     std::string format = format_of(file);
     if (!compression.empty()) {
         if (format != "mcap" || ja.jig)
@@ -393,7 +415,6 @@ int cmd_record(const std::string &uri, const std::string &file, double seconds, 
     if (ja.jig) {
         ctx.plan = jig_plan_for(uri, ja);
         ctx.plan_n = cdm_jig_plan_count(ctx.plan);
-        ctx.samples = cdm_jig_plan_samples(ctx.plan);
         const auto inputs = uri_inputs(uri);
         std::vector<const char *> protect;
         for (const auto &p : inputs) protect.push_back(p.c_str());
@@ -462,6 +483,10 @@ void add_record_command(CLI::App &app) {
                        "comma-separated fixture heights in mm (default 30,40,50,60,70, or the sim: URI's)");
     record->add_option("--jig-samples", ja.samples, "samples kept per position (0: 100, or the sim: URI's)")
         ->check(range(0, 1000000));
+    record->add_option("--plan", ja.plan,
+                       "with --jig: a planned session, PLAN.csv of `cdm calib plan` (the plate and heights as "
+                       "given here): only its positions, in its order, each with its own samples; the progress line "
+                       "says which hole at which height comes next");
     static std::string r_compression;
     const char *compression_help = "MCAP's chunk compression: zstd (the default), lz4 (faster, larger) or none";
     record->add_option("--compression", r_compression, compression_help)

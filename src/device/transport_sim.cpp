@@ -18,6 +18,7 @@
 #include "device/sim/sim_truth.h"
 #include "device/sim/simulator.h"
 #include "device/transport.h"
+#include "jig/planned.h"
 #include "io/calibration_json.h"
 #include "io/device_json.h"
 #include "io/file.h"
@@ -28,7 +29,7 @@ namespace {
 
 constexpr const char *kSimOptions =
     "rate, noise, imu_noise, hall_noise, seed, motion, effects, effect_seed, device, truth, realtime, "
-    "stall_after, serial, jig_n, jig_pitch, jig_heights, jig_samples, jig_tolerance, jig_transit";
+    "stall_after, serial, jig_n, jig_pitch, jig_heights, jig_samples, jig_tolerance, jig_transit, jig_plan";
 
 // Reports the host has not read pile up in the kernel's hidraw queue (64
 // reports on Linux); beyond that the oldest are lost. A paced simulation
@@ -182,6 +183,7 @@ struct SimOptions {
     sim::FaultPlan faults;
     sim::JigMotionOptions jig;
     bool any_jig_option = false;
+    std::vector<PlanRow> jig_plan; // jig_plan=PLAN.csv's rows
 };
 
 // One jig_* option into o.jig; false + err when its value is refused.
@@ -203,6 +205,10 @@ bool jig_option(const Uri &u, const std::string &k, const std::string &v, SimOpt
         o.jig.plan.samples = int(n);
     } else if (k == "jig_tolerance") {
         ok = option_double(u, k, v, 0.0, 10.0, o.jig.tolerance_mm, err);
+    } else if (k == "jig_plan") {
+        std::string perr;
+        ok = read_plan_csv(v, o.jig_plan, perr);
+        if (!ok) err = "URI \"" + u.text + "\": option jig_plan: " + perr;
     } else { // jig_transit
         ok = option_u64(u, k, v, 1, 100000, n, err);
         o.jig.transit = int(n);
@@ -244,7 +250,7 @@ int parse_sim_options(const Uri &u, SimOptions &o, std::string &err) {
             o.serial = v;
             if (!ok) err = "URI \"" + u.text + "\": option serial=\"" + v + "\" must be 1..16 of [A-Za-z0-9-_.]";
         } else if (k == "jig_n" || k == "jig_pitch" || k == "jig_heights" || k == "jig_samples" ||
-                   k == "jig_tolerance" || k == "jig_transit") {
+                   k == "jig_tolerance" || k == "jig_transit" || k == "jig_plan") {
             ok = jig_option(u, k, v, o, err);
         } else {
             bool known = false;
@@ -362,6 +368,10 @@ int open_sim(const Uri &u, TransportPtr &out, std::string &err) {
         }
         sim::JigMotionOptions jig = o.jig;
         jig.seed = o.so.seed ^ 0x6A09E667F3BCC909ull;
+        if (!o.jig_plan.empty() && !match_plan(make_jig_plan(o.jig.plan), o.jig_plan, jig.visits, jerr)) {
+            err = "URI \"" + u.text + "\": jig_plan: " + jerr;
+            return CDM_ERR_INVALID_ARG;
+        }
         m = sim::make_jig_motion(truth, jig);
     }
     out = std::make_unique<SimTransport>(u.text, truth, info, std::move(m), o.so, o.realtime, o.stall_after,

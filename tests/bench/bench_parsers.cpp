@@ -125,6 +125,8 @@ std::string replay_bytes(size_t n) {
     return s;
 }
 
+constexpr size_t kMcapBytesPerMessage = cdm::proto::kInputReportSize + 31 + 16;
+
 // An MCAP recording of about n bytes of messages (uncompressed), written
 // by the recorder in `compression`; returns its path.
 std::string mcap_file(size_t n, const char *compression) {
@@ -140,10 +142,10 @@ std::string mcap_file(size_t n, const char *compression) {
         std::fprintf(stderr, "bench_parsers: %s\n", err.c_str());
         std::exit(2);
     }
-    // A message record is the report and 31 bytes; chunk, index and summary
-    // records add about 1 %: 97 % of n in messages keeps the file (and the
-    // uncompressed chunks) within the cap.
-    const size_t per = cdm::proto::kInputReportSize + 31;
+    // A message is its record (the report and 31 bytes) and its index entry
+    // (16 bytes); chunk and summary records add about 1 %: 97 % of n keeps
+    // the file, and the uncompressed chunks, within the cap.
+    const size_t per = kMcapBytesPerMessage;
     for (uint32_t k = 0; double(k) * double(per) < 0.97 * double(n); ++k) {
         const auto r = input_report(k);
         if (w->write(uint64_t(k) * 1000000 + 1, r.data(), r.size(), nullptr, err) != 0) {
@@ -180,6 +182,9 @@ std::string dataset_file(size_t n, int rows_per_point, const char *tag) {
 std::vector<Case> cases() {
     const size_t kJson = cdm::io::kJsonMaxBytes, kData = cdm::io::kDatasetMaxBytes;
     const size_t kRec = size_t(cdm::replay::kMaxFileBytes), kUri = cdm::kMaxUriBytes;
+    // An MCAP recording is capped by its bytes and by its messages' count,
+    // whichever comes first.
+    const size_t kMcap = std::min(kRec, size_t(double(cdm::mcap::kMaxMessages) * kMcapBytesPerMessage / 0.97) - 1);
     auto json = [](const std::string &text, std::string &err) {
         cdm::io::JsonValue v;
         return cdm::io::parse_json(text, "bench.json", v, err);
@@ -236,7 +241,7 @@ std::vector<Case> cases() {
         c.push_back({comp[0] == 'n' ? "mcap_messages" : "mcap_messages_zstd",
                      comp[0] == 'n' ? "an MCAP file of report messages, chunks uncompressed"
                                     : "the same, zstd chunks (the cap is on the uncompressed bytes)",
-                     kRec, true, true, [comp](size_t n) { return mcap_file(n, comp); },
+                     kMcap, true, true, [comp](size_t n) { return mcap_file(n, comp); },
                      [](const std::string &path, std::string &err) {
                          cdm::replay::File f;
                          return cdm::replay::load(path, f, err) == 0;

@@ -137,3 +137,58 @@ def test_a_position_off_the_plate_or_too_many_positions(tmp_path):
     with pytest.raises(cdm.InvalidArgumentError) as e:
         cdm.plan(5, effects=["no_such_effect"], **JIG)
     assert "no_such_effect" in str(e.value)
+
+
+def dataset_positions(path):
+    """(point, x, y, z) -> rows of a dataset CSV, in first-appearance order."""
+    import csv
+    out = {}
+    with open(path) as f:
+        for r in csv.DictReader(f):
+            k = (int(r["point"]), float(r["x_ref"]), float(r["y_ref"]), float(r["z_ref"]))
+            out[k] = out.get(k, 0) + 1
+    return list(out.items())
+
+
+def test_record_walks_a_planned_session(tmp_path):
+    """`cdm record --jig --plan` on the simulated master walking the same
+    PLAN.csv (sim:'s jig_plan): the same positions, in the plan's order, with
+    each its own samples, as `cdm calib simulate --plan` writes; the
+    progress line names the height and the hole that come next."""
+    plan = tmp_path / "plan.csv"
+    rows = ["x_ref,y_ref,z_ref,samples", "40,-30,-30,7", "40,-30,0,12", "55,10,20,5", "70,0,0,9"]
+    plan.write_text("\n".join(rows) + "\n")
+    plate = "jig_n=7&jig_pitch=10&jig_heights=40,55,70"
+    rec = tmp_path / "rec.csv"
+    # Paced at 100 Hz (133 reports, 1.3 s): the progress line has time to show.
+    r = cli("record", "sim:?rate=100&motion=jig&%s&jig_plan=%s" % (plate, plan), rec, "--jig", "--plan", plan)
+    assert r.returncode == 0, r.stderr
+    assert "4 of 4 jig positions (33 samples" in r.stdout, r.stdout
+    assert "jig position 1/4: height 40 mm, hole y -30 z -30 mm" in r.stderr, r.stderr
+    sim = tmp_path / "sim.csv"
+    r = cli("calib", "simulate", sim, "--holes", 7, "--pitch-mm", 10, "--heights", "40,55,70", "--plan", plan)
+    assert r.returncode == 0, r.stderr
+    got = dataset_positions(rec)
+    assert got == dataset_positions(sim)
+    assert [(k[1], k[2], k[3], n) for k, n in got] == [(40, -30, -30, 7), (40, -30, 0, 12), (55, 10, 20, 5), (70, 0, 0, 9)]
+
+
+def test_record_refuses_a_plan_that_cannot_be_walked(tmp_path):
+    plan = tmp_path / "plan.csv"
+    plan.write_text("x_ref,y_ref,z_ref,samples\n40,-30,-30,7\n")
+    other = tmp_path / "other.csv"
+    other.write_text("x_ref,y_ref,z_ref,samples\n40,-30,0,7\n")
+    off = tmp_path / "off.csv"
+    off.write_text("x_ref,y_ref,z_ref,samples\n40,-30,-30,7\n40,3,0,5\n")
+    plate = "sim:?realtime=0&motion=jig&jig_n=7&jig_pitch=10&jig_heights=40,55,70"
+    cases = [
+        ([plate, tmp_path / "a.cdmrec", "--plan", plan], "a planned session is recorded with --jig"),
+        ([plate + "&jig_plan=%s" % plan, tmp_path / "b.csv", "--jig", "--plan", other],
+         "is not the simulator's jig_plan"),
+        ([plate, tmp_path / "c.csv", "--jig", "--plan", off], "plan position 2 (40, 3, 0 mm) is not a hole"),
+        ([plate + "&jig_plan=%s" % off, tmp_path / "d.csv", "--jig"], "plan position 2 (40, 3, 0 mm) is not a hole"),
+    ]
+    for args, words in cases:
+        r = cli("record", *args)
+        assert r.returncode == 2 and words in r.stderr, (args, r.returncode, r.stderr)
+        assert not os.path.exists(args[1]), args[1]

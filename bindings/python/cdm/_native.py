@@ -284,6 +284,9 @@ PROTOTYPES: Dict[str, Tuple[Any, List[Any]]] = {
     "cdm_jig_plan_count": (_size, [_handle]),
     "cdm_jig_plan_samples": (_int, [_handle]),
     "cdm_jig_plan_get": (_int, [_handle, _size, ctypes.POINTER(ctypes.c_int), c_double_p]),
+    "cdm_jig_plan_use_file": (_int, [_handle, ctypes.c_char_p]),
+    "cdm_jig_plan_samples_at": (_int, [_handle, _size]),
+    "cdm_plan_file_read": (_int, [ctypes.c_char_p, ctypes.POINTER(ctypes.c_void_p)]),
     "cdm_jig_plan_free": (None, [_handle]),
     "cdm_effect_doc": (_str, [_size]),
     "cdm_effect_param_count": (_size, [_size]),
@@ -402,6 +405,9 @@ class Library:
     cdm_jig_plan_count: Callable[..., int]
     cdm_jig_plan_samples: Callable[..., int]
     cdm_jig_plan_get: Callable[..., int]
+    cdm_jig_plan_use_file: Callable[..., int]
+    cdm_jig_plan_samples_at: Callable[..., int]
+    cdm_plan_file_read: Callable[..., int]
     cdm_jig_plan_free: Callable[..., None]
     cdm_effect_doc: Callable[..., Optional[bytes]]
     cdm_effect_param_count: Callable[..., int]

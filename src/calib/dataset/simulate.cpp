@@ -7,6 +7,7 @@
 #include <random>
 
 #include "jig/errors.h"
+#include "jig/planned.h"
 
 namespace cdm {
 
@@ -24,41 +25,9 @@ bool planned_visits(const std::vector<JigPosition> &plan, const JigSimOptions &o
         err = "a planned session is on the plate's holes, not a scattered layout";
         return false;
     }
-    // The plate's positions by their reference in micrometres: a planned
-    // reference within 1e-6 mm of one is found among its key's neighbours.
-    using Key = std::array<long long, 3>;
-    auto key = [](const double *r) { return Key{std::llround(r[0] * 1e6), std::llround(r[1] * 1e6), std::llround(r[2] * 1e6)}; };
-    std::map<Key, size_t> at;
-    for (size_t k = 0; k < plan.size(); ++k) at.emplace(key(plan[k].ref), k);
-    auto find = [&](const double *r) -> size_t {
-        const Key c = key(r);
-        for (long long dx = -1; dx <= 1; ++dx)
-            for (long long dy = -1; dy <= 1; ++dy)
-                for (long long dz = -1; dz <= 1; ++dz) {
-                    const auto it = at.find({c[0] + dx, c[1] + dy, c[2] + dz});
-                    if (it == at.end()) continue;
-                    const double *p = plan[it->second].ref;
-                    if (std::fabs(p[0] - r[0]) < 1e-6 && std::fabs(p[1] - r[1]) < 1e-6 && std::fabs(p[2] - r[2]) < 1e-6)
-                        return it->second;
-                }
-        return plan.size();
-    };
-    for (size_t i = 0; i < o.plan.size(); ++i) {
-        const auto &r = o.plan[i];
-        const size_t found = find(r.data());
-        if (found == plan.size()) {
-            char b[160];
-            std::snprintf(b, sizeof b, "plan position %zu (%g, %g, %g mm) is not a hole of the plate at one of its heights",
-                          i + 1, r[0], r[1], r[2]);
-            err = b;
-            return false;
-        }
-        if (!(r[3] >= 1 && r[3] <= 1e6) || r[3] != std::floor(r[3])) {
-            err = "plan position " + std::to_string(i + 1) + ": samples must be a whole number in 1..1000000";
-            return false;
-        }
-        visits.emplace_back(found, int(r[3]));
-    }
+    std::vector<PlannedVisit> planned;
+    if (!match_plan(plan, o.plan, planned, err)) return false;
+    for (const PlannedVisit &v : planned) visits.emplace_back(v.index, v.samples);
     return true;
 }
 

@@ -2,6 +2,7 @@
 
 #include "jig/errors.h"
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -97,21 +98,28 @@ public:
         je.fixture_mm = o.tolerance_mm;
         je.seed = o.seed;
         const auto where = jig_true_positions(plan_, o.plan.n, je);
-        truth_.resize(plan_.size() * 3);
-        for (size_t k = 0; k < plan_.size(); ++k) truth->jig_to_device(where[k].data(), &truth_[3 * k]);
+        if (o.visits.empty())
+            for (size_t k = 0; k < plan_.size(); ++k) visits_.push_back({k, o.plan.samples});
+        else
+            visits_ = o.visits;
+        // Where each visit's block of reports (transit, then its samples) starts.
+        start_.push_back(0);
+        for (const PlannedVisit &v : visits_) start_.push_back(start_.back() + uint64_t(o.transit) + uint64_t(v.samples));
+        truth_.resize(visits_.size() * 3);
+        for (size_t k = 0; k < visits_.size(); ++k) truth->jig_to_device(where[visits_[k].index].data(), &truth_[3 * k]);
     }
     bool at(uint64_t index, double, HandState &s) override {
-        const uint64_t block = uint64_t(o_.transit) + uint64_t(o_.plan.samples);
-        const uint64_t k = index / block, r = index % block;
         s = HandState{};
-        if (k >= plan_.size()) {
+        if (index >= start_.back()) {
             // A short rest with MARK released after the last dwell, then the
             // end: a recorder sees the last dwell close like every other.
-            if (index >= plan_.size() * block + uint64_t(o_.transit)) return false;
-            const double *p = &truth_[3 * (plan_.size() - 1)];
+            if (index >= start_.back() + uint64_t(o_.transit)) return false;
+            const double *p = &truth_[3 * (visits_.size() - 1)];
             for (int i = 0; i < 3; ++i) s.p[i] = p[i];
             return true;
         }
+        const size_t k = size_t(std::upper_bound(start_.begin(), start_.end(), index) - start_.begin()) - 1;
+        const uint64_t r = index - start_[k];
         const double *to = &truth_[3 * k];
         if (r < uint64_t(o_.transit)) {
             const double *from = k == 0 ? to : &truth_[3 * (k - 1)];
@@ -121,14 +129,16 @@ public:
         }
         for (int i = 0; i < 3; ++i) s.p[i] = to[i];
         s.buttons = 1u << 2; // MARK: seated
-        s.jig_point = int(k);
+        s.jig_point = plan_[visits_[k].index].point;
         return true;
     }
 
 private:
     JigMotionOptions o_;
     std::vector<JigPosition> plan_;
-    std::vector<double> truth_;
+    std::vector<PlannedVisit> visits_;
+    std::vector<uint64_t> start_; // visits_.size() + 1 entries
+    std::vector<double> truth_;   // each visit's true position, device frame
 };
 } // namespace
 

@@ -6,7 +6,10 @@
 #include <memory>
 #include <string>
 
+#include <vector>
+
 #include "jig/plan.h"
+#include "jig/planned.h"
 #include "model/model.h"
 
 namespace cdm::sim {
@@ -41,10 +44,14 @@ struct JigMotionOptions {
     double tolerance_mm = 0.03; // std of each hole's error (y, z) and each height's fixture error (x)
     int transit = 20;           // samples spent moving between positions, MARK released
     uint64_t seed = 1;
+    // A planned session (jig/planned.h, the URI's jig_plan): only these
+    // positions of the plate, in this order, each with its samples. Empty:
+    // every position of the plate, plan.samples each.
+    std::vector<PlannedVisit> visits;
 };
-// The seed's calibration session: for each plan position in order, a
-// transit with MARK released, then `plan.samples` samples seated with MARK
-// pressed. The true position is model.jig_to_device(reference + jig error);
+// The seed's calibration session: for each plan position in order (or
+// each planned visit), a transit with MARK released, then its samples
+// seated with MARK pressed. The true position is model.jig_to_device(reference + jig error);
 // the jig errors come from the one jig error model (jig/errors.h): a hole is
 // off by the same amount at every height, a fixture height by the same
 // amount at every hole; tolerance_mm is the std of both.

@@ -3,8 +3,10 @@
 #   cmake -DCDM_EXE=... -DHELP2MAN=... -DGZIP=... -DVERSION=... -DOUT_DIR=... -P man_pages.cmake
 # The tree of subcommands is walked from each help's "Subcommands:" list, so
 # a new subcommand gets its page (cdm-calib-diagnose.1 for `cdm calib
-# diagnose`). Each page is gzipped (-9n: no name or time stamp, the same
-# bytes every build), as Debian installs man pages.
+# diagnose`). Each page is gzipped (-9n: no name or time stamp in the gzip
+# header; the page's date is help2man's, SOURCE_DATE_EPOCH if set), as
+# Debian installs man pages. help2man runs the program through /bin/sh: the
+# caller passes a build path of plain characters only (CMakeLists.txt).
 file(REMOVE_RECURSE "${OUT_DIR}")
 file(MAKE_DIRECTORY "${OUT_DIR}")
 

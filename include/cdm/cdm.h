@@ -895,8 +895,9 @@ CDM_API int cdm_recorder_close(cdm_recorder *rec);
  * values that contradict them are CDM_ERR_INVALID_ARG (the labels would not
  * match the positions); uri may be NULL. Values are validated
  * (CDM_ERR_INVALID_ARG naming the field). The plan is the caller's: free it
- * with cdm_jig_plan_free (NULL is fine). Any thread; a plan is read-only once
- * made, so several threads may read it.
+ * with cdm_jig_plan_free (NULL is fine). Any thread; once made (and, for a
+ * planned session, given its file by cdm_jig_plan_use_file) a plan is
+ * read-only, so several threads may read it.
  */
 typedef struct cdm_jig_plan cdm_jig_plan;
 CDM_API int cdm_jig_plan_create(const char *uri, int holes, double pitch_mm, const double *heights_mm,
@@ -911,18 +912,21 @@ CDM_API int cdm_jig_plan_samples(const cdm_jig_plan *plan);
  * order, each a hole of the plate at one of its heights (within 1e-6 mm)
  * with its own samples. A sim: URI with jig_plan= set does this in
  * cdm_jig_plan_create; another file then is CDM_ERR_INVALID_ARG (the labels
- * would not match the positions). CDM_ERR_INVALID_ARG naming the file, line
- * and fault, or the first row that is no hole; the plan is unchanged then.
+ * would not match the positions), and so is any file for a sim: URI without
+ * jig_plan= (it walks the whole plate). CDM_ERR_INVALID_ARG naming the file,
+ * line and fault, or the first row that is no hole; the plan is unchanged
+ * then. It changes the plan: not concurrently with another call on the same
+ * plan; any thread otherwise.
  */
 CDM_API int cdm_jig_plan_use_file(cdm_jig_plan *plan, const char *plan_csv);
 /**
  * since 1.2: a PLAN.csv's rows as a JSON array of [x_ref, y_ref, z_ref,
  * samples] (mm, jig frame), for cdm_simulate_jig_dataset's "plan" option.
  * CDM_ERR_INVALID_ARG naming the file, line and fault. Free *rows_json with
- * cdm_free_string.
+ * cdm_free_string. Any thread.
  */
 CDM_API int cdm_plan_file_read(const char *plan_csv, char **rows_json);
-/** since 1.2: samples to keep at position i (0 for an i past the end). */
+/** since 1.2: samples to keep at position i (0 for an i past the end). Any thread. */
 CDM_API int cdm_jig_plan_samples_at(const cdm_jig_plan *plan, size_t i);
 /** Position i: its dataset `point` id and reference x (height), y, z in mm, jig frame. */
 CDM_API int cdm_jig_plan_get(const cdm_jig_plan *plan, size_t i, int *point, double ref_mm[3]);

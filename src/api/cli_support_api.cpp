@@ -46,6 +46,7 @@ struct cdm_jig_plan {
     // position of the plate, options.samples each.
     std::vector<cdm::PlannedVisit> visits;
     std::vector<cdm::PlanRow> uri_plan; // a sim: URI's jig_plan rows, if any
+    bool sim = false;                   // made for a sim: URI (which walks its own plan)
 };
 
 namespace {
@@ -111,6 +112,7 @@ struct SimRequest {
     cdm::JigSimOptions o;
     uint64_t effect_seed = 1;
     std::string device, truth, truth_out;
+    std::string plan_file; // where "plan" was read from: an input, never written over
     std::vector<std::string> effects;
 };
 
@@ -178,15 +180,16 @@ bool parse_sim_options(const char *text, SimRequest &r, std::string &err) {
                 if (!e.is_string()) return err = "option \"effects\" must be a list of effect names", false;
                 r.effects.push_back(e.get<std::string>());
             }
-        } else if ((k == "device" || k == "truth" || k == "truth_out") && v.is_string()) {
-            (k == "device" ? r.device : k == "truth" ? r.truth : r.truth_out) = v.get<std::string>();
+        } else if ((k == "device" || k == "truth" || k == "truth_out" || k == "plan_file") && v.is_string()) {
+            (k == "device" ? r.device : k == "truth" ? r.truth : k == "truth_out" ? r.truth_out : r.plan_file) =
+                v.get<std::string>();
         } else if (k == "heights_mm" || k == "effects" || k == "device" || k == "truth" || k == "truth_out" ||
-                   k == "plan") {
+                   k == "plan" || k == "plan_file") {
             return err = "option \"" + k + "\" has the wrong type: " + v.dump(), false;
         } else {
             return err = "unknown option \"" + k + "\" (known: holes, pitch_mm, heights_mm, samples, noise_mm, "
                          "quant_mm, jig_tolerance_mm, jig_hole_mm, jig_fixture_mm, seed, effect_seed, device, truth, effects, truth_out, "
-                         "plan)", false;
+                         "plan, plan_file)", false;
         }
         if (!ok) return false;
     }
@@ -331,6 +334,7 @@ int cdm_jig_plan_create(const char *uri, int holes, double pitch_mm, const doubl
             if (int rc = jig_options_from_uri(uri, o, is_sim, plan->uri_plan, err); rc != CDM_OK)
                 return cdm::fail(rc, err);
         }
+        plan->sim = is_sim;
         const cdm::JigPlanOptions from_uri = o;
         if (holes) o.n = holes;
         if (pitch_mm != 0) o.pitch_mm = pitch_mm;
@@ -376,6 +380,10 @@ int cdm_jig_plan_use_file(cdm_jig_plan *plan, const char *plan_csv) {
         std::string err;
         if (!cdm::read_plan_csv(plan_csv, rows, err) || !cdm::match_plan(plan->positions, rows, visits, err))
             return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_jig_plan_use_file: " + err);
+        if (plan->sim && plan->uri_plan.empty())
+            return cdm::fail(CDM_ERR_INVALID_ARG, std::string("cdm_jig_plan_use_file: the sim: URI walks the whole "
+                                                              "plate: give it the plan too (jig_plan=") +
+                                                      plan_csv + "), or the labels would not match the positions");
         if (!plan->uri_plan.empty() && rows != plan->uri_plan)
             return cdm::fail(CDM_ERR_INVALID_ARG, std::string("cdm_jig_plan_use_file: ") + plan_csv +
                                                       " is not the simulator's jig_plan in the URI: the labels "
@@ -479,6 +487,7 @@ int cdm_simulate_jig_dataset(const char *out_csv, const char *options_json) {
         std::vector<std::string> inputs;
         if (!req.device.empty()) inputs.push_back(req.device);
         if (!req.truth.empty()) inputs.push_back(req.truth);
+        if (!req.plan_file.empty()) inputs.push_back(req.plan_file);
         if (!req.truth_out.empty() &&
             !cdm::io::write_file_atomic(req.truth_out, cdm::io::model_to_json(truth).dump(2) + "\n", inputs, err))
             return cdm::fail(CDM_ERR_IO, err);

@@ -12,7 +12,7 @@
 #include "api/errors.h"
 #include "cdm/cdm.h"
 #include "device/device.h"
-#include "device/transport_hidapi.h"
+#include "device/hid/transport_hidapi.h"
 
 // The 1.0 sizes are part of the ABI: a caller passing less is refused, a
 // newer caller passing more gets the 1.0 fields and the rest untouched.

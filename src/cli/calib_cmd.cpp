@@ -409,7 +409,10 @@ int cmd_simulate(const SimArgs &a) {
     if (!a.device.empty()) o["device"] = a.device;
     if (!a.truth.empty()) o["truth"] = a.truth;
     if (!a.truth_out.empty()) o["truth_out"] = a.truth_out;
-    if (!a.plan.empty()) o["plan"] = read_plan_csv(a.plan);
+    if (!a.plan.empty()) {
+        o["plan"] = read_plan_csv(a.plan);
+        o["plan_file"] = a.plan; // an input: never written over
+    }
     if (int rc = load_plugins(a.plugins); rc != kExitOk) return rc;
     if (int rc = cdm_simulate_jig_dataset(a.out.c_str(), o.dump().c_str()); rc != CDM_OK)
         return report_error("calib simulate", rc);

@@ -46,8 +46,9 @@ std::string num(double v);
 CLI::Validator range(double lo, double hi);
 // A jig tolerance in mm: -1 (estimated from the data) or a std in [0, 5000].
 CLI::Validator tolerance_or_estimate();
-// Seeds: whole numbers a double holds exactly (what the JSON options carry).
-constexpr double kMaxSeed = 9007199254740992.0; // 2^53
+// Seeds: whole numbers a double holds exactly, each of its own (what the
+// JSON options carry): below 2^53, so that no two seeds given read as one.
+constexpr double kMaxSeed = 9007199254740991.0; // 2^53 - 1
 
 // "30,40,50" -> {30,40,50}; throws UsageError naming `option` and the item.
 std::vector<double> parse_number_list(const std::string &text, const std::string &option);

@@ -35,13 +35,17 @@ namespace {
 
 // A decimal number, finite, in a double's range: strtod alone also takes
 // hexadecimal ("0x10"), "inf", "nan(...)" and leading blanks, which CLI11's
-// own conversion of the value may read differently.
-bool decimal_number(const std::string &s, double &v) {
-    if (s.empty() || s.find_first_not_of("0123456789+-.eE") != std::string::npos) return false;
+// own conversion of the value may read differently. "" when it is one,
+// else why not.
+std::string decimal_number(const std::string &s, double &v) {
+    if (s.empty() || s.find_first_not_of("0123456789+-.eE") != std::string::npos)
+        return "\"" + s + "\" is not a decimal number";
     char *end = nullptr;
     errno = 0;
     v = std::strtod(s.c_str(), &end);
-    return *end == '\0' && errno != ERANGE && std::isfinite(v);
+    if (*end != '\0') return "\"" + s + "\" is not a decimal number";
+    if (errno == ERANGE || !std::isfinite(v)) return s + " is out of a double's range";
+    return std::string();
 }
 
 } // namespace
@@ -51,7 +55,7 @@ CLI::Validator range(double lo, double hi) {
     return CLI::Validator(
         [lo, hi, desc](std::string &s) -> std::string {
             double v = 0;
-            if (!decimal_number(s, v)) return "\"" + s + "\" is not a decimal number";
+            if (std::string why = decimal_number(s, v); !why.empty()) return why;
             if (v < lo || v > hi) return s + " is not " + desc;
             return std::string();
         },
@@ -63,7 +67,7 @@ CLI::Validator tolerance_or_estimate() {
     return CLI::Validator(
         [desc](std::string &s) -> std::string {
             double v = 0;
-            if (!decimal_number(s, v)) return "\"" + s + "\" is not a decimal number";
+            if (std::string why = decimal_number(s, v); !why.empty()) return why;
             if (v != -1 && !(v >= 0 && v <= 5000)) return s + " is not " + desc;
             return std::string();
         },

@@ -118,8 +118,9 @@ void close_dwell(RecordCtx &c) {
     double ref[3] = {0, 0, 0};
     cdm_jig_plan_get(c.plan, c.next_point, &point, ref);
     for (size_t k = 0; k < c.dwell.size() && !c.write_failed; ++k) {
-        after_write(c, cdm_dataset_writer_add_at(c.csv, point, ref, c.dwell[k].data(), c.dwell_t[k]));
-        ++c.kept_samples;
+        const int rc = cdm_dataset_writer_add_at(c.csv, point, ref, c.dwell[k].data(), c.dwell_t[k]);
+        if (rc == CDM_OK) ++c.kept_samples;
+        after_write(c, rc);
     }
     c.dwell.clear();
     c.dwell_t.clear();
@@ -184,7 +185,7 @@ void record_sample(void *user, const cdm_sample *s) {
     }
 }
 
-// The files a URI reads: replay:PATH, and a sim:'s device=/truth= options.
+// The files a URI reads: replay:PATH, and a sim:'s device=, truth= and jig_plan= options.
 std::vector<std::string> uri_inputs(const std::string &uri) {
     std::vector<std::string> v;
     const size_t q = uri.find('?');
@@ -195,7 +196,7 @@ std::vector<std::string> uri_inputs(const std::string &uri) {
         size_t e = uri.find('&', i);
         if (e == std::string::npos) e = uri.size();
         const std::string opt = uri.substr(i, e - i);
-        for (const char *k : {"device=", "truth="})
+        for (const char *k : {"device=", "truth=", "jig_plan="})
             if (opt.rfind(k, 0) == 0) v.push_back(opt.substr(std::strlen(k)));
         i = e + 1;
     }
@@ -415,7 +416,8 @@ int cmd_record(const std::string &uri, const std::string &file, double seconds, 
     if (ja.jig) {
         ctx.plan = jig_plan_for(uri, ja);
         ctx.plan_n = cdm_jig_plan_count(ctx.plan);
-        const auto inputs = uri_inputs(uri);
+        auto inputs = uri_inputs(uri);
+        if (!ja.plan.empty()) inputs.push_back(ja.plan);
         std::vector<const char *> protect;
         for (const auto &p : inputs) protect.push_back(p.c_str());
         if (cdm_dataset_writer_open(file.c_str(), protect.data(), protect.size(), &ctx.csv) != CDM_OK) {

@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "device/recording/replay_format.h"
-#include "device/transport_hidapi.h"
+#include "device/hid/transport_hidapi.h"
 #include "io/log.h"
 
 namespace cdm {

@@ -12,7 +12,7 @@
 #include <set>
 
 #include "device/device.h"
-#include "device/transport_hidapi.h"
+#include "device/hid/transport_hidapi.h"
 #include "io/log.h"
 
 namespace cdm {
@@ -163,7 +163,7 @@ void MasterWatcher::loop(bool enumerate) {
     }
 }
 
-// Compares the enumeration (device/hidraw_enum.h) with known_: new nodes are arrivals (their
+// Compares the enumeration (device/hid/hidraw_enum.h) with known_: new nodes are arrivals (their
 // full info read from the device), vanished ones departures.
 void MasterWatcher::rescan(bool report) {
     std::vector<MasterNode> nodes;

@@ -37,7 +37,7 @@
 #include <vector>
 
 #include "cdm/cdm.h"
-#include "device/hidraw_enum.h"
+#include "device/hid/hidraw_enum.h"
 #include "device/protocol.h"
 #include "device/sim/firmware.h"
 #include "model/model.h"

@@ -96,7 +96,7 @@ def test_help_shows_exit_codes(sub):
 def test_help_shows_defaults():
     sim = cdm("calib", "simulate", "--help").stdout
     for default in ["--noise-mm FLOAT:in [0, 100]=0.05", "--holes INT:in [1, 1000]=25",
-                    "--seed UINT:in [0, 9007199254740992]=1",
+                    "--seed UINT:in [0, 9007199254740991]=1",
                     "default: 30,40,50,60,70"]:
         assert default in sim
     assert "comma-separated list" in sim.split("--effects", 1)[1].split("\n")[0]

@@ -187,8 +187,18 @@ def test_record_refuses_a_plan_that_cannot_be_walked(tmp_path):
          "is not the simulator's jig_plan"),
         ([plate, tmp_path / "c.csv", "--jig", "--plan", off], "plan position 2 (40, 3, 0 mm) is not a hole"),
         ([plate + "&jig_plan=%s" % off, tmp_path / "d.csv", "--jig"], "plan position 2 (40, 3, 0 mm) is not a hole"),
+        # The simulated master without the plan walks the whole plate: the labels would be wrong.
+        ([plate, tmp_path / "e.csv", "--jig", "--plan", plan], "give it the plan too (jig_plan="),
     ]
     for args, words in cases:
         r = cli("record", *args)
         assert r.returncode == 2 and words in r.stderr, (args, r.returncode, r.stderr)
         assert not os.path.exists(args[1]), args[1]
+    # The plan is an input: never written over, by the recorder or the simulator.
+    before = plan.read_text()
+    for args in (["record", plate + "&jig_plan=%s" % plan, plan, "--jig", "--plan", plan],
+                 ["record", plate + "&jig_plan=%s" % plan, plan, "--jig"],
+                 ["calib", "simulate", plan, "--holes", 7, "--pitch-mm", 10, "--heights", "40,55,70", "--plan", plan]):
+        r = cli(*args)
+        assert r.returncode != 0 and "input" in r.stderr, (args, r.returncode, r.stderr)
+        assert plan.read_text() == before, args

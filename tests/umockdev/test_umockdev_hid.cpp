@@ -278,7 +278,7 @@ void say(int fd, const char *line) {
 // hidapi 0.13.1 crashes inside hid_open_path when the
 // open fails or the node does not answer HIDIOCGRDESCSIZE (it frees an
 // uninitialised pointer). The hid: transport checks every path before
-// hid_open_path (device/hidraw_check.cpp): a crash here is a regression.
+// hid_open_path (device/hid/hidraw_check.cpp): a crash here is a regression.
 void expect_no_crash(int code, const char *what) {
     if (code > 128) {
         print_error("%s: crashed with signal %d\n", what, code - 128);

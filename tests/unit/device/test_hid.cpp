@@ -25,7 +25,7 @@
 #include <vector>
 
 #include "cdm/cdm.h"
-#include "device/hidraw_enum.h"
+#include "device/hid/hidraw_enum.h"
 #include "device/protocol.h"
 #include "device/sim/firmware.h"
 #include "model/model.h"
@@ -88,7 +88,7 @@ extern "C" {
 
 int __wrap_hid_init(void) { return 0; }
 
-// The enumeration (device/hidraw_enum.h, libudev in the library): the mock's
+// The enumeration (device/hid/hidraw_enum.h, libudev in the library): the mock's
 // one master while it is plugged in, with bcdDevice 2.1.
 int __wrap_cdm_hidraw_list_masters(cdm_hidraw_master_fn fn, void *ctx, char *, size_t) {
     std::string path, serial;

@@ -1,4 +1,4 @@
-#include "device/hidraw_check.h"
+#include "device/hid/hidraw_check.h"
 
 #include <fcntl.h>
 #include <linux/hidraw.h>

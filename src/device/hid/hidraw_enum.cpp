@@ -1,4 +1,4 @@
-#include "device/hidraw_enum.h"
+#include "device/hid/hidraw_enum.h"
 
 #include <libudev.h>
 #include <linux/input.h>

@@ -18,12 +18,12 @@
 
 #include "cdm/cdm.h"
 #include "device/device.h"
-#include "device/hidraw_check.h"
-#include "device/hidraw_enum.h"
+#include "device/hid/hidraw_check.h"
+#include "device/hid/hidraw_enum.h"
 #include "device/hotplug.h"
 #include "device/protocol.h"
 #include "device/transport.h"
-#include "device/transport_hidapi.h"
+#include "device/hid/transport_hidapi.h"
 
 namespace cdm {
 
@@ -63,7 +63,7 @@ std::string printable(const char *s) {
 }
 
 // Every connected master's node, each once, through libudev
-// (device/hidraw_enum.h: hidapi's own enumeration crashed on a node being
+// (device/hid/hidraw_enum.h: hidapi's own enumeration crashed on a node being
 // made or removed, which is exactly when a watcher or a reconnection by
 // serial enumerates). err says why the list may be incomplete (a scan that
 // met a changing device), or why nothing could be listed.

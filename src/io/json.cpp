@@ -102,8 +102,8 @@ private:
             return true;
         }
         // The keys seen, each with its member's index: a duplicate is found
-        // in O(log n) (a scan of the members made an object of n keys,
-        // which a 64 MiB file holds millions of, cost n^2 / 2 compares).
+        // in O(log n); a scan of the members would cost n^2 / 2 compares
+        // on an object of n keys, and a 64 MiB file holds millions.
         std::map<std::string, size_t> seen;
         for (;;) {
             skip_ws();

@@ -17,6 +17,7 @@ per-position mean (0.05 / sqrt(40) = 0.008 mm), small enough for CI.
 """
 import json
 import os
+import threading
 import time
 
 import pytest
@@ -289,16 +290,25 @@ def stream_errors(cdmpy, tmp_path, name, cal, d):
            "&jig_transit=1" % (truth, pitch, heights))
     positions = 7 * 7 * len(heights.split(","))
     no_position = int(cdmpy.PoseFlag.OUT_OF_WORKSPACE) | int(cdmpy.PoseFlag.NO_POSITION)
+    compensated = int(cdmpy.PoseFlag.COMPENSATED)
 
     def worst_rms(calibration):
         got = []  # (device sequence, position) of every pose with a position
+        # The calibration is set once the open has returned: the walk waits
+        # for it in the first callback (an unpaced walk is paced by its
+        # callback), and that first report, taken before, is left out.
+        applied = threading.Event()
 
         def on_sample(s):
-            if s.pose is not None and not (int(s.pose.flags) & no_position):
-                got.append((s.pose.sequence, tuple(s.pose.position)))
+            applied.wait(60.0)
+            flags = int(s.pose.flags) if s.pose is not None else no_position
+            if flags & no_position or (calibration is not None and not flags & compensated):
+                return
+            got.append((s.pose.sequence, tuple(s.pose.position)))
 
         err = []
         with cdmpy.open(uri, calibration=calibration, on_sample=on_sample) as dev:
+            applied.set()
             deadline = time.monotonic() + 300.0
             while not dev.wait_pose(timeout=1.0).is_end_of_stream and time.monotonic() < deadline:
                 pass
@@ -307,7 +317,9 @@ def stream_errors(cdmpy, tmp_path, name, cal, d):
             for seq, pos in got:  # the simulator remembers its last 16384 reports' truth
                 if lib.cdm_sim_truth(dev._handle("cdm_sim_truth"), seq, p) == 0:
                     err.append(np.asarray(pos) - np.asarray(p[:]))
-        # Every report of the walk: a transit sample and ten seated ones per position.
+        # Every report of the walk (a transit sample and ten seated ones per
+        # position, and the rest after them) but the one taken before the
+        # calibration was set.
         assert len(err) >= positions * 11, (len(err), positions)
         return float(np.sqrt(np.mean(np.square(err), axis=0)).max())
 

@@ -349,7 +349,10 @@ def open(uri: Optional[str] = None, stale_timeout_us: int = 0,  # noqa: A001
     reader thread when the device's state changes; kind is "disconnected",
     "reconnected", "stale", "fresh" or "end_of_stream".
     calibration (since 1.2), if given: a cdm.Calibration or the path of a
-    calibration JSON, applied from the first pose on (set_calibration). A
+    calibration JSON, applied as soon as the device is open
+    (set_calibration): the reports the reader took before that (an unpaced
+    sim: or replay: gives some) have nominal poses, without
+    PoseFlag.COMPENSATED. A
     calibration with a user effect needs it registered in this process
     first (cdm.register_effect, cdm.load_plugin); so does a sim: URI that
     hides one (effects=, truth=).

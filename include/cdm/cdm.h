@@ -728,20 +728,27 @@ CDM_API int cdm_calibration_position_covariance(const cdm_calibration *cal, cons
  * built-in effect on the cables' geometry, path and pots), "noise_mm":
  * per-sample pot noise (0.05), "jig_tolerance_mm": each visit's seating
  * error (0.03), "alpha" (1e-3), "power" (0.9), "device": device JSON path
- * (default: the nominal)}. First, while an effect's likelihood-ratio test
- * against the nominal model has power below "power" at its typical size
- * (and the whole plate reaches it), the position adding most to the
- * weakest one's non-centrality; then greedy I-optimal picks (the predicted
- * position variance averaged over the plate's box at every height).
+ * (default: the nominal), "measured": positions already measured ([x, y,
+ * z] or a plan's [x, y, z, samples] rows, mm, each a hole of the plate at
+ * one of its heights: in the design from the start, and "positions" more
+ * are chosen: a session planned on from the data so far), "allowed": the
+ * only positions that may be chosen (same form)}. First, while an effect's
+ * likelihood-ratio test against the nominal model has power below "power"
+ * at its typical size (and the whole plate reaches it), the position adding
+ * most to the weakest one's non-centrality; then greedy I-optimal picks (the
+ * predicted position variance averaged over the plate's box at every
+ * height).
  * *result_json (free with cdm_free_string): {"positions": [[x_ref, y_ref,
  * z_ref, samples]] in walking order (height by height, rows along y, back
  * and forth along z), "points": their point ids in the whole plate's plan,
- * "samples", "plate_positions", "design": {effects, excluded [{effect,
- * why}], detectability_picks}, "predicted_sigma_mm": {plan, whole_plate},
+ * "samples", "plate_positions", "measured" (count), "design": {effects,
+ * excluded [{effect, why}], detectability_picks}, "predicted_sigma_mm":
+ * {plan (the measured positions with the chosen), whole_plate},
  * "detectability": [{effect, dof, lambda, power, lambda_whole_plate,
  * power_whole_plate, detectable, reachable}], "test", "alpha",
- * "target_power", "order"}. CDM_ERR_INVALID_ARG names a bad option or more
- * positions than the plate has. Any thread. */
+ * "target_power", "order"}. CDM_ERR_INVALID_ARG names a bad option, a
+ * position that is no hole, or more positions than are left to choose
+ * from. Any thread. */
 CDM_API int cdm_plan(const char *options_json, cdm_progress_fn progress, void *user, char **result_json);
 
 /* ---- cdm_check (experimental, since 1.2) ----
@@ -928,6 +935,15 @@ CDM_API int cdm_jig_plan_use_file(cdm_jig_plan *plan, const char *plan_csv);
 CDM_API int cdm_plan_file_read(const char *plan_csv, char **rows_json);
 /** since 1.2: samples to keep at position i (0 for an i past the end). Any thread. */
 CDM_API int cdm_jig_plan_samples_at(const cdm_jig_plan *plan, size_t i);
+/**
+ * since 1.2: the plate the plan's positions are holes of: holes per side,
+ * pitch (mm) and the fixture heights (mm, up to cap of them into heights_mm;
+ * *n_heights says how many there are: call again with more room when it is
+ * over cap). What cdm_plan's "holes", "pitch_mm" and "heights_mm" take.
+ * NULL out-pointers are skipped (heights_mm with cap 0). Any thread.
+ */
+CDM_API int cdm_jig_plan_plate(const cdm_jig_plan *plan, int *holes, double *pitch_mm, double *heights_mm,
+                               size_t cap, size_t *n_heights);
 /** Position i: its dataset `point` id and reference x (height), y, z in mm, jig frame. */
 CDM_API int cdm_jig_plan_get(const cdm_jig_plan *plan, size_t i, int *point, double ref_mm[3]);
 CDM_API void cdm_jig_plan_free(cdm_jig_plan *plan);

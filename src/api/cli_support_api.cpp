@@ -405,6 +405,18 @@ int cdm_jig_plan_samples_at(const cdm_jig_plan *plan, size_t i) {
     return plan->visits.empty() ? plan->options.samples : plan->visits[i].samples;
 }
 
+int cdm_jig_plan_plate(const cdm_jig_plan *plan, int *holes, double *pitch_mm, double *heights_mm, size_t cap,
+                       size_t *n_heights) {
+    if (!plan) return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_jig_plan_plate: plan is NULL");
+    const cdm::JigPlanOptions &o = plan->options;
+    if (holes) *holes = o.n;
+    if (pitch_mm) *pitch_mm = o.pitch_mm;
+    if (heights_mm)
+        for (size_t i = 0; i < cap && i < o.heights_mm.size(); ++i) heights_mm[i] = o.heights_mm[i];
+    if (n_heights) *n_heights = o.heights_mm.size();
+    return CDM_OK;
+}
+
 int cdm_jig_plan_get(const cdm_jig_plan *plan, size_t i, int *point, double ref_mm[3]) {
     if (!plan || !point || !ref_mm)
         return cdm::fail(CDM_ERR_INVALID_ARG, "cdm_jig_plan_get: plan, point or ref_mm is NULL");

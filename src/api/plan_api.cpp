@@ -1,5 +1,6 @@
 // extern "C" cdm_plan: a jig session planned before any data. Thin: the
 // logic is calib/plan's plan_session().
+#include <array>
 #include <cmath>
 #include <sstream>
 
@@ -30,6 +31,23 @@ bool number(const json &v, const std::string &k, double lo, double hi, bool whol
     return true;
 }
 
+// A list of positions: [x, y, z] or [x, y, z, samples] (a plan's rows) in
+// mm, the jig frame.
+bool positions(const json &v, const std::string &k, std::vector<std::array<double, 3>> &out, std::string &err) {
+    for (size_t i = 0; i < v.size(); ++i) {
+        const json &r = v[i];
+        bool ok = r.is_array() && (r.size() == 3 || r.size() == 4);
+        for (size_t c = 0; ok && c < 3; ++c) ok = r[c].is_number() && std::isfinite(r[c].get<double>());
+        if (!ok) {
+            err = "cdm_plan options: \"" + k + "\"[" + std::to_string(i) +
+                  "] must be [x, y, z] or [x, y, z, samples] in mm, not " + r.dump().substr(0, 60);
+            return false;
+        }
+        out.push_back({r[0].get<double>(), r[1].get<double>(), r[2].get<double>()});
+    }
+    return true;
+}
+
 bool parse(const char *text, cdm::PlanOptions &o, std::string &device, std::string &err) {
     const json j = json::parse(text ? text : "", nullptr, false);
     if (!j.is_object()) return err = "cdm_plan options must be a JSON object with \"positions\"", false;
@@ -57,12 +75,14 @@ bool parse(const char *text, cdm::PlanOptions &o, std::string &device, std::stri
                 if (!e.is_string()) return err = "cdm_plan options: \"effects\" must be a list of effect names", false;
                 o.effects.push_back(e.get<std::string>());
             }
+        } else if ((k == "measured" || k == "allowed") && v.is_array()) {
+            ok = positions(v, k, k == "measured" ? o.measured : o.allowed, err);
         } else if (k == "device" && v.is_string()) {
             device = v.get<std::string>();
         } else {
             return err = "cdm_plan options: unknown option or wrong type: \"" + k +
                          "\" (known: positions, samples, holes, pitch_mm, heights_mm, effects, noise_mm, "
-                         "jig_tolerance_mm, alpha, power, device)",
+                         "jig_tolerance_mm, alpha, power, measured, allowed, device)",
                    false;
         }
         if (!ok) return false;
@@ -89,6 +109,7 @@ json plan_json(const cdm::PlanOptions &o, const cdm::PlanResult &r) {
             {"points", points},
             {"samples", r.samples},
             {"plate_positions", plate},
+            {"measured", o.measured.size()},
             {"design", {{"effects", r.effects}, {"excluded", excluded}, {"detectability_picks", r.detect_picks}}},
             {"predicted_sigma_mm", {{"plan", r.sigma_mm}, {"whole_plate", r.sigma_all_mm}}},
             {"detectability", power},

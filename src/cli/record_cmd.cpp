@@ -17,6 +17,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstring>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -24,6 +25,7 @@
 
 #include <cdm/cdm.h>
 #include "commands.h"
+#include "live_jig.h"
 
 namespace cdm::cli {
 
@@ -46,6 +48,7 @@ struct JigArgs {
     std::string heights;
     int samples = 0;
     std::string plan; // PLAN.csv of `cdm calib plan`: only its positions, in its order
+    LiveOptions live; // --live: diagnosed as it is recorded, stops by itself (live_jig.h)
 };
 
 struct RecordCtx {
@@ -84,6 +87,8 @@ struct RecordCtx {
     uint64_t refused_samples = 0;
     std::string first_refusal;
     std::atomic<bool> done{false};
+    std::unique_ptr<LiveJig> live; // with --live
+    bool live_stopped = false;     // the live analysis ended the session: the model is determined
     // both
     uint64_t reports = 0;
     uint64_t rejected = 0; // reports the reader discarded, kept in the recording
@@ -122,6 +127,7 @@ void close_dwell(RecordCtx &c) {
         if (rc == CDM_OK) ++c.kept_samples;
         after_write(c, rc);
     }
+    if (c.live && !c.write_failed && c.live->add(point, ref, c.dwell, c.dwell_t)) c.live_stopped = c.done = true;
     c.dwell.clear();
     c.dwell_t.clear();
     if (++c.next_point == c.plan_n) c.done = true;
@@ -305,6 +311,12 @@ void progress(RecordCtx &ctx, bool jig, double t, uint32_t dropped, bool tty) {
                      (unsigned long long)ctx.reports, t, dropped, tty ? "   " : "\n");
 }
 
+// The live analysis's lines, each on its own (the progress line, on a
+// terminal, is rewritten in place: a line goes below it).
+void print_live(const std::vector<std::string> &lines, bool tty) {
+    for (const auto &l : lines) std::fprintf(stderr, "%s%s\n", tty ? "\n" : "", l.c_str());
+}
+
 // Runs until the time is up, the stream ends, the plan is complete, a write
 // fails or a stop signal arrives.
 void record_loop(cdm_device *dev, RecordCtx &ctx, double seconds, bool jig) {
@@ -317,6 +329,13 @@ void record_loop(cdm_device *dev, RecordCtx &ctx, double seconds, bool jig) {
         p.struct_size = sizeof p;
         const bool ended = cdm_get_pose(dev, &p) == CDM_ERR_END_OF_STREAM;
         const double t = now_s() - t0;
+        if (ctx.live) {
+            print_live(ctx.live->take_messages(), tty);
+            if (ctx.live->stop_requested()) {
+                std::lock_guard<std::mutex> lock(ctx.mu);
+                ctx.live_stopped = ctx.done = true;
+            }
+        }
         if (t - last_print >= 0.5 || ended) {
             last_print = t;
             progress(ctx, jig, t, p.dropped, tty);
@@ -339,54 +358,78 @@ std::string sync_file(const std::string &path) {
     return "";
 }
 
-// Completes the file: flush, close, rename into place. After a write error
-// (a full disk, an I/O error) the target is never replaced: an existing FILE
-// stays as it was, and what was written stays in the temporary, named.
-int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, const cdm_stats &st, bool json) {
+// A jig dataset completed: committed (fsync, rename) only whole, so after a
+// write error the old FILE, if any, is left as it was; then the summary,
+// with the live analysis's when there was one. A session that ended before
+// its plan fails, unless the live analysis ended it (the model determined).
+int finish_jig(RecordCtx &ctx, const std::string &file, const cdm_stats &st, bool json) {
+    // The stream ended, or the session was stopped, with MARK still held:
+    // a whole dwell is kept, a partial one dropped (it is not asked for
+    // again: not a short dwell).
+    if (ctx.in_dwell && ctx.next_point < ctx.plan_n &&
+        ctx.dwell.size() >= size_t(cdm_jig_plan_samples_at(ctx.plan, ctx.next_point)))
+        close_dwell(ctx);
+    nlohmann::json live = ctx.live ? ctx.live->finish() : nlohmann::json(nullptr);
+    if (ctx.live) print_live(ctx.live->take_messages(), false);
     std::string err = ctx.write_err;
-    if (ctx.jig) {
-        if (ctx.in_dwell) close_dwell(ctx); // the stream ended with MARK still held
-        err = ctx.write_err;
-        // The dataset is committed (fsync, rename) only whole: after a write
-        // error the old FILE, if any, is left as it was.
-        const bool ok = err.empty() && cdm_dataset_writer_commit(ctx.csv) == CDM_OK;
-        if (!ok && err.empty()) err = cdm_thread_error();
-        cdm_dataset_writer_free(ctx.csv);
-        ctx.csv = nullptr;
-        if (!ok) {
-            std::fprintf(stderr, "cdm: record: %s; %s not written\n", err.c_str(), file.c_str());
-            return kExitFailure;
-        }
-    } else {
-        if (cdm_recorder_close(ctx.rec) != CDM_OK && err.empty()) err = cdm_thread_error();
-        if (err.empty()) err = sync_file(tmp);
-        if (!err.empty()) {
-            std::fprintf(stderr,
-                         "cdm: record: %s; %s not replaced (left as it was, if it existed); what was written "
-                         "before the error is kept in %s\n",
-                         err.c_str(), file.c_str(), tmp.c_str());
-            return kExitFailure;
-        }
-        if (std::rename(tmp.c_str(), file.c_str()) != 0) {
-            std::fprintf(stderr, "cdm: record: cannot rename %s to %s: %s\n", tmp.c_str(), file.c_str(),
-                         std::strerror(errno));
-            return kExitFailure;
-        }
+    const bool ok = err.empty() && cdm_dataset_writer_commit(ctx.csv) == CDM_OK;
+    if (!ok && err.empty()) err = cdm_thread_error();
+    cdm_dataset_writer_free(ctx.csv);
+    ctx.csv = nullptr;
+    if (!ok) {
+        std::fprintf(stderr, "cdm: record: %s; %s not written\n", err.c_str(), file.c_str());
+        return kExitFailure;
     }
     if (ctx.refused_samples)
         std::fprintf(stderr, "cdm: record: %llu samples left out: the file could not hold them (first: %s)\n",
                      (unsigned long long)ctx.refused_samples, ctx.first_refusal.c_str());
-    if (ctx.jig) {
+    if (json) {
+        const nlohmann::json j = {{"file", file},           {"positions", ctx.next_point}, {"of", ctx.plan_n},
+                                  {"samples", ctx.kept_samples}, {"reports", ctx.reports},
+                                  {"short_dwells", ctx.short_dwells}, {"stats", stats_json(st)},
+                                  {"live", live}};
+        std::printf("%s\n", j.dump().c_str());
+    } else {
         std::printf("wrote %s: %zu of %zu jig positions (%llu samples; %llu reports, %llu dwells too short and "
                     "repeated, %llu dropped)\n",
                     file.c_str(), ctx.next_point, ctx.plan_n, (unsigned long long)ctx.kept_samples,
                     (unsigned long long)ctx.reports, (unsigned long long)ctx.short_dwells,
                     (unsigned long long)st.dropped);
-        if (ctx.next_point < ctx.plan_n) {
-            std::fprintf(stderr, "cdm: record: the session stopped before the jig plan was complete\n");
-            return kExitFailure;
-        }
-    } else if (json) {
+    }
+    if (ctx.live_stopped) {
+        std::fprintf(stderr, "cdm: record: the live analysis ended the session after %zu of %zu positions: the "
+                             "model is determined\n", ctx.next_point, ctx.plan_n);
+    } else if (ctx.next_point < ctx.plan_n) {
+        std::fprintf(stderr, "cdm: record: the session stopped before the jig plan was complete\n");
+        return kExitFailure;
+    }
+    return kExitOk;
+}
+
+// Completes the file: flush, close, rename into place. After a write error
+// (a full disk, an I/O error) the target is never replaced: an existing FILE
+// stays as it was, and what was written stays in the temporary, named.
+int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, const cdm_stats &st, bool json) {
+    if (ctx.jig) return finish_jig(ctx, file, st, json);
+    std::string err = ctx.write_err;
+    if (cdm_recorder_close(ctx.rec) != CDM_OK && err.empty()) err = cdm_thread_error();
+    if (err.empty()) err = sync_file(tmp);
+    if (!err.empty()) {
+        std::fprintf(stderr,
+                     "cdm: record: %s; %s not replaced (left as it was, if it existed); what was written "
+                     "before the error is kept in %s\n",
+                     err.c_str(), file.c_str(), tmp.c_str());
+        return kExitFailure;
+    }
+    if (std::rename(tmp.c_str(), file.c_str()) != 0) {
+        std::fprintf(stderr, "cdm: record: cannot rename %s to %s: %s\n", tmp.c_str(), file.c_str(),
+                     std::strerror(errno));
+        return kExitFailure;
+    }
+    if (ctx.refused_samples)
+        std::fprintf(stderr, "cdm: record: %llu samples left out: the file could not hold them (first: %s)\n",
+                     (unsigned long long)ctx.refused_samples, ctx.first_refusal.c_str());
+    if (json) {
         nlohmann::json j = {{"file", file}, {"format", format_of(file)}, {"samples", ctx.reports},
                             {"rejected", ctx.rejected}, {"stats", stats_json(st)}};
         std::printf("%s\n", j.dump().c_str());
@@ -395,6 +438,73 @@ int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, cons
                     (unsigned long long)ctx.reports, (unsigned long long)ctx.rejected, losses_text(st).c_str());
     }
     return kExitOk;
+}
+
+// A URI option's value ("" when absent): `key=` in the query.
+std::string uri_option(const std::string &uri, const std::string &key) {
+    const size_t q = uri.find('?');
+    if (q == std::string::npos) return "";
+    for (size_t i = q + 1; i < uri.size();) {
+        size_t e = uri.find('&', i);
+        if (e == std::string::npos) e = uri.size();
+        if (uri.compare(i, key.size() + 1, key + "=") == 0) return uri.substr(i + key.size() + 1, e - i - key.size() - 1);
+        i = e + 1;
+    }
+    return "";
+}
+
+// A source no clock paces: a replay at speed=0, a sim: at realtime=0. It
+// waits for whoever reads it, so the live analysis may hold the reader.
+bool unpaced(const std::string &uri) {
+    return (uri.rfind("sim:", 0) == 0 && uri_option(uri, "realtime") == "0") ||
+           (uri.rfind("replay:", 0) == 0 && uri_option(uri, "speed") == "0");
+}
+
+// The jig plan and the dataset writer, and with --live the analysis (its
+// thread waits for start_live).
+int open_jig(const std::string &uri, const std::string &file, const JigArgs &ja, RecordCtx &ctx) {
+    ctx.plan = jig_plan_for(uri, ja);
+    ctx.plan_n = cdm_jig_plan_count(ctx.plan);
+    auto inputs = uri_inputs(uri);
+    if (!ja.plan.empty()) inputs.push_back(ja.plan);
+    std::vector<const char *> protect;
+    for (const auto &p : inputs) protect.push_back(p.c_str());
+    if (cdm_dataset_writer_open(file.c_str(), protect.data(), protect.size(), &ctx.csv) != CDM_OK) {
+        std::fprintf(stderr, "cdm: record: %s\n", cdm_thread_error());
+        cdm_jig_plan_free(ctx.plan);
+        return kExitFailure;
+    }
+    if (!ja.live.on) return kExitOk;
+    LiveSession s;
+    for (size_t i = 0; i < ctx.plan_n; ++i) {
+        int point = 0;
+        std::array<double, 3> ref{};
+        cdm_jig_plan_get(ctx.plan, i, &point, ref.data());
+        s.positions.push_back(ref);
+    }
+    s.samples = cdm_jig_plan_samples(ctx.plan);
+    size_t nh = 0;
+    cdm_jig_plan_plate(ctx.plan, &s.holes, &s.pitch_mm, nullptr, 0, &nh);
+    s.heights_mm.resize(nh);
+    cdm_jig_plan_plate(ctx.plan, nullptr, nullptr, s.heights_mm.data(), nh, &nh);
+    ctx.live = std::make_unique<LiveJig>(ja.live, std::move(s), unpaced(uri));
+    return kExitOk;
+}
+
+// The live analysis started with the device's nominal geometry. When it
+// cannot start, the session is recorded without it (nothing is lost).
+void start_live(cdm_device *dev, RecordCtx &ctx) {
+    cdm_device_info info{};
+    info.struct_size = sizeof info;
+    std::string err;
+    if (cdm_get_info(dev, &info) != CDM_OK)
+        err = std::string("the device's information: ") + cdm_thread_error();
+    else if (ctx.live->start(info.a_mm, info.b_mm, info.m_mm, err))
+        return;
+    std::fprintf(stderr, "cdm: record: --live: %s; recording without the live analysis\n", err.c_str());
+    ctx.live->finish(); // first: a reader waiting for an update (holding ctx.mu) is let go
+    std::lock_guard<std::mutex> lock(ctx.mu);
+    ctx.live.reset();
 }
 
 int cmd_record(const std::string &uri, const std::string &file, double seconds, const JigArgs &ja,
@@ -413,19 +523,7 @@ int cmd_record(const std::string &uri, const std::string &file, double seconds, 
     ctx.csv_file = format == "csv";
     const std::string tmp = file + ".tmp";
     install_stop_handlers(); // before the first report: a stop at any moment finishes the file
-    if (ja.jig) {
-        ctx.plan = jig_plan_for(uri, ja);
-        ctx.plan_n = cdm_jig_plan_count(ctx.plan);
-        auto inputs = uri_inputs(uri);
-        if (!ja.plan.empty()) inputs.push_back(ja.plan);
-        std::vector<const char *> protect;
-        for (const auto &p : inputs) protect.push_back(p.c_str());
-        if (cdm_dataset_writer_open(file.c_str(), protect.data(), protect.size(), &ctx.csv) != CDM_OK) {
-            std::fprintf(stderr, "cdm: record: %s\n", cdm_thread_error());
-            cdm_jig_plan_free(ctx.plan);
-            return kExitFailure;
-        }
-    }
+    if (ja.jig && open_jig(uri, file, ja, ctx) != kExitOk) return kExitFailure;
     cdm_open_options o{};
     o.struct_size = sizeof o;
     o.on_sample = record_sample;
@@ -448,6 +546,7 @@ int cmd_record(const std::string &uri, const std::string &file, double seconds, 
         cdm_jig_plan_free(ctx.plan);
         return report_error("open " + uri, rc);
     }
+    if (ctx.live) start_live(dev, ctx);
     record_loop(dev, ctx, seconds, ja.jig);
     cdm_stats st{};
     st.struct_size = sizeof st;
@@ -489,6 +588,7 @@ void add_record_command(CLI::App &app) {
                        "with --jig: a planned session, PLAN.csv of `cdm calib plan` (the plate and heights as "
                        "given here): only its positions, in its order, each with its own samples; the progress line "
                        "says which hole at which height comes next");
+    add_live_options(record, ja.live);
     static std::string r_compression;
     const char *compression_help = "MCAP's chunk compression: zstd (the default), lz4 (faster, larger) or none";
     record->add_option("--compression", r_compression, compression_help)
@@ -498,10 +598,13 @@ void add_record_command(CLI::App &app) {
     static bool r_json = false;
     record->add_flag("--json", r_json,
                      "print the summary as one JSON object: file, format, samples, rejected (the reports the "
-                     "reader discarded that the file keeps: none in a CSV) and the device's counters (stats)");
+                     "reader discarded that the file keeps: none in a CSV) and the device's counters (stats); with "
+                     "--jig: file, positions, of, samples, reports, short_dwells, stats and live (the live "
+                     "analysis's updates, or null)");
     record->callback([] {
         select_command([] {
             if (int rc = load_plugins(r_plugins); rc != kExitOk) return rc;
+            if (ja.live.on && !ja.jig) throw UsageError("--live: a live analysis is of a jig session (--jig)");
             return cmd_record(r_uri, r_file, r_seconds, ja, r_compression, false, r_json);
         });
     });

@@ -286,6 +286,8 @@ PROTOTYPES: Dict[str, Tuple[Any, List[Any]]] = {
     "cdm_jig_plan_get": (_int, [_handle, _size, ctypes.POINTER(ctypes.c_int), c_double_p]),
     "cdm_jig_plan_use_file": (_int, [_handle, ctypes.c_char_p]),
     "cdm_jig_plan_samples_at": (_int, [_handle, _size]),
+    "cdm_jig_plan_plate": (_int, [_handle, ctypes.POINTER(ctypes.c_int), c_double_p, c_double_p, _size,
+                                  ctypes.POINTER(ctypes.c_size_t)]),
     "cdm_plan_file_read": (_int, [ctypes.c_char_p, ctypes.POINTER(ctypes.c_void_p)]),
     "cdm_jig_plan_free": (None, [_handle]),
     "cdm_effect_doc": (_str, [_size]),
@@ -407,6 +409,7 @@ class Library:
     cdm_jig_plan_get: Callable[..., int]
     cdm_jig_plan_use_file: Callable[..., int]
     cdm_jig_plan_samples_at: Callable[..., int]
+    cdm_jig_plan_plate: Callable[..., int]
     cdm_plan_file_read: Callable[..., int]
     cdm_jig_plan_free: Callable[..., None]
     cdm_effect_doc: Callable[..., Optional[bytes]]

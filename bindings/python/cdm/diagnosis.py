@@ -179,7 +179,9 @@ def plan(positions: int, samples: int = 100, holes: int = 25, pitch_mm: float = 
     Returns {"positions": [[x_ref, y_ref, z_ref, samples], ...] in walking
     order, "points", "predicted_sigma_mm": {plan, whole_plate},
     "detectability": [...], ...}; `effects` plans for that model instead of
-    the catalogue; **options: noise_mm, jig_tolerance_mm, alpha, power."""
+    the catalogue; **options: noise_mm, jig_tolerance_mm, alpha, power,
+    measured (positions measured already: the plan goes on from them) and
+    allowed (the only positions it may choose), each a list of [x, y, z]."""
     o: Dict[str, Any] = {"positions": int(positions), "samples": int(samples), "holes": int(holes),
                          "pitch_mm": float(pitch_mm), **options}
     if heights_mm is not None:

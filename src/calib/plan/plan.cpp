@@ -8,6 +8,7 @@
 #include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/non_central_chi_squared.hpp>
 
+#include "jig/planned.h"
 #include "model/effect.h"
 #include "model/evaluator.h"
 
@@ -16,6 +17,11 @@ namespace cdm {
 namespace {
 
 using Mat4X = Eigen::Matrix<double, 4, Eigen::Dynamic>;
+
+// A plate position's state in a design: free to choose, chosen (or measured
+// already), or not to be chosen (outside PlanOptions::allowed). Loops over
+// the candidates skip every state but kFree.
+constexpr char kFree = 0, kChosen = 1, kBarred = 2;
 
 // The design: every candidate position's Jacobian and mean-reading
 // covariance, the workspace's average of G'G (G = A J, the position's
@@ -228,7 +234,7 @@ Eigen::MatrixXd information(const Design &D, const std::vector<char> &chosen, bo
     Eigen::MatrixXd F = raw ? Eigen::MatrixXd(D.prior.asDiagonal()) : D.Pr;
     const auto &J = raw ? D.J : D.Jr;
     for (size_t k = 0; k < D.cand.size(); ++k)
-        if (chosen[k]) F.noalias() += J[k].transpose() * D.W[k] * J[k];
+        if (chosen[k] == kChosen) F.noalias() += J[k].transpose() * D.W[k] * J[k];
     return F;
 }
 
@@ -263,7 +269,7 @@ int detect_stage(const PlanOptions &o, const Design &D, const std::vector<double
             if (gain > best) best = gain, pick = k;
         }
         if (best <= 0) break;
-        chosen[pick] = 1;
+        chosen[pick] = kChosen;
         ++picks;
     }
     return picks;
@@ -283,7 +289,7 @@ bool i_optimal_stage(const PlanOptions &o, const std::vector<const Design *> &Ds
         const Eigen::MatrixXd C = information(D, chosen).ldlt().solve(Eigen::MatrixXd::Identity(D.r, D.r));
         Z[m].resize(nc), Y[m].resize(nc);
         for (size_t k = 0; k < nc; ++k)
-            if (!chosen[k]) Z[m][k] = D.Jr[k] * C, Y[m][k] = Z[m][k] * D.L;
+            if (chosen[k] == kFree) Z[m][k] = D.Jr[k] * C, Y[m][k] = Z[m][k] * D.L;
     }
     for (int pick = 0; pick < budget; ++pick) {
         if (o.progress && !o.progress(double(pick) / double(budget))) {
@@ -306,7 +312,7 @@ bool i_optimal_stage(const PlanOptions &o, const std::vector<const Design *> &Ds
             err = "the I-optimal criterion is not finite at any position left (the design model is degenerate)";
             return false;
         }
-        chosen[star] = 1;
+        chosen[star] = kChosen;
         for (size_t m = 0; m < Ds.size(); ++m) {
             const Design &D = *Ds[m];
             const Eigen::Matrix4d Mi = (D.Winv[star] + Z[m][star] * D.Jr[star].transpose()).inverse();
@@ -325,6 +331,42 @@ bool i_optimal_stage(const PlanOptions &o, const std::vector<const Design *> &Ds
 double mean_sigma(const Design &D, const std::vector<char> &chosen) {
     const Eigen::MatrixXd C = information(D, chosen).ldlt().solve(Eigen::MatrixXd::Identity(D.r, D.r));
     return std::sqrt(std::max(0.0, (C * D.L).trace()));
+}
+
+// The plate's indices of positions given by reference (each within 1e-6 mm
+// of a hole at one of the heights: match_plan's rule); empty + err when one
+// is not.
+std::vector<size_t> plate_indices(const std::vector<JigPosition> &plate, const std::vector<std::array<double, 3>> &refs,
+                                  std::string &err) {
+    std::vector<PlanRow> rows;
+    for (const auto &r : refs) rows.push_back({r[0], r[1], r[2], 1});
+    std::vector<PlannedVisit> visits;
+    std::vector<size_t> out;
+    if (!match_plan(plate, rows, visits, err)) return out;
+    for (const auto &v : visits) out.push_back(v.index);
+    return out;
+}
+
+// Each plate position's state before the picks: the measured ones chosen,
+// those outside `allowed` (when given) barred. False + err when a position
+// is no hole, or fewer are free than `positions` asks for.
+bool initial_states(const PlanOptions &o, const std::vector<JigPosition> &plate, std::vector<char> &state,
+                    std::string &err) {
+    state.assign(plate.size(), o.allowed.empty() ? kFree : kBarred);
+    const std::vector<size_t> allowed = plate_indices(plate, o.allowed, err);
+    if (allowed.size() != o.allowed.size()) return err = "allowed: " + err, false;
+    for (size_t i : allowed) state[i] = kFree;
+    const std::vector<size_t> measured = plate_indices(plate, o.measured, err);
+    if (measured.size() != o.measured.size()) return err = "measured: " + err, false;
+    for (size_t i : measured) state[i] = kChosen;
+    const auto free = size_t(std::count(state.begin(), state.end(), kFree));
+    if (size_t(o.positions) > free) {
+        err = "positions must be at most " + std::to_string(free) + " (the plate's positions left to choose from";
+        err += o.measured.empty() && o.allowed.empty() ? ")" : ", measured and barred ones apart)";
+        err += ", not " + std::to_string(o.positions);
+        return false;
+    }
+    return true;
 }
 
 // Height by height (lowest first), rows along y, each visited row's holes
@@ -414,7 +456,8 @@ bool plan_session(const DeviceGeometry &g, const PlanOptions &o, PlanResult &out
     const Eigen::MatrixXd Fall = information(D, all, true);
     std::vector<double> power_all;
     for (const auto &e : D.eff) power_all.push_back(power_of(D, e, sub(Fall, test_cols(D, e)), o.alpha).second);
-    std::vector<char> chosen(D.cand.size(), 0);
+    std::vector<char> chosen;
+    if (!initial_states(o, D.cand, chosen, err)) return false;
     out.detect_picks = detect_stage(o, D, power_all, chosen, o.positions);
     // The I-criterion's models: the one given; else each effect beside the
     // jig's placement (the device has some of them, nobody knows which).
@@ -443,8 +486,10 @@ bool plan_session(const DeviceGeometry &g, const PlanOptions &o, PlanResult &out
     }
     out.sigma_mm = mean_sigma(D, chosen);
     out.sigma_all_mm = mean_sigma(D, all);
+    std::vector<char> measured(D.cand.size(), 0);
+    for (size_t i : plate_indices(D.cand, o.measured, err)) measured[i] = 1;
     for (size_t k = 0; k < D.cand.size(); ++k)
-        if (chosen[k]) out.chosen.push_back(D.cand[k]);
+        if (chosen[k] == kChosen && !measured[k]) out.chosen.push_back(D.cand[k]);
     walking_order(out.chosen);
     out.samples = o.jig.samples;
     return true;

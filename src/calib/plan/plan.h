@@ -28,6 +28,7 @@
 // back and forth.
 #pragma once
 
+#include <array>
 #include <functional>
 #include <string>
 #include <vector>
@@ -45,6 +46,14 @@ struct PlanOptions {
     double jig_tolerance_mm = 0.03;    // each visit's seating error (std per axis)
     double alpha = 1e-3;               // the detectability test's level
     double power = 0.9;                // its target power
+    // A session planned on from the data so far: the positions already
+    // measured (x, y, z mm, jig frame, each a hole of the plate at one of its
+    // heights) are in the design from the start, and `positions` more are
+    // chosen. Their samples are taken as `jig.samples`.
+    std::vector<std::array<double, 3>> measured;
+    // When not empty, the only positions that may be chosen (what is left of
+    // a planned session, say): each a hole of the plate at one of its heights.
+    std::vector<std::array<double, 3>> allowed;
     std::function<bool(double)> progress; // fraction done; false cancels
 };
 
@@ -56,19 +65,21 @@ struct EffectPower {
 };
 
 struct PlanResult {
-    std::vector<JigPosition> chosen;      // in walking order
+    std::vector<JigPosition> chosen;      // in walking order (the measured ones not among them)
     int samples = 0;
     int detect_picks = 0;                 // chosen in stage 1
     // Predicted 1-sigma position error (mm, root of the mean trace over the
     // workspace) with the plan and with every position of the plate.
+    // With `measured`, the plan's includes them.
     double sigma_mm = 0, sigma_all_mm = 0;
     std::vector<std::string> effects;     // the design model's
     std::vector<std::pair<std::string, std::string>> excluded; // effects left out, and why
     std::vector<EffectPower> power;
 };
 
-// False + err on bad options (naming the field), an unknown effect, more
-// positions asked than the plate has, or cancellation.
+// False + err on bad options (naming the field), an unknown effect, a
+// measured or allowed position that is no hole of the plate, more positions
+// asked than are left to choose from, or cancellation.
 bool plan_session(const DeviceGeometry &g, const PlanOptions &o, PlanResult &out, std::string &err);
 
 } // namespace cdm

@@ -31,9 +31,11 @@ bool number(const json &v, const std::string &k, double lo, double hi, bool whol
     return true;
 }
 
-// A list of positions: [x, y, z] or [x, y, z, samples] (a plan's rows) in
-// mm, the jig frame.
+// A list of positions: [x, y, z] or [x, y, z, samples] (a plan's rows, whose
+// samples are not read) in mm, the jig frame.
 bool positions(const json &v, const std::string &k, std::vector<std::array<double, 3>> &out, std::string &err) {
+    if (k == "allowed" && v.empty()) // not "no restriction": leave the option out for that
+        return err = "cdm_plan options: \"allowed\" is empty: no position could be chosen", false;
     for (size_t i = 0; i < v.size(); ++i) {
         const json &r = v[i];
         bool ok = r.is_array() && (r.size() == 3 || r.size() == 4);

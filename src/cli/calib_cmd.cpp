@@ -410,7 +410,7 @@ int cmd_simulate(const SimArgs &a) {
     if (!a.truth.empty()) o["truth"] = a.truth;
     if (!a.truth_out.empty()) o["truth_out"] = a.truth_out;
     if (!a.plan.empty()) {
-        o["plan"] = read_plan_csv(a.plan);
+        o["plan"] = read_plan_csv(a.plan, "--plan");
         o["plan_file"] = a.plan; // an input: never written over
     }
     if (int rc = load_plugins(a.plugins); rc != kExitOk) return rc;

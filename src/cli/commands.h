@@ -71,9 +71,10 @@ void add_plugin_option(CLI::App *app, std::vector<std::string> &plugins);
 int load_plugins(const std::vector<std::string> &plugins);
 
 // `cdm calib plan` (plan_cmd.cpp), and its PLAN.csv read back for
-// `cdm calib simulate --plan`: [[x_ref, y_ref, z_ref, samples], ...];
-// throws UsageError naming the file, line and what is wrong.
+// `cdm calib simulate --plan` and `cdm calib plan --after`: [[x_ref, y_ref,
+// z_ref, samples], ...]; throws UsageError naming the option, the file,
+// line and what is wrong.
 void add_plan(CLI::App *calib);
-nlohmann::json read_plan_csv(const std::string &path);
+nlohmann::json read_plan_csv(const std::string &path, const std::string &option);
 
 } // namespace cdm::cli

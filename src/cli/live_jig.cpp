@@ -11,6 +11,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <set>
 
 #include <Eigen/Dense>
 
@@ -137,9 +138,16 @@ bool LiveJig::start(double a_mm, double b_mm, double m_mm, std::string &err) {
         std::ofstream f(device_json_);
         f << json{{"a_mm", a_mm}, {"b_mm", b_mm}, {"m_mm", m_mm}}.dump() << "\n";
         if (!f.flush()) {
-            err = "cannot write " + device_json_;
+            err = "cannot write " + device_json_ + ": " + std::strerror(errno);
             return false;
         }
+    }
+    try { // the analysis hands these paths to libcdm inside JSON options
+        (void)json{dir_, device_json_}.dump();
+    } catch (const json::exception &) {
+        err = "the working directory " + dir_ + " or the device file " + device_json_ +
+              " is not a UTF-8 path (set TMPDIR, or --device, to one)";
+        return false;
     }
     started_ = true;
     cv_.notify_all();
@@ -193,16 +201,32 @@ void LiveJig::run() {
     std::unique_lock<std::mutex> lock(mu_);
     for (;;) {
         cv_.wait(lock, [&] { return quit_ || (started_ && requested_ > done_); });
-        if (quit_) return;
+        // After finish(), an update asked for and not begun is still made
+        // (the session's last positions), then the thread ends.
+        if (!(started_ && requested_ > done_)) return;
         const size_t n = requested_;
         std::vector<std::shared_ptr<const Position>> data(data_.begin(), data_.begin() + long(n));
         lock.unlock();
-        json u = update(data);
+        json u;
+        try {
+            u = update(data);
+        } catch (const std::exception &e) { // the analysis fails, never the recording
+            u = {{"positions", n}, {"of", s_.positions.size()}, {"error", std::string("live analysis: ") + e.what()}};
+        }
         lock.lock();
-        judge(u);
-        if (u["decision"] == "next") {
+        try {
+            judge(u);
+        } catch (const std::exception &e) {
+            u["decision"] = "error";
+            u["text"] = std::string("live: no update (live analysis: ") + e.what() + ")";
+        }
+        if (u["decision"] == "next" && !quit_) {
             lock.unlock();
-            advise(data, u);
+            try {
+                advise(data, u);
+            } catch (const std::exception &e) {
+                u["next_error"] = e.what();
+            }
             lock.lock();
         }
         updates_.push_back(u);
@@ -242,10 +266,12 @@ json LiveJig::update(const std::vector<std::shared_ptr<const Position>> &data) {
         const int rc = cdm_diagnose(csv.c_str(), device_json_.c_str(), nullptr, nullptr, nullptr, &text);
         d = result_json(rc, text, err);
     }
-    if (!d.is_null()) {
-        const json &rec = d["recommended"];
+    const json rec = d.is_object() ? d.value("recommended", json::object()) : json::object();
+    if (!d.is_null() && !(rec.contains("effects") && rec["effects"].is_array()))
+        err = "the diagnosis recommends no model";
+    if (err.empty()) {
         u["model"] = rec["effects"];
-        u["explained"] = rec["explained"];
+        u["explained"] = rec.value("explained", false);
         if (rec["effects"].empty()) {
             u["predicted_radius95_mm"] = {{"mean", 0.0}, {"worst", 0.0}, {"positions", s_.positions.size()},
                                           {"unplaced", 0}, {"about", "the nominal model: nothing fitted"}};
@@ -265,33 +291,43 @@ json LiveJig::update(const std::vector<std::shared_ptr<const Position>> &data) {
 
 // The stop rule, and the update's line for the person at the bench.
 void LiveJig::judge(json &u) {
-    const std::vector<std::string> model =
-        u["model"].is_array() ? u["model"].get<std::vector<std::string>>() : std::vector<std::string>{"?"};
-    same_ = u["model"].is_array() && model == last_model_ ? same_ + 1 : 1;
+    const bool failed = u.contains("error");
+    const json none = nullptr;
+    const json &m = u.contains("model") ? u["model"] : none;
+    const std::vector<std::string> model = m.is_array() ? m.get<std::vector<std::string>>() : std::vector<std::string>{"?"};
+    same_ = !failed && m.is_array() && model == last_model_ ? same_ + 1 : 1;
     last_model_ = model;
     u["same_for"] = same_;
-    const json &p = u["predicted_radius95_mm"];
-    const bool under = p.is_object() && p["worst"].get<double>() <= o_.target_mm;
-    const size_t out = u["outside_measured_volume"].get<size_t>();
-    const bool stop = !u.contains("error") && u["explained"].get<bool>() && same_ >= o_.stable && under && out == 0;
-    u["decision"] = stop ? "stop" : u.contains("error") ? "error" : "next";
-    std::string t = "live: " + std::to_string(u["positions"].get<size_t>()) + "/" +
-                    std::to_string(u["of"].get<size_t>()) + " positions: ";
-    if (u.contains("error")) {
+    const json &p = u.contains("predicted_radius95_mm") ? u["predicted_radius95_mm"] : none;
+    const bool under = p.is_object() && p.value("unplaced", size_t(1)) == 0 && p.value("worst", INFINITY) <= o_.target_mm;
+    const size_t out = u.value("outside_measured_volume", size_t(1));
+    // The nominal model never stops a session: nothing fitted means nothing
+    // predicted, not that the catalogue's effects could have been seen.
+    const bool determined = !failed && u.value("explained", false) && same_ >= o_.stable && under && out == 0 &&
+                            !model.empty();
+    u["decision"] = determined ? "stop" : failed ? "error" : "next";
+    std::string t = "live: " + std::to_string(u.value("positions", size_t(0))) + "/" +
+                    std::to_string(u.value("of", size_t(0))) + " positions: ";
+    if (failed) {
         t += "no update (" + u["error"].get<std::string>() + ")";
     } else {
         t += "model " + (model.empty() ? std::string("nominal") : joined(model, " + ")) +
-             (u["explained"].get<bool>() ? " (explains the data" : " (does not explain the data yet") +
+             (u.value("explained", false) ? " (explains the data" : " (does not explain the data yet") +
              ", the same for " + std::to_string(same_) + " update" + (same_ > 1 ? "s" : "") + ")";
         if (p.is_object())
             t += "; predicted error (95 % radius) at the session's positions: mean " +
-                 num(std::round(p["mean"].get<double>() * 1e4) / 1e4) + ", worst " +
-                 num(std::round(p["worst"].get<double>() * 1e4) / 1e4) + " mm (target " + num(o_.target_mm) + ")";
+                 num(std::round(p.value("mean", 0.0) * 1e4) / 1e4) + ", worst " +
+                 num(std::round(p.value("worst", 0.0) * 1e4) / 1e4) + " mm (target " + num(o_.target_mm) + ")";
+        if (p.is_object() && p.value("unplaced", size_t(0)) > 0)
+            t += "; " + std::to_string(p["unplaced"].get<size_t>()) + " positions the model cannot place";
         if (out) t += "; " + std::to_string(out) + " of them outside the measured volume (extrapolated)";
     }
-    if (stop) {
+    // The session is ended only while it runs and has positions left.
+    if (determined && !quit_ && u.value("positions", size_t(0)) < s_.positions.size()) {
         stop_ = true;
         t += "\n  stop: the model is determined";
+    } else if (determined) {
+        t += "\n  the model is determined";
     }
     u["text"] = t;
 }
@@ -299,9 +335,13 @@ void LiveJig::judge(json &u) {
 // "next: measure these holes": the planner's picks for the recommended
 // model among the session's positions not yet measured.
 void LiveJig::advise(const std::vector<std::shared_ptr<const Position>> &data, json &u) const {
+    // The session's positions not measured yet, each once (a plan may
+    // visit a hole twice).
+    std::set<std::array<double, 3>> seen;
     json measured = json::array(), allowed = json::array();
-    for (const auto &p : data) measured.push_back(p->ref);
-    for (size_t i = data.size(); i < s_.positions.size(); ++i) allowed.push_back(s_.positions[i]);
+    for (const auto &p : data) measured.push_back(p->ref), seen.insert(p->ref);
+    for (size_t i = data.size(); i < s_.positions.size(); ++i)
+        if (seen.insert(s_.positions[i]).second) allowed.push_back(s_.positions[i]);
     if (allowed.empty()) return;
     json o = {{"positions", std::min<size_t>(size_t(o_.next), allowed.size())},
               {"samples", s_.samples},
@@ -322,9 +362,10 @@ void LiveJig::advise(const std::vector<std::shared_ptr<const Position>> &data, j
         u["text"] = t + "(the planner: " + err + ")";
         return;
     }
-    u["next"] = r["positions"];
-    for (size_t i = 0; i < r["positions"].size(); ++i) {
-        const json &q = r["positions"][i];
+    const json holes = r.value("positions", json::array());
+    u["next"] = holes;
+    for (size_t i = 0; i < holes.size(); ++i) {
+        const json &q = holes[i];
         t += std::string(i ? "; " : "") + "height " + num(q[0].get<double>()) + " mm, y " + num(q[1].get<double>()) +
              " z " + num(q[2].get<double>());
     }

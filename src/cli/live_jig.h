@@ -4,8 +4,10 @@
 // position of the session, measured or not (the 95 % ellipsoid's longest
 // semi-axis: cdm_calibration_position_covariance). The session stops by
 // itself once the model is determined: the diagnosis explains the data, its
-// recommended model has not changed for `stable` updates, the predicted
-// error is under the target at every position of the session, and none of
+// recommended model (not the nominal one, which has nothing fitted to be
+// uncertain about) has not changed for `stable` updates, the predicted
+// error is under the target at every position of the session (each placed
+// by the model), and none of
 // them is an extrapolation (outside the span of the heights, and of the
 // holes, measured so far: an effect that only shows there could not have
 // been seen). Until then
@@ -74,8 +76,11 @@ public:
     bool stop_requested() const;
     // Lines for the person at the bench, in order; each returned once.
     std::vector<std::string> take_messages();
-    // Ends the thread (an update under way completes first) and returns
-    // {"updates": [...], "stopped": bool, "model", "predicted_radius95_mm"}.
+    // Ends the thread (an update under way, or asked for and not begun,
+    // completes first; no advice is planned after this) and returns
+    // {"updates": [...], "every", "target_mm", "stable", "stopped" (the
+    // analysis ended the session), "model", "predicted_radius95_mm"} (the
+    // last update's).
     nlohmann::json finish();
 
 private:

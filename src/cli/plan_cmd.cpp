@@ -25,7 +25,7 @@ namespace {
 constexpr const char *kPlanHeader = "x_ref,y_ref,z_ref,samples";
 
 struct PlanArgs {
-    std::string out, json_out, effects, heights, device;
+    std::string out, json_out, effects, heights, device, after;
     int positions = 0, samples = 100, n = 25;
     double pitch = 5, noise = 0.05, jig = 0.03;
     bool quiet = false;
@@ -68,10 +68,12 @@ void print_plan(const PlanArgs &a, const nlohmann::json &r) {
         std::printf("  %-20s left out: %s\n", e["effect"].get<std::string>().c_str(), e["why"].get<std::string>().c_str());
 }
 
-// Atomically; never over the command's input (`protect`, may be empty).
-int write_text(const std::string &path, const std::string &text, const std::string &protect) {
-    const char *p[] = {protect.c_str()};
-    if (cdm_write_file_atomic(path.c_str(), text.data(), text.size(), p, protect.empty() ? 0 : 1) == CDM_OK)
+// Atomically; never over one of the command's inputs (empty names skipped).
+int write_text(const std::string &path, const std::string &text, const std::vector<std::string> &inputs) {
+    std::vector<const char *> p;
+    for (const auto &i : inputs)
+        if (!i.empty()) p.push_back(i.c_str());
+    if (cdm_write_file_atomic(path.c_str(), text.data(), text.size(), p.data(), p.size()) == CDM_OK)
         return kExitOk;
     std::fprintf(stderr, "cdm: %s\n", cdm_thread_error());
     return kExitFailure;
@@ -83,6 +85,7 @@ int cmd_plan(const PlanArgs &a) {
     if (!a.heights.empty()) o["heights_mm"] = parse_number_list(a.heights, "--jig-heights");
     if (!a.effects.empty()) o["effects"] = split_list(a.effects);
     if (!a.device.empty()) o["device"] = a.device;
+    if (!a.after.empty()) o["measured"] = read_plan_csv(a.after, "--after");
     char *res = nullptr;
     const bool shown = !a.quiet && isatty(2); // a bar, on a terminal only
     const int rc = cdm_plan(o.dump().c_str(), shown ? progress_plan : nullptr, nullptr, &res);
@@ -90,18 +93,19 @@ int cmd_plan(const PlanArgs &a) {
     if (rc != CDM_OK) return report_error("calib plan", rc);
     const auto r = nlohmann::json::parse(res);
     cdm_free_string(res);
-    if (int w = write_text(a.out, plan_csv(r), a.device); w != kExitOk) return w;
+    const std::vector<std::string> inputs{a.device, a.after};
+    if (int w = write_text(a.out, plan_csv(r), inputs); w != kExitOk) return w;
     if (!a.json_out.empty())
-        if (int w = write_text(a.json_out, r.dump(1) + "\n", a.device); w != kExitOk) return w;
+        if (int w = write_text(a.json_out, r.dump(1) + "\n", inputs); w != kExitOk) return w;
     print_plan(a, r);
     return kExitOk;
 }
 
 } // namespace
 
-nlohmann::json read_plan_csv(const std::string &path) {
+nlohmann::json read_plan_csv(const std::string &path, const std::string &option) {
     char *rows = nullptr;
-    if (cdm_plan_file_read(path.c_str(), &rows) != CDM_OK) throw UsageError(std::string("--plan: ") + cdm_thread_error());
+    if (cdm_plan_file_read(path.c_str(), &rows) != CDM_OK) throw UsageError(option + ": " + cdm_thread_error());
     const nlohmann::json j = nlohmann::json::parse(rows);
     cdm_free_string(rows);
     return j;
@@ -120,6 +124,10 @@ void add_plan(CLI::App *calib) {
                   "The model to plan for, a comma-separated list (default: every catalogued effect on the cables' "
                   "geometry, path and pots)");
     c->add_option("--device", p.device, "Device description JSON (default: the nominal a=b=150, m=30 mm)");
+    c->add_option("--after", p.after,
+                  "A PLAN.csv already measured: the plan goes on from it (its positions are in the design from the "
+                  "start and --positions more are chosen, none of them again); with --effects the model its "
+                  "data's diagnosis recommends, a session planned in two steps");
     c->add_option("--noise-mm", p.noise, "Per-sample pot noise (mm, std)")->capture_default_str()->check(range(1e-6, 100));
     c->add_option("--jig-tolerance-mm", p.jig, "Each visit's seating error (mm, std per axis)")
         ->capture_default_str()

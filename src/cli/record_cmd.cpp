@@ -16,6 +16,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <mutex>
@@ -122,12 +123,17 @@ void close_dwell(RecordCtx &c) {
     int point = 0;
     double ref[3] = {0, 0, 0};
     cdm_jig_plan_get(c.plan, c.next_point, &point, ref);
+    size_t kept = 0; // the rows the writer took, moved to the front for the live analysis
     for (size_t k = 0; k < c.dwell.size() && !c.write_failed; ++k) {
         const int rc = cdm_dataset_writer_add_at(c.csv, point, ref, c.dwell[k].data(), c.dwell_t[k]);
-        if (rc == CDM_OK) ++c.kept_samples;
+        if (rc == CDM_OK) {
+            ++c.kept_samples;
+            c.dwell[kept] = c.dwell[k], c.dwell_t[kept] = c.dwell_t[k], ++kept;
+        }
         after_write(c, rc);
     }
-    if (c.live && !c.write_failed && c.live->add(point, ref, c.dwell, c.dwell_t)) c.live_stopped = c.done = true;
+    c.dwell.resize(kept), c.dwell_t.resize(kept);
+    if (c.live && !c.write_failed && kept && c.live->add(point, ref, c.dwell, c.dwell_t)) c.live_stopped = c.done = true;
     c.dwell.clear();
     c.dwell_t.clear();
     if (++c.next_point == c.plan_n) c.done = true;
@@ -370,7 +376,10 @@ int finish_jig(RecordCtx &ctx, const std::string &file, const cdm_stats &st, boo
         ctx.dwell.size() >= size_t(cdm_jig_plan_samples_at(ctx.plan, ctx.next_point)))
         close_dwell(ctx);
     nlohmann::json live = ctx.live ? ctx.live->finish() : nlohmann::json(nullptr);
-    if (ctx.live) print_live(ctx.live->take_messages(), false);
+    if (ctx.live) {
+        print_live(ctx.live->take_messages(), false);
+        ctx.live_stopped = live.value("stopped", false); // what the summary says, and the exit status
+    }
     std::string err = ctx.write_err;
     const bool ok = err.empty() && cdm_dataset_writer_commit(ctx.csv) == CDM_OK;
     if (!ok && err.empty()) err = cdm_thread_error();
@@ -456,8 +465,13 @@ std::string uri_option(const std::string &uri, const std::string &key) {
 // A source no clock paces: a replay at speed=0, a sim: at realtime=0. It
 // waits for whoever reads it, so the live analysis may hold the reader.
 bool unpaced(const std::string &uri) {
-    return (uri.rfind("sim:", 0) == 0 && uri_option(uri, "realtime") == "0") ||
-           (uri.rfind("replay:", 0) == 0 && uri_option(uri, "speed") == "0");
+    auto zero = [](const std::string &v) {
+        char *end = nullptr;
+        const double d = std::strtod(v.c_str(), &end);
+        return !v.empty() && end && *end == '\0' && d == 0;
+    };
+    return (uri.rfind("sim:", 0) == 0 && zero(uri_option(uri, "realtime"))) ||
+           (uri.rfind("replay:", 0) == 0 && zero(uri_option(uri, "speed")));
 }
 
 // The jig plan and the dataset writer, and with --live the analysis (its
@@ -484,9 +498,10 @@ int open_jig(const std::string &uri, const std::string &file, const JigArgs &ja,
     }
     s.samples = cdm_jig_plan_samples(ctx.plan);
     size_t nh = 0;
-    cdm_jig_plan_plate(ctx.plan, &s.holes, &s.pitch_mm, nullptr, 0, &nh);
-    s.heights_mm.resize(nh);
-    cdm_jig_plan_plate(ctx.plan, nullptr, nullptr, s.heights_mm.data(), nh, &nh);
+    if (cdm_jig_plan_plate(ctx.plan, &s.holes, &s.pitch_mm, nullptr, 0, &nh) == CDM_OK) {
+        s.heights_mm.resize(nh);
+        cdm_jig_plan_plate(ctx.plan, nullptr, nullptr, s.heights_mm.data(), nh, &nh);
+    }
     ctx.live = std::make_unique<LiveJig>(ja.live, std::move(s), unpaced(uri));
     return kExitOk;
 }

@@ -6,7 +6,9 @@ against random and regular subsets of the same size (docs/calibration.md,
 For each scenario (a simulated device with hidden effects): the whole plate
 (25 x 25 holes, 5 heights, 100 samples) is simulated; `cdm calib plan` picks
 N positions from the geometry and the catalogue alone (it is not told the
-effects); the planned positions, random draws of N and a regular subset of N
+effects); a session planned in two steps (half for the catalogue, measured
+and diagnosed, the other half planned on from it for the recommended model:
+`calib plan --after`); the planned positions, random draws of N and a regular subset of N
 (every k-th position in the plate's order) are simulated from the same truth;
 each is fitted with the whole session's model (the hidden effects) and
   - checked on the whole session (`cdm calib check`: position_error_mm, each
@@ -88,6 +90,33 @@ def score(cdm_cli, d, name, data, effects, full, truth):
     return float(np.sqrt(sum(pe[a]["rms"] ** 2 for a in "xyz"))), true_error(truth, cal)
 
 
+def read_plan(path):
+    with open(path) as f:
+        next(f)
+        return [line for line in f if line.strip()]
+
+
+def two_steps(cdm_cli, d, k, frac, n, truth_path, extra):
+    """A session planned in two steps: half the positions for the whole
+    catalogue, measured and diagnosed; the other half planned on from them
+    (`calib plan --after`) for the model that half's diagnosis recommends.
+    Returns the whole plan (both halves)."""
+    first = os.path.join(d, "first%d_%d.csv" % (k, frac))
+    run([cdm_cli, "calib", "plan", "--positions", str(n // 2), "--out", first, "--quiet"])
+    data = first + ".data.csv"
+    run([cdm_cli, "calib", "simulate", data, "--truth", truth_path, "--seed", str(300 + k), "--plan", first] + extra)
+    diag = data + ".json"
+    run([cdm_cli, "calib", "diagnose", data, "--json", diag, "--quiet"])
+    model = json.load(open(diag))["recommended"]["effects"]
+    rest = os.path.join(d, "rest%d_%d.csv" % (k, frac))
+    run([cdm_cli, "calib", "plan", "--positions", str(n - n // 2), "--after", first, "--out", rest, "--quiet"] +
+        (["--effects", ",".join(model)] if model else []))
+    both = os.path.join(d, "twosteps%d_%d.csv" % (k, frac))
+    with open(both, "w") as f:
+        f.write("x_ref,y_ref,z_ref,samples\n" + "".join(read_plan(first) + read_plan(rest)))
+    return both
+
+
 def scenario(cdm_cli, d, k, label, effects, extra, fractions, n_random):
     import cdm
     full = os.path.join(d, "full%d.csv" % k)
@@ -104,7 +133,7 @@ def scenario(cdm_cli, d, k, label, effects, extra, fractions, n_random):
         plan = os.path.join(d, "plan%d_%d.csv" % (k, frac))
         run([cdm_cli, "calib", "plan", "--positions", str(n), "--out", plan, "--quiet"] +
             (["--effects", ",".join(effects)] if PLAN_FOR_THE_MODEL else []))
-        subsets = {"planned": plan}
+        subsets = {"planned": plan, "two steps": two_steps(cdm_cli, d, k, frac, n, truth_path, extra)}
         rng = random.Random(k * 1000 + frac)
         for i in range(n_random):
             p = os.path.join(d, "random%d_%d_%d.csv" % (k, frac, i))
@@ -119,7 +148,7 @@ def scenario(cdm_cli, d, k, label, effects, extra, fractions, n_random):
             run(sim + [data, "--truth", truth_path, "--seed", str(200 + k), "--plan", plan_csv] + extra)
             got[name] = score(cdm_cli, d, "%s%d_%d" % (name, k, frac), data, effects, full, truth)
         rnd = [got["random%d" % i] for i in range(n_random)]
-        rows.append((label, frac, n, base, got["planned"],
+        rows.append((label, frac, n, base, got["planned"], got["two steps"],
                      (float(np.mean([r[0] for r in rnd])), float(np.mean([r[1] for r in rnd]))), got["regular"]))
     return rows
 
@@ -135,14 +164,15 @@ def main():
     global PLAN_FOR_THE_MODEL
     PLAN_FOR_THE_MODEL = a.plan_for_the_model
     fractions = [int(f) for f in a.fractions.split(",")]
-    print("| scenario | 1/k | N | whole: check, true | planned | random (mean of %d) | regular |" % a.random)
-    print("|---|---|---|---|---|---|---|")
+    print("| scenario | 1/k | N | whole: check, true | planned | two steps | random (mean of %d) | regular |" %
+          a.random)
+    print("|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as d:
         for k, (label, effects, extra) in enumerate(SCENARIOS):
-            for label_, frac, n, base, pl, rd, rg in scenario(a.cdm, d, k, label, effects, extra, fractions, a.random):
-                cell = lambda s: "%.4f, %.4f" % s
-                print("| %s | 1/%d | %d | %s | %s | %s | %s |" % (label_, frac, n, cell(base), cell(pl), cell(rd),
-                                                                 cell(rg)), flush=True)
+            for row in scenario(a.cdm, d, k, label, effects, extra, fractions, a.random):
+                label_, frac, n = row[:3]
+                print("| %s | 1/%d | %d | %s |" % (label_, frac, n, " | ".join("%.4f, %.4f" % c for c in row[3:])),
+                      flush=True)
 
 
 if __name__ == "__main__":

@@ -138,10 +138,29 @@ def test_planning_on_from_the_measured_positions():
     assert r["measured"] == 10 and len(picks) == 4
     assert all(p in allowed and p not in measured for p in picks)
     # The measured positions' information counts: planning on from them
-    # predicts a smaller error than from nothing with the same picks.
+    # predicts a smaller error than four picks from nothing.
     alone = cdm.plan(4, allowed=allowed, **jig)
     assert r["predicted_sigma_mm"]["plan"] < alone["predicted_sigma_mm"]["plan"]
     with pytest.raises(cdm.CdmError, match="at most 9"):
         cdm.plan(10, allowed=allowed, **jig)
-    with pytest.raises(cdm.CdmError, match=r"measured: .*\(41, 0, 0 mm\) is not a hole"):
+    with pytest.raises(cdm.CdmError, match=r"\"measured\": .*\(41, 0, 0 mm\) is not a hole"):
         cdm.plan(3, measured=[[41, 0, 0]], **jig)
+
+
+def test_a_jig_plan_names_its_plate():
+    import ctypes
+    from cdm import _native
+    L = _native.lib()
+    plan = ctypes.c_void_p()
+    assert L.cdm_jig_plan_create((SIM + "&jig_heights=35,45").encode(), 0, 0.0, None, 0, 0, ctypes.byref(plan)) == 0
+    try:
+        holes, pitch, n = ctypes.c_int(), ctypes.c_double(), ctypes.c_size_t()
+        # First without room for the heights: how many there are.
+        assert L.cdm_jig_plan_plate(plan, ctypes.byref(holes), ctypes.byref(pitch), None, 0, ctypes.byref(n)) == 0
+        assert (holes.value, pitch.value, n.value) == (9, 15.0, 2)
+        heights = (ctypes.c_double * 2)()
+        assert L.cdm_jig_plan_plate(plan, None, None, heights, 2, ctypes.byref(n)) == 0
+        assert list(heights) == [35.0, 45.0]
+        assert L.cdm_jig_plan_plate(None, None, None, None, 0, None) == cdm.Error.CDM_ERR_INVALID_ARG
+    finally:
+        L.cdm_jig_plan_free(plan)

@@ -263,7 +263,7 @@ int detect_stage(const PlanOptions &o, const Design &D, const std::vector<double
         size_t pick = 0;
         Mat4X Jc(4, Eigen::Index(cols.size()));
         for (size_t k = 0; k < D.cand.size(); ++k) {
-            if (chosen[k]) continue;
+            if (chosen[k] != kFree) continue;
             for (size_t c = 0; c < cols.size(); ++c) Jc.col(Eigen::Index(c)) = D.J[k].col(cols[c]);
             const double gain = power_of(D, e, Fs + Jc.transpose() * D.W[k] * Jc, o.alpha).first - base;
             if (gain > best) best = gain, pick = k;
@@ -299,7 +299,7 @@ bool i_optimal_stage(const PlanOptions &o, const std::vector<const Design *> &Ds
         double best = -INFINITY; // (round-off can make a gain that is nothing a little below zero)
         size_t star = nc;
         for (size_t k = 0; k < nc; ++k) {
-            if (chosen[k]) continue;
+            if (chosen[k] != kFree) continue;
             double gain = 0;
             for (size_t m = 0; m < Ds.size(); ++m) {
                 const Design &D = *Ds[m];
@@ -318,7 +318,7 @@ bool i_optimal_stage(const PlanOptions &o, const std::vector<const Design *> &Ds
             const Eigen::Matrix4d Mi = (D.Winv[star] + Z[m][star] * D.Jr[star].transpose()).inverse();
             const Mat4X Zs = Z[m][star], Ys = Y[m][star];
             for (size_t k = 0; k < nc; ++k) {
-                if (chosen[k]) continue;
+                if (chosen[k] != kFree) continue;
                 const Eigen::Matrix4d K = (D.Jr[k] * Zs.transpose()) * Mi;
                 Z[m][k].noalias() -= K * Zs;
                 Y[m][k].noalias() -= K * Ys;
@@ -354,10 +354,10 @@ bool initial_states(const PlanOptions &o, const std::vector<JigPosition> &plate,
                     std::string &err) {
     state.assign(plate.size(), o.allowed.empty() ? kFree : kBarred);
     const std::vector<size_t> allowed = plate_indices(plate, o.allowed, err);
-    if (allowed.size() != o.allowed.size()) return err = "allowed: " + err, false;
+    if (allowed.size() != o.allowed.size()) return err = "\"allowed\": " + err, false;
     for (size_t i : allowed) state[i] = kFree;
     const std::vector<size_t> measured = plate_indices(plate, o.measured, err);
-    if (measured.size() != o.measured.size()) return err = "measured: " + err, false;
+    if (measured.size() != o.measured.size()) return err = "\"measured\": " + err, false;
     for (size_t i : measured) state[i] = kChosen;
     const auto free = size_t(std::count(state.begin(), state.end(), kFree));
     if (size_t(o.positions) > free) {

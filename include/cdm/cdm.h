@@ -760,7 +760,8 @@ CDM_API int cdm_plan(const char *options_json, cdm_progress_fn progress, void *u
  * data as cdm_fit's is. The device is the calibration's own. options_json
  * (NULL: defaults): {"jig_tolerance_mm": mm (default: estimated),
  * "max_error_mm": mm (positions whose mean error is longer are listed;
- * default: none)}. *result_json (free with cdm_free_string): {"effects":
+ * default: none)}. *result_json (free with cdm_free_string): {"tool": "cdm
+ * calib check", "effects":
  * the calibration's (its Jig-stage ones apart), "positions": count, "jig":
  * {re_estimated, text, effects: [{name, params: {p: {value, std, unit}}}],
  * added, fixture_mm, tolerance_mm, plate_holes_mm}, "error_mm" and
@@ -771,8 +772,10 @@ CDM_API int cdm_plan(const char *options_json, cdm_progress_fn progress, void *u
  * "fit" block or null, "failing": {count, test, positions: [{point, ref,
  * error_mm}], beyond_max_error (with max_error_mm)}, "predicted":
  * {available, calibration_rms_mm, noise_and_jig_rms_mm, chi2_per_dof,
- * p_value, as_predicted, test, text} (the error against the calibration's
- * own covariance, cdm_calibration_position_covariance's), "model_check": {holds,
+ * p_value, as_predicted, test, text, per_position: {ref_mm, error_mm,
+ * calibration_sigma_mm, expected_sigma_mm, chi2}} (the error against the
+ * calibration's own covariance, cdm_calibration_position_covariance's;
+ * per_position: each placed position's), "model_check": {holds,
  * chi2_per_dof, chi2_p_value, chi2_scale, structure, test, text},
  * "reading_noise_mm", "glitches"}. Errors as cdm_diagnose's (the
  * calibration's: CDM_ERR_IO unreadable, CDM_ERR_PARSE malformed or naming

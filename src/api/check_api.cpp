@@ -129,6 +129,8 @@ json predicted_json(const cdm::CalibrationFit &cf, const cdm::Model &calibration
     const cdm::diag::FixtureOffsets fixture = cdm::diag::fixture_offsets(cf.fitted, cf.grid, cf.jig);
     double chi2 = 0, pred[3] = {0, 0, 0}, noise[3] = {0, 0, 0};
     long n = 0;
+    json refs = json::array(), errs = json::array(), sig_cal = json::array(), sig_all = json::array(),
+         chi2s = json::array();
     for (size_t i = 0; i < idx.size(); ++i) {
         if (!ok[i]) continue;
         const size_t j = idx[i];
@@ -146,8 +148,15 @@ json predicted_json(const cdm::CalibrationFit &cf, const cdm::Model &calibration
             const auto it = fixture.find({cf.grid.height_index[j], k});
             if (it != fixture.end()) e(k) -= it->second;
         }
-        chi2 += e.dot(C.ldlt().solve(e));
+        const double c2 = e.dot(C.ldlt().solve(e));
+        chi2 += c2;
         ++n;
+        const auto &r = cf.pos[j].ref;
+        refs.push_back({r(0), r(1), r(2)});
+        errs.push_back({e(0), e(1), e(2)});
+        sig_cal.push_back({std::sqrt(S[i](0, 0)), std::sqrt(S[i](1, 1)), std::sqrt(S[i](2, 2))});
+        sig_all.push_back({std::sqrt(C(0, 0)), std::sqrt(C(1, 1)), std::sqrt(C(2, 2))});
+        chi2s.push_back(c2);
     }
     if (n == 0) return {{"available", false}, {"text", "no position placed"}};
     if (!(chi2 >= 0) || !std::isfinite(chi2))
@@ -172,6 +181,15 @@ json predicted_json(const cdm::CalibrationFit &cf, const cdm::Model &calibration
                      "calibration's predicted error there (its covariance propagated), a chi-square over the "
                      "positions (widened as the judge's for the holes' correlation) at p >= 1e-3; the jig's "
                      "placement, fitted here, takes up any error common to every position"},
+            {"per_position",
+             {{"ref_mm", refs},
+              {"error_mm", errs},
+              {"calibration_sigma_mm", sig_cal},
+              {"expected_sigma_mm", sig_all},
+              {"chi2", chi2s},
+              {"about", "each placed position's mean error (the fixture heights' offsets out), the calibration's "
+                        "predicted 1-sigma there, the 1-sigma expected with the noise and the jig's tolerance, and "
+                        "its chi-square (3 degrees of freedom) against them"}}},
             {"text", std::string(as_predicted ? "as the calibration's accuracy map predicted"
                                               : "larger than the calibration's accuracy map predicted") +
                          " (chi2/dof " + cdm::diag::fmt_num(chi2 / dof, 2) + ", " + cdm::diag::fmt_p(p) + ")"}};
@@ -201,7 +219,8 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
         if (cf.model.effect_desc(k).stage != cdm::Stage::Jig) names.push_back(cf.model.effect_name(k));
     size_t used = 0;
     for (char ok : cf.fitted.ok) used += ok != 0;
-    return {{"effects", names},
+    return {{"tool", "cdm calib check"},
+            {"effects", names},
             {"positions", used},
             {"jig", jig_json(cf)},
             {"error_mm", cdm::diag::stats3(cf.fitted.err)},

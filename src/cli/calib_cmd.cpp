@@ -219,29 +219,32 @@ bool report_dir_is_ours(const std::string &dir) {
     return empty;
 }
 
-int write_outputs(const DiagArgs &a, const nlohmann::json &r) {
-    const std::vector<std::string> inputs{a.data, a.device, a.calib_out};
-    if (!a.json_out.empty() && !write_atomic(a.json_out, r.dump(1) + "\n", inputs)) return kExitFailure;
-    if (a.report.empty()) return kExitOk;
-    std::string jp = a.json_out;
+// The result's JSON (--json) and HTML report (--report DIR, drawn from the
+// JSON: --json's file, or `name` written into DIR when there is none).
+// Never over one of the command's inputs.
+int write_outputs(const std::string &json_out, const std::string &report, const std::vector<std::string> &before,
+                  const nlohmann::json &r, const std::vector<std::string> &inputs, const char *name) {
+    if (!json_out.empty() && !write_atomic(json_out, r.dump(1) + "\n", inputs)) return kExitFailure;
+    if (report.empty()) return kExitOk;
+    std::string jp = json_out;
     if (jp.empty()) {
-        if (mkdir(a.report.c_str(), 0755) != 0 && errno != EEXIST) {
-            std::fprintf(stderr, "cdm: --report: cannot create %s: %s\n", a.report.c_str(), std::strerror(errno));
+        if (mkdir(report.c_str(), 0755) != 0 && errno != EEXIST) {
+            std::fprintf(stderr, "cdm: --report: cannot create %s: %s\n", report.c_str(), std::strerror(errno));
             return kExitFailure;
         }
-        if (!report_dir_is_ours(a.report)) {
+        if (!report_dir_is_ours(report)) {
             std::fprintf(stderr,
                          "cdm: --report: %s is not empty and holds no report (.cdm-report is missing): the report "
                          "writes only into a new or empty directory, or one an earlier report wrote; give another "
                          "directory\n",
-                         a.report.c_str());
+                         report.c_str());
             return kExitUsage;
         }
-        jp = a.report + "/diagnosis.json";
+        jp = report + "/" + name;
         if (!write_atomic(jp, r.dump() + "\n", inputs)) return kExitFailure;
     }
-    if (run_report(jp, a.before, a.report) != 0) return kExitFailure;
-    std::printf("report: %s/index.html\n", a.report.c_str());
+    if (run_report(jp, before, report) != 0) return kExitFailure;
+    std::printf("report: %s/index.html\n", report.c_str());
     return kExitOk;
 }
 
@@ -302,11 +305,11 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     } else {
         print_summary(r);
     }
-    return write_outputs(a, r);
+    return write_outputs(a.json_out, a.report, a.before, r, {a.data, a.device, a.calib_out}, "diagnosis.json");
 }
 
 struct CheckArgs {
-    std::string data, calibration, json_out;
+    std::string data, calibration, json_out, report;
     std::vector<std::string> plugins;
     double jig = -1, max_error = -1;
     bool quiet = false;
@@ -351,9 +354,7 @@ int cmd_check(const CheckArgs &a) {
     const auto r = nlohmann::json::parse(res);
     cdm_free_string(res);
     print_check(a, r);
-    if (!a.json_out.empty() && !write_atomic(a.json_out, r.dump(1) + "\n", {a.data, a.calibration}))
-        return kExitFailure;
-    return kExitOk;
+    return write_outputs(a.json_out, a.report, {}, r, {a.data, a.calibration}, "check.json");
 }
 
 void add_check(CLI::App *calib) {
@@ -363,6 +364,9 @@ void add_check(CLI::App *calib) {
     chk->add_option("data", c.data, "Jig dataset CSV: point,x_ref,y_ref,z_ref,l1,l2,l3,l4")->required();
     chk->add_option("--calibration", c.calibration, "Calibration JSON to check (`cdm calib fit --out`)")->required();
     chk->add_option("--json", c.json_out, "Write the check's JSON here");
+    chk->add_option("--report", c.report,
+                    "Write the HTML report into this directory: the measured error at each position against the "
+                    "error the calibration's accuracy map predicted there (runs $PYTHON -m cdm.report)");
     chk->add_option("--jig-tolerance-mm", c.jig, "Std of the jig's own position error (-1: estimated from the data)")
         ->check(tolerance_or_estimate());
     chk->add_option("--max-error-mm", c.max_error,

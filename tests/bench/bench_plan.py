@@ -99,18 +99,23 @@ def read_plan(path):
 def two_steps(cdm_cli, d, k, frac, n, truth_path, extra):
     """A session planned in two steps: half the positions for the whole
     catalogue, measured and diagnosed; the other half planned on from them
-    (`calib plan --after`) for the model that half's diagnosis recommends.
-    Returns the whole plan (both halves)."""
+    (`calib plan --after`) for the model that half's diagnosis recommends,
+    with the jig tolerance it estimated. Returns the whole plan (both
+    halves)."""
     first = os.path.join(d, "first%d_%d.csv" % (k, frac))
     run([cdm_cli, "calib", "plan", "--positions", str(n // 2), "--out", first, "--quiet"])
     data = first + ".data.csv"
     run([cdm_cli, "calib", "simulate", data, "--truth", truth_path, "--seed", str(300 + k), "--plan", first] + extra)
     diag = data + ".json"
     run([cdm_cli, "calib", "diagnose", data, "--json", diag, "--quiet"])
-    model = json.load(open(diag))["recommended"]["effects"]
+    dj = json.load(open(diag))
+    model = dj["recommended"]["effects"]
+    # The jig's tolerance as the data shows it (the diagnosis's value): the
+    # second half's weights.
+    tol = dj["jig_tolerance_mm"]["value"]
     rest = os.path.join(d, "rest%d_%d.csv" % (k, frac))
-    run([cdm_cli, "calib", "plan", "--positions", str(n - n // 2), "--after", first, "--out", rest, "--quiet"] +
-        (["--effects", ",".join(model)] if model else []))
+    run([cdm_cli, "calib", "plan", "--positions", str(n - n // 2), "--after", first, "--out", rest, "--quiet",
+         "--jig-tolerance-mm", "%.6f" % tol] + (["--effects", ",".join(model)] if model else []))
     both = os.path.join(d, "twosteps%d_%d.csv" % (k, frac))
     with open(both, "w") as f:
         f.write("x_ref,y_ref,z_ref,samples\n" + "".join(read_plan(first) + read_plan(rest)))

@@ -137,3 +137,35 @@ def test_the_cli_prints_the_verdict_and_writes_the_json(sessions, tmp_path):
     r = subprocess.run([cli, "calib", "check", os.fspath(sessions / "b.csv")], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 2 and "--calibration" in r.stderr
+
+
+def test_the_report_draws_measured_against_predicted(sessions, tmp_path):
+    """`cdm calib check --report DIR`: the check's page, from its per-position
+    arrays (each placed position's error, the calibration's predicted
+    1-sigma and the expected one with noise and jig, and its chi-square)."""
+    cli = os.environ["CDM_CLI"]
+    rep = tmp_path / "report"
+    r = subprocess.run([cli, "calib", "check", os.fspath(sessions / "b.csv"), "--calibration",
+                        os.fspath(sessions / "cal.json"), "--report", os.fspath(rep), "--quiet"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    check = json.loads((rep / "check.json").read_text())
+    assert check["tool"] == "cdm calib check"
+    pp = check["predicted"]["per_position"]
+    n = len(pp["chi2"])
+    assert n == check["positions"] and all(len(pp[k]) == n for k in ("ref_mm", "error_mm", "calibration_sigma_mm",
+                                                                      "expected_sigma_mm"))
+    # The expected error holds the calibration's own and more (noise, jig).
+    assert all(e >= c for pe, pc in zip(pp["expected_sigma_mm"], pp["calibration_sigma_mm"]) for e, c in zip(pe, pc))
+    page = (rep / "index.html").read_text()
+    assert "Does the calibration hold here?" in page and "Measured against predicted" in page
+    assert (rep / "check_predicted.png").stat().st_size > 1000 and (rep / "check_maps.png").stat().st_size > 1000
+    # A directory that is not the report's is refused, and nothing is written.
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "mine.txt").write_text("x")
+    r = subprocess.run([cli, "calib", "check", os.fspath(sessions / "b.csv"), "--calibration",
+                        os.fspath(sessions / "cal.json"), "--report", os.fspath(other), "--quiet"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "holds no report" in r.stderr
+    assert sorted(p.name for p in other.iterdir()) == ["mine.txt"]

@@ -2,11 +2,12 @@
 moved into place; and the command line."""
 from __future__ import annotations
 
-from typing import Any, List, Optional, Sequence, Set, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Set, Tuple, Union
 
 from .loading import Diag
 
 import argparse
+import json
 import os
 import shutil
 import sys
@@ -15,6 +16,7 @@ import tempfile
 import matplotlib.pyplot as plt
 
 from . import sections
+from .check import is_check, render_check
 from .drawing import _draw_all
 from .loading import DiagnosisError, Positions, _label, _run
 from .page import Page, _Figure, _e, _img, document
@@ -101,22 +103,47 @@ def _render(runs: List[Tuple[str, Diag]], tmp: str) -> Tuple[str, List[str]]:
 Run = Union[str, "os.PathLike[str]", Diag]
 
 
+def _as_check(items: Sequence[Run]) -> Optional[Tuple[str, Dict[str, Any]]]:
+    """(name, result) when the one input is a `cdm calib check` result; None
+    otherwise (a diagnosis, or a file _run will name as unreadable)."""
+    if len(items) != 1:
+        return None
+    item = items[0]
+    if isinstance(item, dict):
+        return ("check", item) if is_check(item) else None
+    try:
+        with open(item, encoding="utf-8") as f:
+            d = json.load(f)
+    except (OSError, ValueError):
+        return None
+    return (os.fspath(item), d) if is_check(d) else None
+
+
 def write_report(runs: Union[Run, Sequence[Run]], out: Union[str, "os.PathLike[str]"]) -> List[str]:
     """Write the report on runs[-1], comparing it with the earlier runs[:-1].
 
-    Each run is a diagnosis JSON path or a loaded diagnosis dict. Raises
+    Each run is a diagnosis JSON path or a loaded diagnosis dict; a single
+    `cdm calib check` result (its "tool") gets the check's page instead. Raises
     DiagnosisError (naming the file) before writing anything if one is unusable.
     Returns the paths written (figures, then index.html).
     """
     items: Sequence[Run] = [runs] if isinstance(runs, (str, os.PathLike, dict)) else runs
     inputs = [r for r in items if isinstance(r, (str, os.PathLike))]
-    loaded = [_run(r, i) for i, r in enumerate(items)]
-    if not loaded:
-        raise DiagnosisError("no diagnosis given")
+    check = _as_check(items)
+    if check is not None:  # a calibration checked on another session: its own page
+        def render(tmp: str) -> Tuple[str, List[str]]:
+            return render_check(check[0], check[1], tmp)
+    else:
+        loaded = [_run(r, i) for i, r in enumerate(items)]
+        if not loaded:
+            raise DiagnosisError("no diagnosis given")
+
+        def render(tmp: str) -> Tuple[str, List[str]]:
+            return _render(loaded, tmp)
     earlier = _claim(out, inputs)
     tmp = tempfile.mkdtemp(prefix="tmp-report-", dir=out)
     try:
-        doc, figs = _render(loaded, tmp)
+        doc, figs = render(tmp)
         with open(os.path.join(tmp, "index.html"), "w", encoding="utf-8") as f:
             f.write(doc)
         new = set(figs + ["index.html"])

@@ -1,0 +1,151 @@
+"""The report of a calibration checked on another session (``cdm calib check
+--json``, whose "tool" is "cdm calib check"): the error measured at each
+position against the error the calibration's accuracy map predicted there.
+Nothing is recomputed: the figures read the check's per-position arrays
+(predicted.per_position) and its statistics."""
+from __future__ import annotations
+
+from typing import Any, Dict, List, Tuple, TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+import math
+import os
+
+import numpy as np
+import matplotlib.pyplot as plt
+
+from .drawing import _draw_all
+from .page import Page, _Figure, _e, _img, _table, document, fmt_mm
+
+TOOL = "cdm calib check"
+# The 95 % quantile of chi-square with 3 degrees of freedom.
+CHI2_3_95 = 7.814727903251178
+
+
+def is_check(d: Any) -> bool:
+    return isinstance(d, dict) and d.get("tool") == TOOL
+
+
+def _per_position(check: Dict[str, Any]) -> Dict[str, Any]:
+    """The per-position arrays; ValueError naming what is missing."""
+    pp = (check.get("predicted") or {}).get("per_position")
+    if not isinstance(pp, dict):
+        raise ValueError(str((check.get("predicted") or {}).get("text", "no per-position prediction")))
+    m = {k: np.asarray(pp[k], dtype=float) for k in ("ref_mm", "error_mm", "calibration_sigma_mm",
+                                                     "expected_sigma_mm", "chi2")}
+    n = len(m["chi2"])
+    if n == 0 or any(len(v) != n for v in m.values()) or any(m[k].shape != (n, 3) for k in m if k != "chi2"):
+        raise ValueError("the per-position arrays do not match")
+    return m
+
+
+def _summary(check: Dict[str, Any], page: Page) -> None:
+    page.add("<h2>1. Does the calibration hold here?</h2>")
+    mc, pr = check.get("model_check") or {}, check.get("predicted") or {}
+    page.add(f"<p><b>{_e(mc.get('text', 'no verdict'))}</b></p>")
+    page.add(f"<p>Against its accuracy map: {_e(pr.get('text', 'not available'))}. Test: {_e(pr.get('test', ''))}."
+             "</p>")
+    pe, nom, err = check.get("position_error_mm") or {}, check.get("nominal_error_mm") or {}, check.get("error_mm") or {}
+    cal_rms, noise_rms = pr.get("calibration_rms_mm") or {}, pr.get("noise_and_jig_rms_mm") or {}
+    rows = []
+    for a in "xyz":
+        rows.append([a, fmt_mm((nom.get(a) or {}).get("rms")), fmt_mm((err.get(a) or {}).get("rms")),
+                     fmt_mm((pe.get(a) or {}).get("rms")), fmt_mm(cal_rms.get(a)), fmt_mm(noise_rms.get(a))])
+    page.add(_table(["axis", "nominal RMS (per sample)", "calibration RMS (per sample)",
+                     "per position RMS (measured)", "calibration's predicted RMS", "noise and jig RMS"], rows))
+    page.add(f"<p>{_e(check.get('positions', 0))} positions; failing: "
+             f"{_e((check.get('failing') or {}).get('count', 'n/a'))}. "
+             f"{_e((check.get('jig') or {}).get('text', ''))}</p>")
+
+
+def _draw_predicted(m: Dict[str, Any]) -> Figure:
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4), layout="constrained")
+    err = np.linalg.norm(m["error_mm"], axis=1)
+    exp = np.linalg.norm(m["expected_sigma_mm"], axis=1)
+    a1.scatter(exp, err, s=6, alpha=0.5, color="C0", label="positions")
+    top = float(max(exp.max(), 1e-9))
+    xs = np.linspace(0, top * 1.05, 2)
+    # |e| for a Gaussian error of equal variance per axis at its 95 % quantile.
+    a1.plot(xs, xs * math.sqrt(CHI2_3_95 / 3), "k--", lw=0.8, label="95 % (chi-square, 3 dof)")
+    a1.set_xlabel("expected error (mm): noise, jig and calibration, 1-sigma length")
+    a1.set_ylabel("measured error (mm): position's mean error length")
+    a1.legend(fontsize=8)
+    c2 = m["chi2"]
+    hi = float(max(np.quantile(c2, 0.99), CHI2_3_95 * 1.5))
+    bins = np.linspace(0, hi, 40)
+    a2.hist(np.clip(c2, 0, hi), bins=bins, density=True, color="C0", alpha=0.6, label="positions")
+    x = np.linspace(1e-3, hi, 200)
+    a2.plot(x, np.sqrt(x) * np.exp(-x / 2) / math.sqrt(2 * math.pi), "k-", lw=1,
+            label="chi-square, 3 dof (as predicted)")
+    a2.axvline(CHI2_3_95, color="k", ls="--", lw=0.8)
+    a2.set_xlabel("each position's chi-square against its expected error")
+    a2.set_ylabel("density")
+    a2.legend(fontsize=8)
+    return fig
+
+
+def _draw_maps(m: Dict[str, Any]) -> Figure:
+    ref = m["ref_mm"]
+    heights = np.unique(ref[:, 0])
+    n = len(heights)
+    fig, axes = plt.subplots(2, n, figsize=(3.0 * n + 1, 5.6), squeeze=False, layout="constrained")
+    err = np.linalg.norm(m["error_mm"], axis=1)
+    cal = np.linalg.norm(m["calibration_sigma_mm"], axis=1)
+    for row, (v, label) in enumerate(((err, "measured error (mm)"), (cal, "calibration's predicted 1-sigma (mm)"))):
+        vmax = float(np.nanmax(v)) if np.isfinite(v).any() else 1.0
+        sc = None
+        for k, h in enumerate(heights):
+            ax = axes[row][k]
+            sel = ref[:, 0] == h
+            sc = ax.scatter(ref[sel, 1], ref[sel, 2], c=v[sel], s=14, vmin=0, vmax=vmax, cmap="viridis")
+            ax.set_title(f"height {h:g} mm", fontsize=9)
+            ax.set_xlabel("y (mm)")
+            ax.set_ylabel("z (mm)")
+            ax.set_aspect("equal")
+        if sc is not None:
+            fig.colorbar(sc, ax=list(axes[row]), shrink=0.8, label=label)
+    return fig
+
+
+def render_check(path: str, check: Dict[str, Any], tmp: str) -> Tuple[str, List[str]]:
+    """The page and figures for a check, drawn into tmp: (html, figure names)."""
+    page = Page()
+    _summary(check, page)
+    page.add("<h2>2. Measured against predicted, position by position</h2>")
+    try:
+        m = _per_position(check)
+    except (ValueError, KeyError, TypeError) as e:
+        page.add(f"<p>Not available: {_e(str(e))}.</p>")
+        page.note(f"no per-position prediction: {e}")
+    else:
+        page.figure("check_predicted.png", lambda: _draw_predicted(m), "measured against predicted error",
+                    "Left: each position's measured mean error against the error expected there (its noise, the "
+                    "jig's tolerance and the calibration's propagated covariance, as 1-sigma lengths); the dashed "
+                    "line is where 95 % of the positions should fall below. Right: each position's chi-square "
+                    "against its expected error, with the chi-square of 3 degrees of freedom it follows when "
+                    "the calibration is as predicted.", weight=1)
+        page.figure("check_maps.png", lambda: _draw_maps(m), "measured and predicted error per height",
+                    "Per fixture height (y right, z up): top, the measured error's length at each position; "
+                    "bottom, the calibration's own predicted 1-sigma there (the accuracy map at the positions).",
+                    weight=2)
+    _draw_all(page.figures, tmp)
+    figs: List[str] = []
+    for i, part in enumerate(page.parts):
+        if not isinstance(part, _Figure):
+            continue
+        if part.error is None:
+            figs.append(part.name)
+            page.parts[i] = _img(part.name, part.alt, part.caption)
+        else:
+            page.note(f"The figure {part.name} could not be drawn ({part.error}).")
+            page.parts[i] = f"<p class=\"bad\">{_e(part.error)}</p>"
+    effects = ", ".join(str(e) for e in check.get("effects") or [])
+    title = "cdm calibration check" + (": " + effects if effects else "")
+    doc = document(title, _e(os.path.basename(path)), page.notes, page.toc,
+                   [p for p in page.parts if isinstance(p, str)])
+    return doc, figs
+
+
+__all__ = ["is_check", "render_check"]

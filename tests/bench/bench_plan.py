@@ -90,6 +90,13 @@ def score(cdm_cli, d, name, data, effects, full, truth):
     return float(np.sqrt(sum(pe[a]["rms"] ** 2 for a in "xyz"))), true_error(truth, cal)
 
 
+def recommended(cdm_cli, data):
+    """The model the data's diagnosis recommends, as a set of effect names."""
+    out = data + ".diag.json"
+    run([cdm_cli, "calib", "diagnose", data, "--json", out, "--quiet"])
+    return set(json.load(open(out))["recommended"]["effects"])
+
+
 def read_plan(path):
     with open(path) as f:
         next(f)
@@ -132,6 +139,7 @@ def scenario(cdm_cli, d, k, label, effects, extra, fractions, n_random):
     truth = cdm.Calibration.load(truth_path)
     refs = list(positions(full).values())
     base = score(cdm_cli, d, "whole%d" % k, full, effects, full, truth)
+    whole_model = recommended(cdm_cli, full)
     rows = []
     for frac in fractions:
         n = len(refs) // frac
@@ -152,9 +160,13 @@ def scenario(cdm_cli, d, k, label, effects, extra, fractions, n_random):
             data = plan_csv + ".data.csv"
             run(sim + [data, "--truth", truth_path, "--seed", str(200 + k), "--plan", plan_csv] + extra)
             got[name] = score(cdm_cli, d, "%s%d_%d" % (name, k, frac), data, effects, full, truth)
+        # Whether the planned sessions' diagnoses recommend the whole session's model.
+        same = ["yes" if recommended(cdm_cli, subsets[name] + ".data.csv") == whole_model else "no"
+                for name in ("planned", "two steps")]
         rnd = [got["random%d" % i] for i in range(n_random)]
         rows.append((label, frac, n, base, got["planned"], got["two steps"],
-                     (float(np.mean([r[0] for r in rnd])), float(np.mean([r[1] for r in rnd]))), got["regular"]))
+                     (float(np.mean([r[0] for r in rnd])), float(np.mean([r[1] for r in rnd]))), got["regular"],
+                     "/".join(same)))
     return rows
 
 
@@ -169,15 +181,15 @@ def main():
     global PLAN_FOR_THE_MODEL
     PLAN_FOR_THE_MODEL = a.plan_for_the_model
     fractions = [int(f) for f in a.fractions.split(",")]
-    print("| scenario | 1/k | N | whole: check, true | planned | two steps | random (mean of %d) | regular |" %
-          a.random)
-    print("|---|---|---|---|---|---|---|---|")
+    print("| scenario | 1/k | N | whole: check, true | planned | two steps | random (mean of %d) | regular | "
+          "whole's model: planned/two steps |" % a.random)
+    print("|---|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as d:
         for k, (label, effects, extra) in enumerate(SCENARIOS):
             for row in scenario(a.cdm, d, k, label, effects, extra, fractions, a.random):
                 label_, frac, n = row[:3]
-                print("| %s | 1/%d | %d | %s |" % (label_, frac, n, " | ".join("%.4f, %.4f" % c for c in row[3:])),
-                      flush=True)
+                print("| %s | 1/%d | %d | %s | %s |" % (label_, frac, n, " | ".join("%.4f, %.4f" % c for c in row[3:-1]),
+                                                      row[-1]), flush=True)
 
 
 if __name__ == "__main__":

@@ -126,18 +126,39 @@ bool evaluate_candidates(const Model &m, Design &D, std::string &err) {
         if (d.stage == Stage::Jig) D.jig.insert(D.jig.end(), eff.cols.begin(), eff.cols.end());
         else D.eff.push_back(std::move(eff));
     }
-    D.Q = gauge(m, ev);
+    // Each fixture height's x offset, as every fit takes it out (FitOptions::
+    // fixture, with two heights or more): nuisance columns after the
+    // model's, with the jig's placement, weakly held (1 mm).
+    const int model_n = D.n;
+    std::vector<int> heights;
+    for (const auto &c : D.cand) heights.push_back(c.height_index);
+    std::sort(heights.begin(), heights.end());
+    heights.erase(std::unique(heights.begin(), heights.end()), heights.end());
+    const int nh = heights.size() >= 2 ? int(heights.size()) : 0;
+    D.n = model_n + nh;
+    D.prior.conservativeResize(D.n);
+    for (int h = 0; h < nh; ++h) D.prior(model_n + h) = 1.0, D.jig.push_back(model_n + h);
+    const Eigen::MatrixXd Qm = gauge(m, ev);
+    D.Q = Eigen::MatrixXd::Zero(D.n, Qm.cols() + nh);
+    D.Q.topLeftCorner(model_n, Qm.cols()) = Qm;
+    D.Q.bottomRightCorner(nh, nh).setIdentity();
     D.r = int(D.Q.cols());
     D.Pr = D.Q.transpose() * D.prior.asDiagonal() * D.Q;
     D.L = Eigen::MatrixXd::Zero(D.r, D.r);
-    Mat4X J(4, D.n);
+    Mat4X Jm(4, model_n), J(4, D.n);
     Eigen::Matrix<double, 4, 3> dydP;
     for (const auto &c : D.cand) {
         Eigen::Vector4d y;
-        if (!ev.eval(full, c.ref, 0.0, y, &J, &dydP, &err)) return false;
-        if (!y.allFinite() || !J.allFinite()) {
+        if (!ev.eval(full, c.ref, 0.0, y, &Jm, &dydP, &err)) return false;
+        if (!y.allFinite() || !Jm.allFinite()) {
             err = "the design model cannot read position " + std::to_string(c.point) + " (outside its workspace)";
             return false;
+        }
+        J.setZero();
+        J.leftCols(model_n) = Jm;
+        if (nh) {
+            const auto h = std::lower_bound(heights.begin(), heights.end(), c.height_index) - heights.begin();
+            J.col(model_n + int(h)) = dydP.col(0); // the holder moved along x by the height's offset
         }
         D.J.push_back(J);
         D.Jr.push_back(J * D.Q);

@@ -3,8 +3,10 @@
 //
 // The design model is the nominal device with the effects to plan for
 // (default: every built-in effect on the cable's geometry, path or pot
-// transfer) and the jig's placement, linearised with each parameter at its
-// typical size (the simulator's middle magnitude). A position's
+// transfer), the jig's placement and each fixture height's x offset (which
+// every fit takes out: a design that leans on x across heights learns
+// less than it seems), linearised with each parameter at its typical size
+// (the simulator's middle magnitude). A position's
 // information is J' W J: J the four readings' derivative in the
 // parameters there, W the inverse of the mean readings' covariance (the
 // pots' noise over the samples, plus the jig's seating tolerance through

@@ -115,9 +115,9 @@ json plan_json(const cdm::PlanOptions &o, const cdm::PlanResult &r) {
             {"design", {{"effects", r.effects}, {"excluded", excluded}, {"detectability_picks", r.detect_picks}}},
             {"predicted_sigma_mm", {{"plan", r.sigma_mm}, {"whole_plate", r.sigma_all_mm}}},
             {"detectability", power},
-            {"test", "each effect's likelihood-ratio test against the jig's placement alone at level alpha, its "
-                     "power at the effect's typical size from the non-central chi-square (non-centrality: the "
-                     "information the positions give on the effect beyond the jig's placement)"},
+            {"test", "each effect's likelihood-ratio test against the jig's placement and the fixture heights' "
+                     "offsets alone at level alpha, its power at the effect's typical size from the non-central "
+                     "chi-square (non-centrality: the information the positions give on the effect beyond them)"},
             {"alpha", o.alpha},
             {"target_power", o.power},
             {"order", "height by height (lowest first), rows along y, each row's holes along z back and forth"}};

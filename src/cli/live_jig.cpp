@@ -154,12 +154,12 @@ bool LiveJig::start(double a_mm, double b_mm, double m_mm, std::string &err) {
     return true;
 }
 
-bool LiveJig::add(int point, const double ref[3], const std::vector<std::array<double, 4>> &rows,
+bool LiveJig::add(size_t index, int point, const double ref[3], const std::vector<std::array<double, 4>> &rows,
                   const std::vector<double> &t_s) {
     std::unique_lock<std::mutex> lock(mu_);
-    data_.push_back(std::make_shared<const Position>(Position{point, {ref[0], ref[1], ref[2]}, rows, t_s}));
+    data_.push_back(std::make_shared<const Position>(Position{index, point, {ref[0], ref[1], ref[2]}, rows, t_s}));
     const size_t n = data_.size();
-    if (n % size_t(o_.every) == 0 || n == s_.positions.size()) {
+    if (n % size_t(o_.every) == 0 || index + 1 >= s_.positions.size()) {
         requested_ = n;
         cv_.notify_all();
         if (wait_) cv_.wait(lock, [&] { return done_ >= n || quit_; });
@@ -183,6 +183,10 @@ json LiveJig::finish() {
     {
         std::lock_guard<std::mutex> lock(mu_);
         quit_ = true;
+        // The positions kept since the last update asked for: one more, on
+        // every position (a session cut short, or ending on a position
+        // whose samples were all refused, still gets its last word).
+        if (started_ && data_.size() > requested_) requested_ = data_.size();
         cv_.notify_all();
     }
     if (thread_.joinable()) thread_.join();
@@ -285,6 +289,7 @@ json LiveJig::update(const std::vector<std::shared_ptr<const Position>> &data) {
     }
     if (!err.empty()) u["error"] = err;
     u["outside_measured_volume"] = outside(data, s_.positions);
+    u["visited"] = data.empty() ? 0 : data.back()->index + 1; // the session's positions walked past
     u["seconds"] = now_s() - t0;
     return u;
 }
@@ -323,7 +328,7 @@ void LiveJig::judge(json &u) {
         if (out) t += "; " + std::to_string(out) + " of them outside the measured volume (extrapolated)";
     }
     // The session is ended only while it runs and has positions left.
-    if (determined && !quit_ && u.value("positions", size_t(0)) < s_.positions.size()) {
+    if (determined && !quit_ && u.value("visited", s_.positions.size()) < s_.positions.size()) {
         stop_ = true;
         t += "\n  stop: the model is determined";
     } else if (determined) {
@@ -340,7 +345,7 @@ void LiveJig::advise(const std::vector<std::shared_ptr<const Position>> &data, j
     std::set<std::array<double, 3>> seen;
     json measured = json::array(), allowed = json::array();
     for (const auto &p : data) measured.push_back(p->ref), seen.insert(p->ref);
-    for (size_t i = data.size(); i < s_.positions.size(); ++i)
+    for (size_t i = data.empty() ? 0 : data.back()->index + 1; i < s_.positions.size(); ++i)
         if (seen.insert(s_.positions[i]).second) allowed.push_back(s_.positions[i]);
     if (allowed.empty()) return;
     json o = {{"positions", std::min<size_t>(size_t(o_.next), allowed.size())},

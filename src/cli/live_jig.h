@@ -69,9 +69,10 @@ public:
     // (used when LiveOptions::device is empty); updates start then. False
     // + err when the working directory or the device JSON cannot be made.
     bool start(double a_mm, double b_mm, double m_mm, std::string &err);
-    // The reader's thread: a position kept, with its samples (l1..l4, mm)
-    // and their times (s). True when the analysis asks the session to stop.
-    bool add(int point, const double ref[3], const std::vector<std::array<double, 4>> &rows,
+    // The reader's thread: the session's position `index` (into
+    // LiveSession::positions) kept, with its samples (l1..l4, mm) and their
+    // times (s). True when the analysis asks the session to stop.
+    bool add(size_t index, int point, const double ref[3], const std::vector<std::array<double, 4>> &rows,
              const std::vector<double> &t_s);
     bool stop_requested() const;
     // Lines for the person at the bench, in order; each returned once.
@@ -85,6 +86,7 @@ public:
 
 private:
     struct Position {
+        size_t index; // into LiveSession::positions
         int point;
         std::array<double, 3> ref;
         std::vector<std::array<double, 4>> rows;

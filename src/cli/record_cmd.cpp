@@ -133,7 +133,8 @@ void close_dwell(RecordCtx &c) {
         after_write(c, rc);
     }
     c.dwell.resize(kept), c.dwell_t.resize(kept);
-    if (c.live && !c.write_failed && kept && c.live->add(point, ref, c.dwell, c.dwell_t)) c.live_stopped = c.done = true;
+    if (c.live && !c.write_failed && kept && c.live->add(c.next_point, point, ref, c.dwell, c.dwell_t))
+        c.live_stopped = c.done = true;
     c.dwell.clear();
     c.dwell_t.clear();
     if (++c.next_point == c.plan_n) c.done = true;

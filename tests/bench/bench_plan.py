@@ -17,7 +17,7 @@ each is fitted with the whole session's model (the hidden effects) and
     calibration's true error: the truth's readings placed by it).
 Prints one table row per scenario and subset size. By hand (2-3 min):
 
-    python3 tests/bench/bench_plan.py --cdm build/src/cli/cdm [--fractions 10,20,50] [--random 3]
+    python3 tests/bench/bench_plan.py --cdm build/src/cli/cdm [--fractions 10,20,50] [--random 3] [--draws 1]
 
 Needs the Python package on PYTHONPATH and CDM_LIBRARY (or an installed
 libcdm) for the true error.
@@ -43,6 +43,7 @@ SCENARIOS = [
 
 
 PLAN_FOR_THE_MODEL = False  # --plan-for-the-model: the planner told the hidden effects
+DRAWS = 1  # --draws: noise draws of each planned and regular subset, averaged
 
 
 def run(argv):
@@ -112,7 +113,8 @@ def two_steps(cdm_cli, d, k, frac, n, truth_path, extra):
     catalogue, measured and diagnosed; the other half planned on from them
     (`calib plan --after`) for the model that half's diagnosis recommends,
     with the jig tolerance it estimated. Returns the whole plan (both
-    halves)."""
+    halves), which is then simulated and scored as every subset is: the
+    first half's noise there is a fresh draw, not the one diagnosed."""
     first = os.path.join(d, "first%d_%d.csv" % (k, frac))
     run([cdm_cli, "calib", "plan", "--positions", str(n // 2), "--out", first, "--quiet"])
     data = first + ".data.csv"
@@ -161,9 +163,15 @@ def scenario(cdm_cli, d, k, label, effects, extra, fractions, n_random):
         subsets["regular"] = p
         got = {}
         for name, plan_csv in subsets.items():
-            data = plan_csv + ".data.csv"
-            run(sim + [data, "--truth", truth_path, "--seed", str(200 + k), "--plan", plan_csv] + extra)
-            got[name] = score(cdm_cli, d, "%s%d_%d" % (name, k, frac), data, effects, full, truth)
+            # A random subset is one draw of positions and noise; the others
+            # are measured DRAWS times (noise seeds) and averaged.
+            scores = []
+            for i in range(1 if name.startswith("random") else DRAWS):
+                data = plan_csv + (".data.csv" if i == 0 else ".data%d.csv" % i)
+                run(sim + [data, "--truth", truth_path, "--seed", str(200 + k + 1000 * i), "--plan", plan_csv] +
+                    extra)
+                scores.append(score(cdm_cli, d, "%s%d_%d_%d" % (name, k, frac, i), data, effects, full, truth))
+            got[name] = (float(np.mean([c for c, _ in scores])), float(np.mean([t for _, t in scores])))
         # Whether the planned sessions' diagnoses recommend the whole
         # session's model ("alt.": as an alternative they name equally good).
         same = []
@@ -185,9 +193,12 @@ def main():
     ap.add_argument("--random", type=int, default=3)
     ap.add_argument("--plan-for-the-model", action="store_true",
                     help="tell the planner the hidden effects (--effects) instead of the whole catalogue")
+    ap.add_argument("--draws", type=int, default=1,
+                    help="noise draws of each planned and regular subset, averaged (a random subset: one each)")
     a = ap.parse_args()
-    global PLAN_FOR_THE_MODEL
+    global PLAN_FOR_THE_MODEL, DRAWS
     PLAN_FOR_THE_MODEL = a.plan_for_the_model
+    DRAWS = max(1, a.draws)
     fractions = [int(f) for f in a.fractions.split(",")]
     print("| scenario | 1/k | N | whole: check, true | planned | two steps | random (mean of %d) | regular | "
           "whole's model: planned/two steps |" % a.random)

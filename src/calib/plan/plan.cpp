@@ -8,6 +8,7 @@
 #include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/non_central_chi_squared.hpp>
 
+#include "calib/fit/fit.h"
 #include "jig/planned.h"
 #include "model/effect.h"
 #include "model/evaluator.h"
@@ -128,7 +129,7 @@ bool evaluate_candidates(const Model &m, Design &D, std::string &err) {
     }
     // Each fixture height's x offset, as every fit takes it out (FitOptions::
     // fixture, with two heights or more): nuisance columns after the
-    // model's, with the jig's placement, weakly held (1 mm).
+    // model's, with the jig's placement, held by the fit's own prior.
     const int model_n = D.n;
     std::vector<int> heights;
     for (const auto &c : D.cand) heights.push_back(c.height_index);
@@ -137,7 +138,8 @@ bool evaluate_candidates(const Model &m, Design &D, std::string &err) {
     const int nh = heights.size() >= 2 ? int(heights.size()) : 0;
     D.n = model_n + nh;
     D.prior.conservativeResize(D.n);
-    for (int h = 0; h < nh; ++h) D.prior(model_n + h) = 1.0, D.jig.push_back(model_n + h);
+    for (int h = 0; h < nh; ++h)
+        D.prior(model_n + h) = 1.0 / (kFixturePriorSdMm * kFixturePriorSdMm), D.jig.push_back(model_n + h);
     const Eigen::MatrixXd Qm = gauge(m, ev);
     D.Q = Eigen::MatrixXd::Zero(D.n, Qm.cols() + nh);
     D.Q.topLeftCorner(model_n, Qm.cols()) = Qm;

@@ -16,6 +16,10 @@ an "error fell" comparison in that order. This is the order `cdm calib diagnose
 From Python: ``write_report([earlier, ..., current], "DIR")`` where each run is
 a path or an already loaded diagnosis dict (lists or numpy arrays).
 
+A single ``cdm calib check --json`` result (its "tool" says so) gets a page of
+its own instead (module check): the measured error at each position against
+the error the calibration's accuracy map predicted there.
+
 DIR receives PNG figures and ``index.html`` (relative image paths, inline CSS,
 no JavaScript, no external resources). Everything is written to a temporary
 directory inside DIR first and moved into place only when complete.
@@ -33,7 +37,8 @@ the rest of the cdm package (the ctypes binding).
 
 The modules: loading (reading and checking the JSON), page (the HTML),
 figures (drawing helpers), drawing (the worker processes), sections (one
-module per part of the page), writer (the driver and the command line).
+module per part of the page), check (a check's page), writer (the driver and
+the command line).
 """
 from __future__ import annotations
 

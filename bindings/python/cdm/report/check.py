@@ -28,11 +28,17 @@ def is_check(d: Any) -> bool:
     return isinstance(d, dict) and d.get("tool") == TOOL
 
 
+def _obj(d: Any, key: str) -> Dict[str, Any]:
+    """d[key] when both are objects, else {} (a part missing or malformed)."""
+    v = d.get(key) if isinstance(d, dict) else None
+    return v if isinstance(v, dict) else {}
+
+
 def _per_position(check: Dict[str, Any]) -> Dict[str, Any]:
     """The per-position arrays; ValueError naming what is missing."""
-    pp = (check.get("predicted") or {}).get("per_position")
+    pp = _obj(check, "predicted").get("per_position")
     if not isinstance(pp, dict):
-        raise ValueError(str((check.get("predicted") or {}).get("text", "no per-position prediction")))
+        raise ValueError(str(_obj(check, "predicted").get("text", "no per-position prediction")))
     m = {k: np.asarray(pp[k], dtype=float) for k in ("ref_mm", "error_mm", "calibration_sigma_mm",
                                                      "expected_sigma_mm", "chi2")}
     n = len(m["chi2"])
@@ -43,21 +49,20 @@ def _per_position(check: Dict[str, Any]) -> Dict[str, Any]:
 
 def _summary(check: Dict[str, Any], page: Page) -> None:
     page.add("<h2>1. Does the calibration hold here?</h2>")
-    mc, pr = check.get("model_check") or {}, check.get("predicted") or {}
+    mc, pr = _obj(check, "model_check"), _obj(check, "predicted")
     page.add(f"<p><b>{_e(mc.get('text', 'no verdict'))}</b></p>")
     page.add(f"<p>Against its accuracy map: {_e(pr.get('text', 'not available'))}. Test: {_e(pr.get('test', ''))}."
              "</p>")
-    pe, nom, err = check.get("position_error_mm") or {}, check.get("nominal_error_mm") or {}, check.get("error_mm") or {}
-    cal_rms, noise_rms = pr.get("calibration_rms_mm") or {}, pr.get("noise_and_jig_rms_mm") or {}
+    pe, nom, err = _obj(check, "position_error_mm"), _obj(check, "nominal_error_mm"), _obj(check, "error_mm")
+    cal_rms, noise_rms = _obj(pr, "calibration_rms_mm"), _obj(pr, "noise_and_jig_rms_mm")
     rows = []
     for a in "xyz":
-        rows.append([a, fmt_mm((nom.get(a) or {}).get("rms")), fmt_mm((err.get(a) or {}).get("rms")),
-                     fmt_mm((pe.get(a) or {}).get("rms")), fmt_mm(cal_rms.get(a)), fmt_mm(noise_rms.get(a))])
+        rows.append([a, fmt_mm(_obj(nom, a).get("rms")), fmt_mm(_obj(err, a).get("rms")),
+                     fmt_mm(_obj(pe, a).get("rms")), fmt_mm(cal_rms.get(a)), fmt_mm(noise_rms.get(a))])
     page.add(_table(["axis", "nominal RMS (per sample)", "calibration RMS (per sample)",
                      "per position RMS (measured)", "calibration's predicted RMS", "noise and jig RMS"], rows))
     page.add(f"<p>{_e(check.get('positions', 0))} positions; failing: "
-             f"{_e((check.get('failing') or {}).get('count', 'n/a'))}. "
-             f"{_e((check.get('jig') or {}).get('text', ''))}</p>")
+             f"{_e(_obj(check, 'failing').get('count', 'n/a'))}. {_e(_obj(check, 'jig').get('text', ''))}</p>")
 
 
 def _draw_predicted(m: Dict[str, Any]) -> Figure:
@@ -86,9 +91,18 @@ def _draw_predicted(m: Dict[str, Any]) -> Figure:
     return fig
 
 
+# More distinct heights than this (positions placed freely, not on a
+# plate's fixtures): one y-z panel for them all.
+MAX_PANELS = 8
+
+
 def _draw_maps(m: Dict[str, Any]) -> Figure:
-    ref = m["ref_mm"]
+    ref = m["ref_mm"].copy()
+    ref[:, 0] = np.round(ref[:, 0], 2)  # a fixture height, to 0.01 mm
     heights = np.unique(ref[:, 0])
+    if len(heights) > MAX_PANELS:
+        heights = np.array([np.nan])
+        ref[:, 0] = np.nan
     n = len(heights)
     fig, axes = plt.subplots(2, n, figsize=(3.0 * n + 1, 5.6), squeeze=False, layout="constrained")
     err = np.linalg.norm(m["error_mm"], axis=1)
@@ -98,9 +112,9 @@ def _draw_maps(m: Dict[str, Any]) -> Figure:
         sc = None
         for k, h in enumerate(heights):
             ax = axes[row][k]
-            sel = ref[:, 0] == h
+            sel = (ref[:, 0] == h) | np.isnan(h)
             sc = ax.scatter(ref[sel, 1], ref[sel, 2], c=v[sel], s=14, vmin=0, vmax=vmax, cmap="viridis")
-            ax.set_title(f"height {h:g} mm", fontsize=9)
+            ax.set_title("every height" if np.isnan(h) else f"height {h:g} mm", fontsize=9)
             ax.set_xlabel("y (mm)")
             ax.set_ylabel("z (mm)")
             ax.set_aspect("equal")
@@ -124,8 +138,10 @@ def render_check(path: str, check: Dict[str, Any], tmp: str) -> Tuple[str, List[
                     "Left: each position's measured mean error against the error expected there (its noise, the "
                     "jig's tolerance and the calibration's propagated covariance, as 1-sigma lengths); the dashed "
                     "line is where 95 % of the positions should fall below. Right: each position's chi-square "
-                    "against its expected error, with the chi-square of 3 degrees of freedom it follows when "
-                    "the calibration is as predicted.", weight=1)
+                    "against its expected error, beside the chi-square of 3 degrees of freedom (the jig's "
+                    "placement and the fixture heights' offsets, fitted on this session, take a little of it: "
+                    "the terms run slightly below that curve when the calibration is as predicted; the test "
+                    "counts them out).", weight=1)
         page.figure("check_maps.png", lambda: _draw_maps(m), "measured and predicted error per height",
                     "Per fixture height (y right, z up): top, the measured error's length at each position; "
                     "bottom, the calibration's own predicted 1-sigma there (the accuracy map at the positions).",

@@ -171,7 +171,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         prog="python3 -m cdm.report",
         description="Figures and index.html for `cdm calib diagnose --json` output. Files are "
                     "in chronological order: the last one is the diagnosis reported on, the "
-                    "earlier ones (and --before files) are compared with it.")
+                    "earlier ones (and --before files) are compared with it. A single "
+                    "`cdm calib check --json` output gets the check's page.")
     ap.add_argument("diagnosis", nargs="+", metavar="DIAG.json",
                     help="diagnosis JSON files, earliest first; the last is reported on")
     ap.add_argument("--before", action="append", default=[], metavar="EARLIER.json",

@@ -38,6 +38,16 @@ step "5. Write the calibration"
 step "6. Reopen the master with the calibration: poses against the simulator's truth"
 "$CDM" stream "$SIM" --truth --seconds 3 --calibration "$OUT/calibration.json"
 
+step "7. A planned tenth of the plate, diagnosed as it is recorded: it stops once the model is determined"
+"$CDM" calib plan --positions 312 --out "$OUT/plan.csv" --quiet
+"$CDM" record "$SIM&motion=jig&realtime=0&jig_plan=$OUT/plan.csv" "$OUT/planned.csv" --jig --plan "$OUT/plan.csv" \
+  --live
+"$CDM" calib fit "$OUT/planned.csv" --device "$DEVICE" --effects "$TOP" --out "$OUT/planned-calibration.json" --quiet
+
+step "8. Its calibration checked on the whole session: measured against predicted error"
+"$CDM" calib check "$OUT/jig.csv" --calibration "$OUT/planned-calibration.json" --report "$OUT/report-check" --quiet
+
 step "Done"
-echo "The report: $OUT/report/index.html (the nominal model's: $OUT/report-nominal/index.html)"
+echo "The report: $OUT/report/index.html (the nominal model's: $OUT/report-nominal/index.html;"
+echo "  the planned session's calibration checked on the whole session: $OUT/report-check/index.html)"
 echo "The calibration: $OUT/calibration.json; the dataset: $OUT/jig.csv"

@@ -146,6 +146,8 @@ private:
     bool is_late(uint32_t seq, uint64_t device_us) const;
     bool restart_undone(uint32_t seq, uint64_t device_us, uint64_t host_ns);
     bool device_clock_trusted(uint64_t device_us, uint64_t host_ns) const;
+    double periods(uint64_t ns) const;
+    void remember(uint32_t seq, uint64_t device_us, uint64_t host_ns);
     bool wait_until(const std::function<bool()> &ready, int timeout_ms);
     // Counts a wait in progress for the destructor (RAII).
     struct WaitScope {

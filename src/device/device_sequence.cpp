@@ -35,15 +35,31 @@ bool cdm_device::device_clock_trusted(uint64_t device_us, uint64_t host_ns) cons
     return double(device_us - anchor_device_us_) * 1e3 <= double(host_ns - anchor_host_ns_) * 1.001 + slack_ns;
 }
 
-bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t host_ns) {
-    if (!have_last_) {
-        have_last_ = true;
-        last_seq_ = seq;
-        last_device_us_ = device_us;
-        last_host_ns_ = host_ns;
+// The furthest a counter may have moved over `reports` report periods:
+// twice them (jitter, the two clocks) plus the kernel queue's 64.
+static double count_bound(double reports) { return 2.0 * reports + 64.0; }
+
+// Report periods in `ns` of host time at the nominal rate.
+double cdm_device::periods(uint64_t ns) const { return double(ns) * 1e-9 * conv_.rate_hz; }
+
+// The newest report's counter and times; a new stretch of the device's
+// clock (the first report, after a reconnection, a restart or a wrap)
+// anchors device_clock_trusted there.
+void cdm_device::remember(uint32_t seq, uint64_t device_us, uint64_t host_ns) {
+    if (!have_last_ || after_reconnect_ || device_us < last_device_us_) {
         anchor_device_us_ = device_us;
         anchor_host_ns_ = host_ns;
-        after_reconnect_ = false;
+    }
+    have_last_ = true;
+    after_reconnect_ = false;
+    last_seq_ = seq;
+    last_device_us_ = device_us;
+    last_host_ns_ = host_ns;
+}
+
+bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t host_ns) {
+    if (!have_last_) {
+        remember(seq, device_us, host_ns);
         return true;
     }
     if (is_late(seq, device_us)) {
@@ -51,15 +67,14 @@ bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t hos
         return false;
     }
     const uint32_t d = seq - last_seq_; // wraps at 2^32 by design
-    const double host_reports = double(host_ns - last_host_ns_) * 1e-9 * conv_.rate_hz;
+    const double host_reports = periods(host_ns - last_host_ns_);
     const double device_reports = device_clock_trusted(device_us, host_ns)
                                       ? double(device_us - last_device_us_) * 1e-6 * conv_.rate_hz
                                       : 0.0;
     const double elapsed_reports = std::max(host_reports, device_reports);
-    const double bound = 2.0 * elapsed_reports + 64.0;
     if (d != 1 && restart_undone(seq, device_us, host_ns)) {
         // The counter is back where it was before the "restart": two jumps.
-    } else if (d >= 1 && d < 0x80000000u && double(d - 1) <= bound) {
+    } else if (d >= 1 && d < 0x80000000u && double(d - 1) <= count_bound(elapsed_reports)) {
         n_dropped_.fetch_add(d - 1, std::memory_order_relaxed);
     } else {
         account_discontinuity(seq, host_ns, elapsed_reports);
@@ -67,15 +82,7 @@ bool cdm_device::account_sequence(uint32_t seq, uint64_t device_us, uint64_t hos
     // The count went past the number before the restart: a real one.
     if (have_restart_ && seq - restart_.seq < 0x80000000u && seq - restart_.seq > kReorderWindow)
         have_restart_ = false;
-    if (after_reconnect_ || device_us < last_device_us_) {
-        // A new stretch of the device's clock (it restarted, or wrapped).
-        anchor_device_us_ = device_us;
-        anchor_host_ns_ = host_ns;
-    }
-    after_reconnect_ = false;
-    last_seq_ = seq;
-    last_device_us_ = device_us;
-    last_host_ns_ = host_ns;
+    remember(seq, device_us, host_ns);
     return true;
 }
 
@@ -100,7 +107,7 @@ bool cdm_device::is_late(uint32_t seq, uint64_t device_us) const {
 bool cdm_device::restart_undone(uint32_t seq, uint64_t device_us, uint64_t host_ns) {
     if (!have_restart_ || device_us <= last_device_us_) return false;
     const uint32_t u = seq - restart_.seq;
-    const double since = 2.0 * double(host_ns - restart_.host_ns) * 1e-9 * conv_.rate_hz + 64.0;
+    const double since = count_bound(periods(host_ns - restart_.host_ns));
     if (u < 1 || u >= 0x80000000u || double(u) > since) return false;
     n_restarts_.fetch_sub(1, std::memory_order_relaxed);
     n_dropped_.fetch_sub(restart_.dropped, std::memory_order_relaxed);
@@ -122,9 +129,9 @@ bool cdm_device::restart_undone(uint32_t seq, uint64_t device_us, uint64_t host_
 //   have restarted its counter (it lost power): what was missed while it
 //   was away is estimated from the host clock instead.
 void cdm_device::account_discontinuity(uint32_t seq, uint64_t host_ns, double elapsed_reports) {
-    const double bound = 2.0 * elapsed_reports + 64.0;
+    const double bound = count_bound(elapsed_reports);
     const uint32_t since_jump = seq - jump_from_seq_;
-    const double jump_bound = 2.0 * double(host_ns - jump_from_host_ns_) * 1e-9 * conv_.rate_hz + 64.0;
+    const double jump_bound = count_bound(periods(host_ns - jump_from_host_ns_));
     const bool returned = have_jump_ && since_jump >= 1 && since_jump < 0x80000000u && double(since_jump) <= jump_bound;
     if (!returned && seq < last_seq_ && double(seq) <= bound) {
         const double missed = after_reconnect_ ? std::max(double(seq), elapsed_reports - 1.0) : double(seq);

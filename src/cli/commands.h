@@ -5,6 +5,8 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <cdm/cdm.h>
+
 #include <cstdint>
 #include <functional>
 #include <stdexcept>

@@ -5,12 +5,9 @@
 // the file cleanly; a write error (a full disk) keeps what was written and
 // names the real cause; the output never replaces one of its inputs or a
 // file that is not a regular file.
-#include <fcntl.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include <array>
-#include <cctype>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -27,6 +24,7 @@
 #include <cdm/cdm.h>
 #include "commands.h"
 #include "live_jig.h"
+#include "record_files.h"
 
 namespace cdm::cli {
 
@@ -198,52 +196,6 @@ void record_sample(void *user, const cdm_sample *s) {
     }
 }
 
-// The files a URI reads: replay:PATH, and a sim:'s device=, truth= and jig_plan= options.
-std::vector<std::string> uri_inputs(const std::string &uri) {
-    std::vector<std::string> v;
-    const size_t q = uri.find('?');
-    if (uri.rfind("replay:", 0) == 0) v.push_back(uri.substr(7, q == std::string::npos ? q : q - 7));
-    if (q == std::string::npos) return v;
-    size_t i = q + 1;
-    while (i < uri.size()) {
-        size_t e = uri.find('&', i);
-        if (e == std::string::npos) e = uri.size();
-        const std::string opt = uri.substr(i, e - i);
-        for (const char *k : {"device=", "truth=", "jig_plan="})
-            if (opt.rfind(k, 0) == 0) v.push_back(opt.substr(std::strlen(k)));
-        i = e + 1;
-    }
-    return v;
-}
-
-// Refuses an output that would replace an input or a non-regular file
-// (a device node, a FIFO, a directory): a usage error, before anything opens.
-void check_output(const std::string &uri, const std::string &file) {
-    struct stat out {};
-    for (const std::string &p : {file, file + ".tmp"}) {
-        if (stat(p.c_str(), &out) != 0) continue;
-        if (!S_ISREG(out.st_mode)) throw UsageError(p + " exists and is not a regular file: not writing over it");
-        for (const auto &in : uri_inputs(uri)) {
-            struct stat st {};
-            if (stat(in.c_str(), &st) == 0 && st.st_dev == out.st_dev && st.st_ino == out.st_ino)
-                throw UsageError(p + " is the input " + in + " of " + uri + ": not writing over it");
-        }
-    }
-}
-
-// The recording format FILE's extension asks for (cdm_recorder_open_ex's
-// names): the recorder writes to FILE.tmp, whose own extension says nothing.
-const char *format_of(const std::string &file) {
-    auto ends = [&](const char *x) {
-        const size_t n = std::strlen(x);
-        if (file.size() < n) return false;
-        for (size_t i = 0; i < n; ++i)
-            if (std::tolower(static_cast<unsigned char>(file[file.size() - n + i])) != x[i]) return false;
-        return true;
-    };
-    return ends(".mcap") ? "mcap" : ends(".csv") ? "csv" : "cdmrec";
-}
-
 cdm_jig_plan *jig_plan_for(const std::string &uri, const JigArgs &a) {
     std::vector<double> heights;
     if (!a.heights.empty()) heights = parse_number_list(a.heights, "--jig-heights");
@@ -352,19 +304,6 @@ void record_loop(cdm_device *dev, RecordCtx &ctx, double seconds, bool jig) {
     if (tty) std::fprintf(stderr, "\n");
 }
 
-// fsync of a complete file before its rename: after a crash FILE is the
-// old one or the whole new one, never an empty one. "" or what failed.
-std::string sync_file(const std::string &path) {
-    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0 || ::fsync(fd) != 0) {
-        const std::string why = path + ": fsync: " + std::strerror(errno);
-        if (fd >= 0) ::close(fd);
-        return why;
-    }
-    ::close(fd);
-    return "";
-}
-
 // A jig dataset completed: committed (fsync, rename) only whole, so after a
 // write error the old FILE, if any, is left as it was; then the summary,
 // with the live analysis's when there was one. A session that ended before
@@ -448,31 +387,6 @@ int finish(RecordCtx &ctx, const std::string &tmp, const std::string &file, cons
                     (unsigned long long)ctx.reports, (unsigned long long)ctx.rejected, losses_text(st).c_str());
     }
     return kExitOk;
-}
-
-// A URI option's value ("" when absent): `key=` in the query.
-std::string uri_option(const std::string &uri, const std::string &key) {
-    const size_t q = uri.find('?');
-    if (q == std::string::npos) return "";
-    for (size_t i = q + 1; i < uri.size();) {
-        size_t e = uri.find('&', i);
-        if (e == std::string::npos) e = uri.size();
-        if (uri.compare(i, key.size() + 1, key + "=") == 0) return uri.substr(i + key.size() + 1, e - i - key.size() - 1);
-        i = e + 1;
-    }
-    return "";
-}
-
-// A source no clock paces: a replay at speed=0, a sim: at realtime=0. It
-// waits for whoever reads it, so the live analysis may hold the reader.
-bool unpaced(const std::string &uri) {
-    auto zero = [](const std::string &v) {
-        char *end = nullptr;
-        const double d = std::strtod(v.c_str(), &end);
-        return !v.empty() && end && *end == '\0' && d == 0;
-    };
-    return (uri.rfind("sim:", 0) == 0 && zero(uri_option(uri, "realtime"))) ||
-           (uri.rfind("replay:", 0) == 0 && zero(uri_option(uri, "speed")));
 }
 
 // The jig plan and the dataset writer, and with --live the analysis (its

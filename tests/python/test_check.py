@@ -125,12 +125,17 @@ def test_bad_options_and_files_are_named(sessions, tmp_path):
     assert rc == CDM_ERR_PARSE and "no_such_effect" in err
 
 
+def cli_check(sessions, *args):
+    """`cdm calib check b.csv --calibration cal.json ARGS --quiet`."""
+    return subprocess.run([os.environ["CDM_CLI"], "calib", "check", os.fspath(sessions / "b.csv"), "--calibration",
+                           os.fspath(sessions / "cal.json"), *map(os.fspath, args), "--quiet"],
+                          capture_output=True, text=True, timeout=300)
+
+
 def test_the_cli_prints_the_verdict_and_writes_the_json(sessions, tmp_path):
     cli = os.environ["CDM_CLI"]
     out = tmp_path / "check.json"
-    r = subprocess.run([cli, "calib", "check", os.fspath(sessions / "b.csv"), "--calibration",
-                        os.fspath(sessions / "cal.json"), "--json", os.fspath(out), "--quiet"],
-                       capture_output=True, text=True, timeout=120)
+    r = cli_check(sessions, "--json", out)
     assert r.returncode == 0, r.stderr
     assert "Verdict: the calibration holds" in r.stdout and "jig's placement was fitted" in r.stdout
     assert json.loads(out.read_text())["model_check"]["holds"]
@@ -143,11 +148,8 @@ def test_the_report_draws_measured_against_predicted(sessions, tmp_path):
     """`cdm calib check --report DIR`: the check's page, from its per-position
     arrays (each placed position's error, the calibration's predicted
     1-sigma and the expected one with noise and jig, and its chi-square)."""
-    cli = os.environ["CDM_CLI"]
     rep = tmp_path / "report"
-    r = subprocess.run([cli, "calib", "check", os.fspath(sessions / "b.csv"), "--calibration",
-                        os.fspath(sessions / "cal.json"), "--report", os.fspath(rep), "--quiet"],
-                       capture_output=True, text=True, timeout=300)
+    r = cli_check(sessions, "--report", rep)
     assert r.returncode == 0, r.stderr
     check = json.loads((rep / "check.json").read_text())
     assert check["tool"] == "cdm calib check"
@@ -164,8 +166,6 @@ def test_the_report_draws_measured_against_predicted(sessions, tmp_path):
     other = tmp_path / "other"
     other.mkdir()
     (other / "mine.txt").write_text("x")
-    r = subprocess.run([cli, "calib", "check", os.fspath(sessions / "b.csv"), "--calibration",
-                        os.fspath(sessions / "cal.json"), "--report", os.fspath(other), "--quiet"],
-                       capture_output=True, text=True, timeout=300)
+    r = cli_check(sessions, "--report", other)
     assert r.returncode == 2 and "holds no report" in r.stderr
     assert sorted(p.name for p in other.iterdir()) == ["mine.txt"]

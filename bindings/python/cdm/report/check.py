@@ -17,7 +17,7 @@ import numpy as np
 import matplotlib.pyplot as plt
 
 from .drawing import _draw_all
-from .page import Page, _Figure, _e, _img, _table, document, fmt_mm
+from .page import Page, _e, _table, document, fmt_mm, place_figures
 
 TOOL = "cdm calib check"
 # The 95 % quantile of chi-square with 3 degrees of freedom.
@@ -147,16 +147,7 @@ def render_check(path: str, check: Dict[str, Any], tmp: str) -> Tuple[str, List[
                     "bottom, the calibration's own predicted 1-sigma there (the accuracy map at the positions).",
                     weight=2)
     _draw_all(page.figures, tmp)
-    figs: List[str] = []
-    for i, part in enumerate(page.parts):
-        if not isinstance(part, _Figure):
-            continue
-        if part.error is None:
-            figs.append(part.name)
-            page.parts[i] = _img(part.name, part.alt, part.caption)
-        else:
-            page.note(f"The figure {part.name} could not be drawn ({part.error}).")
-            page.parts[i] = f"<p class=\"bad\">{_e(part.error)}</p>"
+    figs = place_figures(page, path)
     effects = ", ".join(str(e) for e in check.get("effects") or [])
     title = "cdm calibration check" + (": " + effects if effects else "")
     doc = document(title, _e(os.path.basename(path)), page.notes, page.toc,

@@ -8,6 +8,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 import html
+import sys
 
 from .loading import _finite
 
@@ -112,3 +113,22 @@ def document(title: str, files: str, notes: List[str], toc: List[str], parts: Li
             + "".join(f'<li><a href="#s{i + 1}">{t}</a></li>' for i, t in enumerate(toc))
             + "</ol></nav>"
             + "\n".join(parts) + "</body></html>\n")
+
+
+def place_figures(page: Page, label: str) -> List[str]:
+    """After the figures are drawn: each figure's place becomes its image, or
+    a note saying why it could not be drawn (also on stderr, naming
+    `label`, the input reported on). Returns the names of those drawn."""
+    figs: List[str] = []
+    for i, part in enumerate(page.parts):
+        if not isinstance(part, _Figure):
+            continue
+        if part.error is None:
+            figs.append(part.name)
+            page.parts[i] = _img(part.name, part.alt, part.caption)
+        else:
+            msg = f"The figure {part.name} could not be drawn ({part.error})."
+            page.note(msg)
+            page.parts[i] = f"<p class=\"bad\">{_e(msg)}</p>"
+            print(f"cdm.report: warning: {label}: {msg}", file=sys.stderr)
+    return figs

@@ -19,7 +19,7 @@ from . import sections
 from .check import is_check, render_check
 from .drawing import _draw_all
 from .loading import DiagnosisError, Positions, _label, _run
-from .page import Page, _Figure, _e, _img, document
+from .page import Page, _e, document, place_figures
 
 # The report's claim on its directory: the names of the files it wrote there,
 # one a line. A directory is the report's when it created it, when it was
@@ -80,18 +80,7 @@ def _render(runs: List[Tuple[str, Diag]], tmp: str) -> Tuple[str, List[str]]:
             page.add(f"<p class=\"bad\">{_e(msg)}</p>")
             print(f"cdm.report: warning: {path}: {msg}", file=sys.stderr)
     _draw_all(page.figures, tmp)
-    figs: List[str] = []
-    for i, part in enumerate(page.parts):
-        if not isinstance(part, _Figure):
-            continue
-        if part.error is None:
-            figs.append(part.name)
-            page.parts[i] = _img(part.name, part.alt, part.caption)
-        else:
-            msg = f"The figure {part.name} could not be drawn ({part.error})."
-            page.note(msg)
-            page.parts[i] = f"<p class=\"bad\">{_e(msg)}</p>"
-            print(f"cdm.report: warning: {path}: {msg}", file=sys.stderr)
+    figs = place_figures(page, path)
     title = f"cdm calibration diagnosis: {_label(diag)}"
     files = _e(os.path.basename(path))
     if len(runs) > 1:

@@ -135,37 +135,39 @@ void test_fault_adc_saturation_holds_position(void **) {
     cdm_close(d2);
 }
 
+uint64_t monotonic_now_ns() {
+    timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return uint64_t(ts.tv_sec) * 1000000000ull + uint64_t(ts.tv_nsec);
+}
+
 // Paced at 100 Hz (10 ms period): the unplug at report 20 is seen as
-// DISCONNECTED at once (the transport reports it on the read that would have
-// delivered report 20), and the replug 300 ms later brings poses back with
-// the same serial and one reconnection counted.
+// DISCONNECTED on the read that would have delivered it (no pose after the
+// 20th), and the replug 300 ms later brings poses back with the same serial
+// and one reconnection counted. Exact whatever the scheduling: the bounds
+// are counts, and the 300 ms are measured from the last pose's receipt time
+// (CLOCK_MONOTONIC, before the unplug) to a clock read after the return was
+// seen. The deadlines are generous timeouts for a wait, not rates.
 void test_fault_disconnect_and_replug(void **) {
     cdm_device *dev = nullptr;
     assert_int_equal(cdm_open("sim:?rate=100&motion=still&disconnect=20:300", &dev), CDM_OK);
     cdm_pose p{};
     p.struct_size = sizeof p;
-    uint64_t last = 0;
-    int rc = CDM_OK;
-    // Wait pose by pose up to the last before the unplug.
-    while (last < 20) {
-        rc = cdm_wait_pose_after(dev, last, 1000, &p);
-        if (rc == CDM_ERR_DISCONNECTED) break;
-        assert_true(rc == CDM_OK || rc == CDM_ERR_STALE);
-        last = p.host_sequence;
-    }
-    const auto t0 = std::chrono::steady_clock::now();
-    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_ERR_DISCONNECTED; }, 20));
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_ERR_DISCONNECTED; }, 5000));
     assert_true(p.flags & CDM_POSE_DISCONNECTED);
+    assert_int_equal(p.host_sequence, 20); // reports 0..19 delivered, 20 lost to the unplug
+    const uint64_t last_receipt_ns = p.host_time_ns;
     // The error names the unplug: the transport's "simulated unplug at report
     // 20", or, once the reader has tried to reconnect (at once, then every
     // 250 ms), its "reconnect failed: simulated master still unplugged".
     char text[300];
     cdm_device_error(dev, text, sizeof text);
     assert_non_null(std::strstr(text, "unplug"));
-    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_OK; }, 2000));
-    const double gone = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    print_message("disconnected for %.3f s (300 ms unplug + up to 250 ms retry interval)\n", gone);
-    assert_true(gone > 0.25 && gone < 0.3 + 0.25 + 0.1);
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_OK; }, 5000));
+    const double gone = double(monotonic_now_ns() - last_receipt_ns) / 1e9;
+    print_message("no pose for %.3f s (300 ms unplug + up to 250 ms retry interval)\n", gone);
+    assert_true(gone > 0.3);
+    assert_true(p.host_sequence > 20);
     const cdm_stats s = stats(dev);
     assert_int_equal(s.reconnects, 1);
     assert_int_equal(s.sequence_jumps, 0);
@@ -176,8 +178,10 @@ void test_fault_disconnect_and_replug(void **) {
     cdm_close(dev);
 }
 
-// A device that stops sending: STALE within the stale deadline plus two
-// report periods.
+// A device that stops sending goes STALE, and never before its deadline:
+// the pose's age read on CLOCK_MONOTONIC *after* the call that said STALE is
+// past the 20 ms deadline (exact whatever the scheduling; the lateness side
+// is test_fault_stale_never_late's).
 void test_fault_stall_goes_stale(void **) {
     cdm_device *dev = nullptr;
     cdm_open_options o{};
@@ -186,11 +190,11 @@ void test_fault_stall_goes_stale(void **) {
     assert_int_equal(cdm_open_ex("sim:?rate=100&motion=still&stall_after=10", &o, &dev), CDM_OK);
     cdm_pose p{};
     p.struct_size = sizeof p;
-    assert_true(cdm_test::wait_until([&] { cdm_get_pose(dev, &p); return p.host_sequence == 10; }, 2000));
-    const auto t0 = std::chrono::steady_clock::now();
-    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_ERR_STALE; }, 1000));
-    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    assert_true(s < 0.020 + 0.020 + 0.010); // deadline + two periods + polling
+    assert_true(cdm_test::wait_until([&] { cdm_get_pose(dev, &p); return p.host_sequence == 10; }, 5000));
+    assert_true(cdm_test::wait_until([&] { return cdm_get_pose(dev, &p) == CDM_ERR_STALE; }, 5000));
+    const uint64_t after = monotonic_now_ns();
+    assert_true(after - p.host_time_ns > 20000u * 1000u);
+    assert_int_equal(p.host_sequence, 10);
     assert_true(p.flags & CDM_POSE_STALE);
     cdm_close(dev);
 }
@@ -217,9 +221,7 @@ void test_fault_stale_never_late(void **) {
         int checked = 0;
         const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
         while (checked < 200 && std::chrono::steady_clock::now() < until) {
-            timespec ts;
-            clock_gettime(CLOCK_MONOTONIC, &ts);
-            const uint64_t before = uint64_t(ts.tv_sec) * 1000000000ull + uint64_t(ts.tv_nsec);
+            const uint64_t before = monotonic_now_ns();
             const int rc = cdm_get_pose(dev, &p);
             if (before > p.host_time_ns && before - p.host_time_ns > uint64_t(limit_us) * 1000u) {
                 if (rc != CDM_ERR_STALE || !(p.flags & CDM_POSE_STALE))

@@ -54,7 +54,8 @@ for san in "${sans[@]}"; do
   cmake --build "$dir" -j"$(nproc)"
   # jig_*, model_*, io_*, device_*, calib_*, api_*, fuzz_* and umockdev_*
   # (the real hidapi and libudev on the emulated master) are the C/C++
-  # programs; the bindings' tests run in the plain build (an instrumented
+  # programs, with cli_live_threads (the `cdm` command's live jig analysis,
+  # its own threads); the bindings' tests run in the plain build (an instrumented
   # libcdm inside python or mono needs the sanitizer runtime preloaded,
   # which tests nothing more of our code). Under TSan only the `cdm`
   # command's umockdev tests: the others hold umockdev's testbed in the
@@ -63,6 +64,6 @@ for san in "${sans[@]}"; do
   # cases start after a fork (docs/testing.md, "Under the sanitizers").
   umock='umockdev'
   [ "$san" = thread ] && umock='umockdev_cli'
-  ctest --test-dir "$dir" -R "^(jig|model|io|device|calib|api|fuzz|$umock)_" -E '^umockdev_(python|csharp)_' \
+  ctest --test-dir "$dir" -R "^((jig|model|io|device|calib|api|fuzz|$umock)_|cli_live_threads$)" -E '^umockdev_(python|csharp)_' \
         --output-on-failure -j"$(nproc)"
 done

@@ -465,6 +465,18 @@ int cdm_nominal_device_json(char **json) {
     });
 }
 
+int cdm_device_file_read(const char *device_json_path, char **json) {
+    return cdm::guarded("cdm_device_file_read", [&] {
+        if (!json) return null_arg("cdm_device_file_read", "json");
+        *json = nullptr;
+        if (!device_json_path) return null_arg("cdm_device_file_read", "device_json_path");
+        cdm::DeviceGeometry g;
+        std::string err;
+        if (!cdm::io::load_device_json(device_json_path, g, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
+        return to_c_string(cdm::io::device_to_json(g).dump(2) + "\n", json);
+    });
+}
+
 int cdm_simulate_jig_defaults(char **options_json) {
     return cdm::guarded("cdm_simulate_jig_defaults", [&] {
         if (!options_json) return null_arg("cdm_simulate_jig_defaults", "options_json");

@@ -122,6 +122,28 @@ LiveJig::~LiveJig() {
     }
 }
 
+std::array<double, 3> live_device_frame(const std::string &path) {
+    char *text = nullptr;
+    if (cdm_device_file_read(path.c_str(), &text) != CDM_OK) throw UsageError("--device: " + std::string(cdm_thread_error()));
+    const json j = json::parse(text);
+    cdm_free_string(text);
+    return {j.at("a_mm").get<double>(), j.at("b_mm").get<double>(), j.at("m_mm").get<double>()};
+}
+
+std::string live_frame_mismatch(const std::string &path, const std::array<double, 3> &file,
+                                const std::array<double, 3> &device) {
+    constexpr double kToleranceMm = 1.0; // the device's check of a calibration's frame
+    static const char *const kNames[3] = {"a_mm", "b_mm", "m_mm"};
+    std::string out;
+    for (int k = 0; k < 3; ++k)
+        if (!(std::fabs(file[k] - device[k]) <= kToleranceMm))
+            out += std::string(out.empty() ? "" : ", ") + kNames[k] + " " + num(file[k]) + " (" + path + ") vs " +
+                   num(device[k]) + " (the device)";
+    if (out.empty()) return out;
+    return "--device " + path + " is another frame: " + out +
+           "; the analysis would diagnose another device (leave --device out to use the device's own)";
+}
+
 bool LiveJig::start(double a_mm, double b_mm, double m_mm, std::string &err) {
     const char *tmp = std::getenv("TMPDIR");
     std::string templ = std::string(tmp && *tmp ? tmp : "/tmp") + "/cdm-live-XXXXXX";
@@ -276,6 +298,7 @@ json LiveJig::update(const std::vector<std::shared_ptr<const Position>> &data) {
     if (err.empty()) {
         u["model"] = rec["effects"];
         u["explained"] = rec.value("explained", false);
+        u["negligible_only"] = rec.value("negligible_only", false);
         if (rec["effects"].empty()) {
             u["predicted_radius95_mm"] = {{"mean", 0.0}, {"worst", 0.0}, {"positions", s_.positions.size()},
                                           {"unplaced", 0}, {"about", "the nominal model: nothing fitted"}};
@@ -308,8 +331,11 @@ void LiveJig::judge(json &u) {
     const size_t out = u.value("outside_measured_volume", size_t(1));
     // The nominal model never stops a session: nothing fitted means nothing
     // predicted, not that the catalogue's effects could have been seen.
-    const bool determined = !failed && u.value("explained", false) && same_ >= o_.stable && under && out == 0 &&
-                            !model.empty();
+    // Explained as the diagnosis's verdict says it: every test passes, or
+    // only effects under a tenth of the noise floor are left significant.
+    const bool explained = u.value("explained", false), negligible_only = u.value("negligible_only", false);
+    const bool determined =
+        !failed && (explained || negligible_only) && same_ >= o_.stable && under && out == 0 && !model.empty();
     u["decision"] = determined ? "stop" : failed ? "error" : "next";
     std::string t = "live: " + std::to_string(u.value("positions", size_t(0))) + "/" +
                     std::to_string(u.value("of", size_t(0))) + " positions: ";
@@ -317,7 +343,9 @@ void LiveJig::judge(json &u) {
         t += "no update (" + u["error"].get<std::string>() + ")";
     } else {
         t += "model " + (model.empty() ? std::string("nominal") : joined(model, " + ")) +
-             (u.value("explained", false) ? " (explains the data" : " (does not explain the data yet") +
+             (explained         ? " (explains the data"
+              : negligible_only ? " (explains the data to within what matters"
+                                : " (does not explain the data yet") +
              ", the same for " + std::to_string(same_) + " update" + (same_ > 1 ? "s" : "") + ")";
         if (p.is_object())
             t += "; predicted error (95 % radius) at the session's positions: mean " +

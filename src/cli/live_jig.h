@@ -44,6 +44,16 @@ struct LiveOptions {
     std::string device;      // device JSON for the analysis; empty: the device's own nominal geometry
 };
 
+// The --device file read and checked before anything opens (an input of
+// the session: never written over): its frame {a, b, m} in mm. Throws
+// UsageError naming what is wrong and where.
+std::array<double, 3> live_device_frame(const std::string &path);
+
+// "" when a device reporting frame {a, b, m} is the --device file's frame
+// (within the 1 mm a calibration's frame is held to), else why not.
+std::string live_frame_mismatch(const std::string &path, const std::array<double, 3> &file,
+                                const std::array<double, 3> &device);
+
 // `cdm record`'s --live, --live-every, --target-mm, --stable, --next and
 // --device (each but --live needs --live).
 void add_live_options(CLI::App *record, LiveOptions &o);

@@ -48,6 +48,7 @@ struct JigArgs {
     int samples = 0;
     std::string plan; // PLAN.csv of `cdm calib plan`: only its positions, in its order
     LiveOptions live; // --live: diagnosed as it is recorded, stops by itself (live_jig.h)
+    std::array<double, 3> live_frame{}; // --device's frame, read before anything opens
 };
 
 struct RecordCtx {
@@ -396,6 +397,7 @@ int open_jig(const std::string &uri, const std::string &file, const JigArgs &ja,
     ctx.plan_n = cdm_jig_plan_count(ctx.plan);
     auto inputs = uri_inputs(uri);
     if (!ja.plan.empty()) inputs.push_back(ja.plan);
+    if (ja.live.on && !ja.live.device.empty()) inputs.push_back(ja.live.device);
     std::vector<const char *> protect;
     for (const auto &p : inputs) protect.push_back(p.c_str());
     if (cdm_dataset_writer_open(file.c_str(), protect.data(), protect.size(), &ctx.csv) != CDM_OK) {
@@ -421,25 +423,36 @@ int open_jig(const std::string &uri, const std::string &file, const JigArgs &ja,
     return kExitOk;
 }
 
-// The live analysis started with the device's nominal geometry. When it
-// cannot start, the session is recorded without it (nothing is lost).
-void start_live(cdm_device *dev, RecordCtx &ctx) {
+// The live analysis started with the device's nominal geometry, or the
+// --device file's when it is the device's frame (false, said, when it is
+// another: a usage error, before anything is recorded). When it cannot
+// start otherwise, the session is recorded without it (nothing is lost).
+bool start_live(cdm_device *dev, const JigArgs &ja, RecordCtx &ctx) {
     cdm_device_info info{};
     info.struct_size = sizeof info;
     std::string err;
-    if (cdm_get_info(dev, &info) != CDM_OK)
+    if (cdm_get_info(dev, &info) != CDM_OK) {
         err = std::string("the device's information: ") + cdm_thread_error();
-    else if (ctx.live->start(info.a_mm, info.b_mm, info.m_mm, err))
-        return;
+    } else if (!ja.live.device.empty() &&
+               !(err = live_frame_mismatch(ja.live.device, ja.live_frame, {info.a_mm, info.b_mm, info.m_mm}))
+                    .empty()) {
+        std::fprintf(stderr, "cdm: record: %s\n", err.c_str());
+        return false;
+    } else if (ctx.live->start(info.a_mm, info.b_mm, info.m_mm, err)) {
+        return true;
+    }
     std::fprintf(stderr, "cdm: record: --live: %s; recording without the live analysis\n", err.c_str());
     ctx.live->finish(); // first: a reader waiting for an update (holding ctx.mu) is let go
     std::lock_guard<std::mutex> lock(ctx.mu);
     ctx.live.reset();
+    return true;
 }
 
-int cmd_record(const std::string &uri, const std::string &file, double seconds, const JigArgs &ja,
+int cmd_record(const std::string &uri, const std::string &file, double seconds, JigArgs ja,
                const std::string &compression, bool exporting = false, bool json = false) {
-    check_output(uri, file);
+    const bool live_device = ja.jig && ja.live.on && !ja.live.device.empty();
+    check_output(uri, file, {ja.plan, live_device ? ja.live.device : std::string()});
+    if (live_device) ja.live_frame = live_device_frame(ja.live.device);
     if (!ja.plan.empty() && !ja.jig) throw UsageError("--plan " + ja.plan + ": a planned session is recorded with --jig");
     std::string format = format_of(file);
     if (!compression.empty()) {
@@ -476,7 +489,13 @@ int cmd_record(const std::string &uri, const std::string &file, double seconds, 
         cdm_jig_plan_free(ctx.plan);
         return report_error("open " + uri, rc);
     }
-    if (ctx.live) start_live(dev, ctx);
+    if (ctx.live && !start_live(dev, ja, ctx)) {
+        ctx.live->finish();
+        cdm_close(dev);
+        cdm_dataset_writer_free(ctx.csv); // removes its temporary
+        cdm_jig_plan_free(ctx.plan);
+        return kExitUsage;
+    }
     record_loop(dev, ctx, seconds, ja.jig);
     cdm_stats st{};
     st.struct_size = sizeof st;

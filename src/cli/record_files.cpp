@@ -50,16 +50,19 @@ bool unpaced(const std::string &uri) {
     return false;
 }
 
-void check_output(const std::string &uri, const std::string &file) {
+void check_output(const std::string &uri, const std::string &file, const std::vector<std::string> &also) {
     struct stat out {};
     for (const std::string &p : {file, file + ".tmp"}) {
         if (stat(p.c_str(), &out) != 0) continue;
         if (!S_ISREG(out.st_mode)) throw UsageError(p + " exists and is not a regular file: not writing over it");
-        for (const auto &in : uri_inputs(uri)) {
+        auto same = [&](const std::string &in) {
             struct stat st {};
-            if (stat(in.c_str(), &st) == 0 && st.st_dev == out.st_dev && st.st_ino == out.st_ino)
-                throw UsageError(p + " is the input " + in + " of " + uri + ": not writing over it");
-        }
+            return !in.empty() && stat(in.c_str(), &st) == 0 && st.st_dev == out.st_dev && st.st_ino == out.st_ino;
+        };
+        for (const auto &in : uri_inputs(uri))
+            if (same(in)) throw UsageError(p + " is the input " + in + " of " + uri + ": not writing over it");
+        for (const auto &in : also)
+            if (same(in)) throw UsageError(p + " is the input " + in + " of this command: not writing over it");
     }
 }
 

@@ -19,8 +19,9 @@ std::vector<std::string> uri_inputs(const std::string &uri);
 // value read as a number). It waits for whoever reads it.
 bool unpaced(const std::string &uri);
 // Throws UsageError when FILE (or FILE.tmp) exists and is not a regular file,
-// or is one of the URI's inputs: before anything opens.
-void check_output(const std::string &uri, const std::string &file);
+// or is one of the URI's inputs or of `also` (the command's other input
+// files; "" skipped): before anything opens.
+void check_output(const std::string &uri, const std::string &file, const std::vector<std::string> &also = {});
 // The recording format FILE's extension asks for (cdm_recorder_open_ex's
 // names): "mcap", "csv" or "cdmrec".
 const char *format_of(const std::string &file);

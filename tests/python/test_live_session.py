@@ -62,7 +62,8 @@ def test_the_session_stops_by_itself_with_the_full_sessions_model(tmp_path, full
     # The model the whole plate recommends.
     assert live["model"] == diagnosis["recommended"]["effects"]
     last = live["updates"][-1]
-    assert last["decision"] == "stop" and last["explained"] and last["same_for"] >= live["stable"]
+    assert last["decision"] == "stop" and (last["explained"] or last["negligible_only"])
+    assert last["same_for"] >= live["stable"]
     assert last["outside_measured_volume"] == 0
     assert last["predicted_radius95_mm"]["worst"] <= live["target_mm"]
     # Until the stop, each update said where to measure next: holes of
@@ -127,6 +128,27 @@ def test_live_options_are_checked(tmp_path, args, words):
     r = cli("record", SIM + "&realtime=0", tmp_path / "x.csv", *args)
     assert r.returncode == 2 and words in r.stderr, r.stderr
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_the_device_file_is_checked_before_anything_opens(tmp_path):
+    """--device is read before the session (a missing or bad file, or another
+    frame than the device's, is a usage error and nothing is written), and
+    is an input: never the output."""
+    dev = tmp_path / "dev.json"
+    dev.write_text(json.dumps(DEVICE))
+    wide = tmp_path / "wide.json"
+    wide.write_text(json.dumps({**DEVICE, "a_mm": 200}))
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"a_mm": 150, "b_mm": 150,\n "m_mm": -30}')
+    out = tmp_path / "x.csv"
+    for device, words in [(tmp_path / "none.json", "cannot open"), (bad, "bad.json:2:"),
+                          (wide, "a_mm 200 (" + str(wide) + ") vs 150 (the device)")]:
+        r = cli("record", SIM + "&realtime=0", out, "--jig", "--live", "--device", device)
+        assert r.returncode == 2 and words in r.stderr, r.stderr
+        assert not out.exists() and not list(tmp_path.glob(".x.csv*"))
+    r = cli("record", SIM + "&realtime=0", dev, "--jig", "--live", "--device", dev)
+    assert r.returncode == 2 and "not writing over it" in r.stderr, r.stderr
+    assert json.loads(dev.read_text()) == DEVICE
 
 
 def test_planning_on_from_the_measured_positions():

@@ -295,6 +295,7 @@ PROTOTYPES: Dict[str, Tuple[Any, List[Any]]] = {
     "cdm_effect_param": (_int, [_size, _size, ctypes.POINTER(ctypes.c_char_p), ctypes.POINTER(ctypes.c_char_p),
                                 c_double_p, c_double_p, c_double_p]),
     "cdm_nominal_device_json": (_int, [_handle_p]),
+    "cdm_device_file_read": (_int, [_str, _handle_p]),
     "cdm_simulate_jig_defaults": (_int, [_handle_p]),
     "cdm_simulate_jig_dataset": (_int, [_str, _str]),
     "cdm_write_file_atomic": (_int, [_str, ctypes.c_void_p, _size, ctypes.POINTER(ctypes.c_char_p), _size]),
@@ -416,6 +417,7 @@ class Library:
     cdm_effect_param_count: Callable[..., int]
     cdm_effect_param: Callable[..., int]
     cdm_nominal_device_json: Callable[..., int]
+    cdm_device_file_read: Callable[..., int]
     cdm_simulate_jig_defaults: Callable[..., int]
     cdm_simulate_jig_dataset: Callable[..., int]
     cdm_write_file_atomic: Callable[..., int]

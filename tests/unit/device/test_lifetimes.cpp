@@ -61,47 +61,30 @@ struct Closer {
     std::string text;               // cdm_thread_error after the deferred close
 };
 
-void close_in_sample(void *user, const cdm_sample *) {
-    auto *c = static_cast<Closer *>(user);
+// The first callback closes the device (when `close` holds); any callback
+// after that close is counted in `after`.
+void close_once(Closer *c, bool close = true) {
     cdm_device *d = c->dev.load();
     if (!d) return;
     if (c->closes.load() > 0) {
         c->after.fetch_add(1);
         return;
     }
+    if (!close) return;
     cdm_close(d);
     c->text = cdm_thread_error();
     c->closes.fetch_add(1);
 }
 
+void close_in_sample(void *user, const cdm_sample *) { close_once(static_cast<Closer *>(user)); }
+
 void close_in_event(void *user, const cdm_event *e) {
-    auto *c = static_cast<Closer *>(user);
-    cdm_device *d = c->dev.load();
-    if (!d) return;
-    if (c->closes.load() > 0) {
-        c->after.fetch_add(1);
-        return;
-    }
-    if (e->kind != CDM_EVENT_STALE) return;
-    cdm_close(d);
-    c->text = cdm_thread_error();
-    c->closes.fetch_add(1);
+    close_once(static_cast<Closer *>(user), e->kind == CDM_EVENT_STALE);
 }
 
 // Closes on the first rejected report (a malformed one, then several more
 // that must reach no callback).
-void close_in_rejected(void *user, const cdm_rejected *) {
-    auto *c = static_cast<Closer *>(user);
-    cdm_device *d = c->dev.load();
-    if (!d) return;
-    if (c->closes.load() > 0) {
-        c->after.fetch_add(1);
-        return;
-    }
-    cdm_close(d);
-    c->text = cdm_thread_error();
-    c->closes.fetch_add(1);
-}
+void close_in_rejected(void *user, const cdm_rejected *) { close_once(static_cast<Closer *>(user)); }
 
 // The reader thread is gone (the handle freed) once the thread count is
 // back to what it was before the open.

@@ -2,6 +2,7 @@
 // printing.
 #include <time.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -85,7 +86,16 @@ std::vector<std::string> split_list(const std::string &s) {
 
 std::vector<double> parse_number_list(const std::string &text, const std::string &option) {
     std::vector<double> out;
-    for (const auto &item : split_list(text)) {
+    std::vector<std::string> items;
+    for (size_t b = 0, e;; b = e + 1) { // every item, empty ones included ("50,,60" is a typo)
+        e = std::min(text.find(',', b), text.size());
+        items.push_back(text.substr(b, e - b));
+        if (e == text.size()) break;
+    }
+    for (const auto &item : items) {
+        if (item.empty())
+            throw UsageError(option + ": an empty item in \"" + text + "\" (expected a comma-separated list such "
+                                      "as 30,40,50)");
         char *end = nullptr;
         errno = 0;
         const double v = std::strtod(item.c_str(), &end);

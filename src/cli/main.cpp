@@ -58,6 +58,19 @@ CLI::App *selected(CLI::App &app) {
     }
 }
 
+// An option given an empty value ("--json ''", "--jig-heights ''") is a
+// usage error: taken as absent, it would silently mean the default.
+void refuse_empty_values(CLI::App &app) {
+    for (CLI::App *level = &app; level;) {
+        for (const CLI::Option *o : level->get_options())
+            for (const std::string &v : o->results())
+                if (v.empty() && o->get_expected_max() != 0)
+                    throw UsageError(o->get_name() + ": an empty value (leave the option out for its default)");
+        auto subs = level->get_subcommands();
+        level = subs.empty() ? nullptr : subs.front();
+    }
+}
+
 int run(int argc, char **argv) {
     CLI::App app{"cdm: driver and model-debugging toolkit for the cable-driven haptic master", "cdm"};
     app.option_defaults()->always_capture_default();
@@ -79,6 +92,7 @@ int run(int argc, char **argv) {
         const int rc = app.exit(e); // prints help, the version or the error
         return rc == 0 ? kExitOk : kExitUsage;
     }
+    refuse_empty_values(app);
     if (!g_command) { // a command group without its subcommand
         std::fprintf(stderr, "%s", selected(app)->help().c_str());
         return kExitUsage;

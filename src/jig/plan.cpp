@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <random>
 
@@ -21,11 +22,21 @@ bool check_jig_options(const JigPlanOptions &o, std::string &err) {
         err = "jig_heights must list at least one height";
         return false;
     }
-    for (double h : o.heights_mm) {
+    for (size_t i = 0; i < o.heights_mm.size(); ++i) {
+        const double h = o.heights_mm[i];
         if (!(h > 0) || !std::isfinite(h)) {
             err = "jig_heights must be positive (mm from the cable plane)";
             return false;
         }
+        // One fixture setting is one height: a repeat would visit each of
+        // its holes twice under one position's label.
+        for (size_t k = 0; k < i; ++k)
+            if (o.heights_mm[k] == h) {
+                char text[64];
+                std::snprintf(text, sizeof text, "%g", h);
+                err = "jig_heights lists " + std::string(text) + " mm twice (each height is one fixture setting)";
+                return false;
+            }
     }
     if (o.samples < 1) {
         err = "jig_samples must be at least 1, got " + std::to_string(o.samples);

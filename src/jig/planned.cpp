@@ -2,6 +2,7 @@
 
 #include <sys/stat.h>
 
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -65,11 +66,20 @@ bool read_plan_csv(const std::string &path, std::vector<PlanRow> &rows, std::str
         return false;
     }
     std::string line;
-    if (!std::getline(f, line) || (line.erase(line.find_last_not_of("\r") + 1), line != kPlanHeader)) {
+    // A UTF-8 byte-order mark (a spreadsheet's "CSV UTF-8") is no part of the header.
+    const auto header = [&] {
+        if (line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
+        line.erase(line.find_last_not_of("\r") + 1);
+        return line == kPlanHeader;
+    };
+    if (!std::getline(f, line) || !header()) {
         err = path + ":1: the header must be " + std::string(kPlanHeader) + " (a file of `cdm calib plan`)";
         return false;
     }
     size_t bytes = line.size();
+    // Each position once: a repeat would merge two seatings of the jig into
+    // one position of the dataset. References to the micrometre.
+    std::map<std::array<long long, 3>, size_t> seen;
     for (size_t no = 2; std::getline(f, line); ++no) {
         bytes += line.size() + 1;
         if (bytes > kPlanMaxBytes) {
@@ -81,6 +91,14 @@ bool read_plan_csv(const std::string &path, std::vector<PlanRow> &rows, std::str
         PlanRow r;
         if (!plan_row(line, r, err)) {
             err = path + ":" + std::to_string(no) + ": " + err;
+            return false;
+        }
+        const auto at = seen.emplace(std::array<long long, 3>{std::llround(r[0] * 1e3), std::llround(r[1] * 1e3),
+                                                              std::llround(r[2] * 1e3)},
+                                     no);
+        if (!at.second) {
+            err = path + ":" + std::to_string(no) + ": the position of line " + std::to_string(at.first->second) +
+                  " again (a plan visits each position once)";
             return false;
         }
         rows.push_back(r);

@@ -72,6 +72,18 @@ def test_heights_not_a_number_names_the_option(tmp_path):
     assert not (tmp_path / "x.csv").exists()
 
 
+@pytest.mark.parametrize("args, words", [
+    (["calib", "diagnose", "{data}", "--json", ""], "--json: an empty value"),
+    (["calib", "simulate", "{tmp}/s.csv", "--heights", ""], "--heights: an empty value"),
+    (["calib", "simulate", "{tmp}/s.csv", "--heights", "40,,60"], 'an empty item in "40,,60"'),
+])
+def test_an_empty_value_is_not_the_default(tmp_path, small_dataset, args, words):
+    """An empty value is refused, not taken as the option left out."""
+    r = cdm(*[a.format(data=small_dataset, tmp=tmp_path) for a in args])
+    assert r.returncode == 2 and words in r.stderr, r.stderr
+    assert not list(tmp_path.iterdir())
+
+
 def test_fit_without_effects_is_usage(tmp_path, small_dataset):
     r = cdm("calib", "fit", str(small_dataset), "--out", str(tmp_path / "c.json"))
     assert r.returncode == 2 and "--effects" in r.stderr

@@ -76,6 +76,7 @@ def test_simulate_measures_exactly_the_planned_positions(tmp_path):
     ("x_ref,y_ref,z_ref,samples\n40,0,0,5,\n", ':2: "" is not a number'),
     ("x_ref,y_ref,z_ref,samples\n40,0,0,2.5\n", ":2: samples must be a whole number"),
     ("x_ref,y_ref,z_ref,samples\n6000,0,0,5\n", ":2: a reference beyond"),
+    ("x_ref,y_ref,z_ref,samples\n40,0,0,5\n40,10,0,5\n40,0,0.0000,7\n", ":4: the position of line 2 again"),
 ])
 def test_a_bad_plan_file_is_refused_naming_the_line(tmp_path, text, words):
     plan = tmp_path / "plan.csv"
@@ -83,6 +84,20 @@ def test_a_bad_plan_file_is_refused_naming_the_line(tmp_path, text, words):
     r = cli("calib", "simulate", tmp_path / "d.csv", "--holes", 7, "--pitch-mm", 10, "--plan", plan)
     assert r.returncode == 2 and words in r.stderr, r.stderr
     assert not (tmp_path / "d.csv").exists()
+
+
+def test_a_plan_file_may_start_with_a_byte_order_mark(tmp_path):
+    """A spreadsheet's "CSV UTF-8" starts with one; it is no part of the header."""
+    plan = tmp_path / "plan.csv"
+    plan.write_bytes(b"\xef\xbb\xbfx_ref,y_ref,z_ref,samples\r\n40,0,0,5\r\n")
+    r = cli("calib", "simulate", tmp_path / "d.csv", "--holes", 7, "--pitch-mm", 10, "--plan", plan)
+    assert r.returncode == 0, r.stderr
+    assert len((tmp_path / "d.csv").read_text().splitlines()) == 1 + 5
+
+
+def test_a_repeated_height_is_refused():
+    with pytest.raises(cdm.CdmError, match="jig_heights lists 50 mm twice"):
+        cdm.plan(4, holes=3, pitch_mm=10.0, heights_mm=[50, 60, 50], samples=5)
 
 
 def test_the_order_starts_at_the_lowest_height_and_rows_alternate():

@@ -104,6 +104,10 @@ static void bad_options_named(void **) {
     o.pitch_mm = -1;
     assert_false(check_jig_options(o, err));
     assert_non_null(std::strstr(err.c_str(), "jig_pitch"));
+    o = small_plan();
+    o.heights_mm = {30, 50, 30};
+    assert_false(check_jig_options(o, err));
+    assert_non_null(std::strstr(err.c_str(), "jig_heights lists 30 mm twice"));
     std::vector<double> h;
     assert_false(parse_heights("30,abc", h, err));
     assert_non_null(std::strstr(err.c_str(), "abc"));

@@ -207,16 +207,51 @@ struct DiagArgs {
 // The report writes only into a directory it owns (cdm.report's rule):
 // empty, or holding the list of files an earlier report wrote
 // (.cdm-report). Checked before the diagnosis JSON is written into it.
-bool report_dir_is_ours(const std::string &dir) {
+// "" when DIR is the report's to write `name` into: empty, or holding a
+// report's marker (.cdm-report) and no `name` the marker does not list (a
+// file of the user's by that name is never written over); else why not.
+std::string report_dir_refusal(const std::string &dir, const std::string &name) {
+    const std::string marker = dir + "/.cdm-report";
     struct stat st {};
-    if (stat((dir + "/.cdm-report").c_str(), &st) == 0 && S_ISREG(st.st_mode)) return true;
+    if (stat(marker.c_str(), &st) == 0 && S_ISREG(st.st_mode)) {
+        if (lstat((dir + "/" + name).c_str(), &st) != 0) return "";
+        std::ifstream f(marker);
+        for (std::string line; std::getline(f, line);)
+            if (line == name) return "";
+        return dir + "/" + name + " is not the report's (.cdm-report does not list it): not writing over it; give "
+                                  "--json a path, or --report another directory";
+    }
     DIR *d = opendir(dir.c_str());
-    if (!d) return false;
+    if (!d) return dir + " cannot be read";
     bool empty = true;
     while (dirent *e = readdir(d))
         if (std::strcmp(e->d_name, ".") != 0 && std::strcmp(e->d_name, "..") != 0) empty = false;
     closedir(d);
-    return empty;
+    if (empty) return "";
+    return dir + " is not empty and holds no report (.cdm-report is missing): the report writes only into a new "
+                 "or empty directory, or one an earlier report wrote; give another directory";
+}
+
+// The outputs' checks that need no result, before the work: --json is no
+// directory or other non-file, --report DIR is the report's to write
+// `name` into (when --json does not give the JSON a path), and that JSON
+// is not one of `inputs` (an earlier diagnosis compared with, in DIR).
+void check_outputs_first(const std::string &json_out, const std::string &report, const char *name,
+                         const std::vector<std::string> &inputs) {
+    struct stat st {};
+    if (!json_out.empty() && stat(json_out.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
+        throw UsageError("--json " + json_out + " exists and is not a regular file: not writing over it");
+    if (report.empty() || !json_out.empty() || stat(report.c_str(), &st) != 0) return;
+    if (!S_ISDIR(st.st_mode)) throw UsageError("--report " + report + " exists and is not a directory");
+    if (const std::string why = report_dir_refusal(report, name); !why.empty()) throw UsageError("--report: " + why);
+    const std::string jp = report + "/" + name;
+    struct stat in {};
+    if (stat(jp.c_str(), &st) == 0)
+        for (const auto &p : inputs)
+            if (stat(p.c_str(), &in) == 0 && in.st_dev == st.st_dev && in.st_ino == st.st_ino)
+                throw UsageError("--report: " + jp + " is the input " + p +
+                                 " of this command, which the report would replace: give --json a path, or copy it "
+                                 "elsewhere first");
 }
 
 // The result's JSON (--json) and HTML report (--report DIR, drawn from the
@@ -232,12 +267,8 @@ int write_outputs(const std::string &json_out, const std::string &report, const 
             std::fprintf(stderr, "cdm: --report: cannot create %s: %s\n", report.c_str(), std::strerror(errno));
             return kExitFailure;
         }
-        if (!report_dir_is_ours(report)) {
-            std::fprintf(stderr,
-                         "cdm: --report: %s is not empty and holds no report (.cdm-report is missing): the report "
-                         "writes only into a new or empty directory, or one an earlier report wrote; give another "
-                         "directory\n",
-                         report.c_str());
+        if (const std::string why = report_dir_refusal(report, name); !why.empty()) {
+            std::fprintf(stderr, "cdm: --report: %s\n", why.c_str());
             return kExitUsage;
         }
         jp = report + "/" + name;
@@ -253,6 +284,11 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     if (fit_only && effects.empty())
         throw UsageError("calib fit: --effects is required (a comma-separated list, e.g. cable_offset,cable_gain; "
                          "`cdm calib effects` lists them): without effects the calibration would correct nothing");
+    {
+        std::vector<std::string> inputs = {a.data, a.device};
+        inputs.insert(inputs.end(), a.before.begin(), a.before.end());
+        check_outputs_first(a.json_out, a.report, "diagnosis.json", inputs);
+    }
     if (int rc = load_plugins(a.plugins); rc != kExitOk) return rc;
     NominalDevice nd;
     std::string device = a.device;
@@ -305,7 +341,9 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     } else {
         print_summary(r);
     }
-    return write_outputs(a.json_out, a.report, a.before, r, {a.data, a.device, a.calib_out}, "diagnosis.json");
+    std::vector<std::string> inputs = {a.data, a.device, a.calib_out};
+    inputs.insert(inputs.end(), a.before.begin(), a.before.end());
+    return write_outputs(a.json_out, a.report, a.before, r, inputs, "diagnosis.json");
 }
 
 struct CheckArgs {
@@ -343,6 +381,7 @@ void print_check(const CheckArgs &a, const nlohmann::json &r) {
 }
 
 int cmd_check(const CheckArgs &a) {
+    check_outputs_first(a.json_out, a.report, "check.json", {a.data, a.calibration});
     if (int rc = load_plugins(a.plugins); rc != kExitOk) return rc;
     nlohmann::json o = nlohmann::json::object();
     if (a.jig >= 0) o["jig_tolerance_mm"] = a.jig;

@@ -179,6 +179,28 @@ def test_report_refuses_a_directory_it_does_not_own(tmp_path, small_dataset):
     assert (out / "diagnosis.json").read_text() == "the user's own"
 
 
+def test_report_lists_its_json_and_keeps_the_users(tmp_path, small_dataset):
+    """The JSON a report is drawn from is in its marker; a file of the user's
+    by that name in a report's directory is never written over, and an
+    earlier diagnosis compared with is never replaced: both refused before
+    the work."""
+    out = tmp_path / "rep"
+    r = cdm("calib", "diagnose", str(small_dataset), "--quiet", "--no-candidates", "--report", str(out), timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "diagnosis.json" in (out / ".cdm-report").read_text().split()
+    r = cdm("calib", "diagnose", str(small_dataset), "--quiet", "--no-candidates", "--report", str(out),
+            "--before", str(out / "diagnosis.json"))
+    assert r.returncode == 2 and "which the report would replace" in r.stderr, r.stderr
+    assert "Recommended model" not in r.stdout  # refused before the work
+    (out / "check.json").write_text("the user's own")
+    cal = tmp_path / "cal.json"
+    assert cdm("calib", "fit", str(small_dataset), "--effects", "cable_gain", "--out", str(cal),
+               timeout=300).returncode == 0
+    r = cdm("calib", "check", str(small_dataset), "--calibration", str(cal), "--report", str(out))
+    assert r.returncode == 2 and ".cdm-report does not list it" in r.stderr, r.stderr
+    assert (out / "check.json").read_text() == "the user's own"
+
+
 def test_report_says_what_to_install(tmp_path, small_dataset):
     env = dict(os.environ, PYTHON="/bin/false")
     r = cdm("calib", "diagnose", str(small_dataset), "--quiet", "--no-candidates", "--report",

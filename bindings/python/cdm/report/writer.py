@@ -135,7 +135,13 @@ def write_report(runs: Union[Run, Sequence[Run]], out: Union[str, "os.PathLike[s
         doc, figs = render(tmp)
         with open(os.path.join(tmp, "index.html"), "w", encoding="utf-8") as f:
             f.write(doc)
-        new = set(figs + ["index.html"])
+        # The JSON reported on, where `cdm calib diagnose/check --report`
+        # wrote it into `out`, is the report's file too: listed, kept (an
+        # earlier run compared with is the user's, never claimed).
+        last = items[-1]
+        own_inputs = {os.path.basename(last)} if isinstance(last, (str, os.PathLike)) and os.path.realpath(
+            os.path.dirname(os.path.abspath(last))) == os.path.realpath(out) else set()
+        new = set(figs + ["index.html"]) | own_inputs
         # The claim first covers both reports' files (a stop half-way leaves
         # none unclaimed), then the new one's alone.
         _write_marker(out, tmp, earlier | new)
@@ -143,7 +149,10 @@ def write_report(runs: Union[Run, Sequence[Run]], out: Union[str, "os.PathLike[s
         # earlier report's figures this one does not have.
         for name in figs + ["index.html"]:
             os.replace(os.path.join(tmp, name), os.path.join(out, name))
-        for name in sorted(earlier - new):
+        # Never a file this report read (an earlier diagnosis compared with).
+        read_here = {os.path.basename(p) for p in inputs
+                     if os.path.realpath(os.path.dirname(os.path.abspath(p))) == os.path.realpath(out)}
+        for name in sorted(earlier - new - read_here):
             path = os.path.join(out, name)
             if os.path.isfile(path) and not os.path.islink(path):
                 os.remove(path)

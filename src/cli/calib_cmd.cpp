@@ -284,6 +284,7 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     if (fit_only && effects.empty())
         throw UsageError("calib fit: --effects is required (a comma-separated list, e.g. cable_offset,cable_gain; "
                          "`cdm calib effects` lists them): without effects the calibration would correct nothing");
+    distinct_outputs({{"--out", a.calib_out}, {"--json", a.json_out}});
     {
         std::vector<std::string> inputs = {a.data, a.device};
         inputs.insert(inputs.end(), a.before.begin(), a.before.end());
@@ -451,6 +452,7 @@ int cmd_simulate(const SimArgs &a) {
     if (!a.effects.empty()) o["effects"] = split_list(a.effects);
     if (!a.device.empty()) o["device"] = a.device;
     if (!a.truth.empty()) o["truth"] = a.truth;
+    distinct_outputs({{"OUT", a.out}, {"--truth-out", a.truth_out}});
     if (!a.truth_out.empty()) o["truth_out"] = a.truth_out;
     if (!a.plan.empty()) {
         o["plan"] = read_plan_csv(a.plan, "--plan");

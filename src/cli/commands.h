@@ -54,6 +54,10 @@ constexpr double kMaxSeed = 9007199254740991.0; // 2^53 - 1
 
 // "30,40,50" -> {30,40,50}; throws UsageError naming `option` and the item.
 std::vector<double> parse_number_list(const std::string &text, const std::string &option);
+// Throws UsageError when two of a command's outputs ({option, path}; ""
+// skipped) are one file: the same directory (symbolic links resolved) and
+// name, or, existing, the same inode. The second would replace the first.
+void distinct_outputs(const std::vector<std::pair<std::string, std::string>> &outputs);
 std::vector<std::string> split_list(const std::string &s);
 
 // "cdm: WHAT: <cdm_strerror>: <detail>" on stderr; returns kExitFailure.

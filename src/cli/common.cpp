@@ -1,5 +1,6 @@
 // What the command groups share: exit codes, the clock, number parsing and
 // printing.
+#include <sys/stat.h>
 #include <time.h>
 
 #include <algorithm>
@@ -106,6 +107,28 @@ std::vector<double> parse_number_list(const std::string &text, const std::string
     }
     if (out.empty()) throw UsageError(option + ": empty list (expected a comma-separated list such as 30,40,50)");
     return out;
+}
+
+void distinct_outputs(const std::vector<std::pair<std::string, std::string>> &outputs) {
+    auto where = [](const std::string &path) {
+        const size_t slash = path.find_last_of('/');
+        const std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+        char *real = realpath(dir.c_str(), nullptr);
+        const std::string key = (real ? std::string(real) : dir) + "/" + path.substr(slash + 1);
+        std::free(real);
+        return key;
+    };
+    for (size_t i = 0; i < outputs.size(); ++i)
+        for (size_t k = 0; k < i; ++k) {
+            const auto &a = outputs[k], &b = outputs[i];
+            if (a.second.empty() || b.second.empty()) continue;
+            struct stat sa {}, sb {};
+            const bool same_inode = stat(a.second.c_str(), &sa) == 0 && stat(b.second.c_str(), &sb) == 0 &&
+                                    sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+            if (same_inode || where(a.second) == where(b.second))
+                throw UsageError(a.first + " and " + b.first + " are the same file " + b.second +
+                                 ": the second would replace the first");
+        }
 }
 
 nlohmann::json stats_json(const cdm_stats &st) {

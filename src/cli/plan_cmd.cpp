@@ -80,6 +80,7 @@ int write_text(const std::string &path, const std::string &text, const std::vect
 }
 
 int cmd_plan(const PlanArgs &a) {
+    distinct_outputs({{"--out", a.out}, {"--json", a.json_out}});
     nlohmann::json o = {{"positions", a.positions}, {"samples", a.samples}, {"holes", a.n},
                         {"pitch_mm", a.pitch},      {"noise_mm", a.noise},   {"jig_tolerance_mm", a.jig}};
     if (!a.heights.empty()) o["heights_mm"] = parse_number_list(a.heights, "--jig-heights");

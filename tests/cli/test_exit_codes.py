@@ -84,6 +84,18 @@ def test_an_empty_value_is_not_the_default(tmp_path, small_dataset, args, words)
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize("args", [
+    ["calib", "plan", "--positions", "3", "--jig-n", "3", "--jig-heights", "50,60", "--out", "{tmp}/p.json",
+     "--json", "{tmp}/./p.json"],
+    ["calib", "simulate", "{tmp}/x.csv", "--holes", "3", "--heights", "50", "--truth-out", "{tmp}/x.csv"],
+    ["calib", "fit", "{data}", "--effects", "cable_gain", "--out", "{tmp}/o.json", "--json", "{tmp}/o.json"],
+])
+def test_two_outputs_on_one_file_are_refused(tmp_path, small_dataset, args):
+    r = cdm(*[a.format(data=small_dataset, tmp=tmp_path) for a in args])
+    assert r.returncode == 2 and "are the same file" in r.stderr, r.stderr
+    assert not list(tmp_path.iterdir())
+
+
 def test_fit_without_effects_is_usage(tmp_path, small_dataset):
     r = cdm("calib", "fit", str(small_dataset), "--out", str(tmp_path / "c.json"))
     assert r.returncode == 2 and "--effects" in r.stderr

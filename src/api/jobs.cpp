@@ -161,12 +161,16 @@ int commit_calibration(JobInputs &in, const Model &fitted, const char *data_path
                    {"glitches_listed", glitches.value("samples", nlohmann::json::array())}}},
                  {"covariance", covariance}};
     std::string err;
-    if (!in.calib_out.write(cj.dump(2) + "\n", err) || !in.calib_out.commit(err)) return cdm::fail(CDM_ERR_IO, err);
+    // A file name that is not UTF-8 (JSON holds UTF-8 only) is shown with
+    // U+FFFD where its bad bytes were: a record of the source, never opened.
+    const std::string text = cj.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
+    if (!in.calib_out.write(text, err) || !in.calib_out.commit(err)) return cdm::fail(CDM_ERR_IO, err);
     return CDM_OK;
 }
 
 int return_json(const nlohmann::json &j, const char *fn, char **out) {
-    const std::string s = j.dump();
+    // The input's name, when it is not UTF-8, with U+FFFD for its bad bytes.
+    const std::string s = j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
     char *r = static_cast<char *>(std::malloc(s.size() + 1));
     if (!r) return cdm::fail(CDM_ERR_NO_MEM, std::string(fn) + ": out of memory");
     std::memcpy(r, s.c_str(), s.size() + 1);

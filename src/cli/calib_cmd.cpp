@@ -300,7 +300,7 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     nlohmann::json o;
     o["effects"] = effects;
     if (a.jig >= 0) o["jig_tolerance_mm"] = a.jig;
-    if (!a.calib_out.empty()) o["calibration_out"] = a.calib_out;
+    if (!a.calib_out.empty()) o["calibration_out"] = json_path("--out", a.calib_out);
     if (!fit_only && a.no_candidates) o["candidates"] = false;
     if (!fit_only && a.no_search) o["search"] = false;
     if (a.keep_outliers) o["outliers"] = false;
@@ -450,13 +450,13 @@ int cmd_simulate(const SimArgs &a) {
                         {"seed", a.seed},         {"effect_seed", a.effect_seed}};
     if (!a.heights.empty()) o["heights_mm"] = parse_number_list(a.heights, "--heights");
     if (!a.effects.empty()) o["effects"] = split_list(a.effects);
-    if (!a.device.empty()) o["device"] = a.device;
-    if (!a.truth.empty()) o["truth"] = a.truth;
+    if (!a.device.empty()) o["device"] = json_path("--device", a.device);
+    if (!a.truth.empty()) o["truth"] = json_path("--truth", a.truth);
     distinct_outputs({{"OUT", a.out}, {"--truth-out", a.truth_out}});
-    if (!a.truth_out.empty()) o["truth_out"] = a.truth_out;
+    if (!a.truth_out.empty()) o["truth_out"] = json_path("--truth-out", a.truth_out);
     if (!a.plan.empty()) {
         o["plan"] = read_plan_csv(a.plan, "--plan");
-        o["plan_file"] = a.plan; // an input: never written over
+        o["plan_file"] = json_path("--plan", a.plan); // an input: never written over
     }
     if (int rc = load_plugins(a.plugins); rc != kExitOk) return rc;
     if (int rc = cdm_simulate_jig_dataset(a.out.c_str(), o.dump().c_str()); rc != CDM_OK)

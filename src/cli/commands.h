@@ -54,6 +54,9 @@ constexpr double kMaxSeed = 9007199254740991.0; // 2^53 - 1
 
 // "30,40,50" -> {30,40,50}; throws UsageError naming `option` and the item.
 std::vector<double> parse_number_list(const std::string &text, const std::string &option);
+// `path`, for an options JSON of libcdm (UTF-8 only): throws UsageError
+// naming `option` when it is not valid UTF-8.
+const std::string &json_path(const std::string &option, const std::string &path);
 // Throws UsageError when two of a command's outputs ({option, path}; ""
 // skipped) are one file: the same directory (symbolic links resolved) and
 // name, or, existing, the same inode. The second would replace the first.

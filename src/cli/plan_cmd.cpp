@@ -85,7 +85,7 @@ int cmd_plan(const PlanArgs &a) {
                         {"pitch_mm", a.pitch},      {"noise_mm", a.noise},   {"jig_tolerance_mm", a.jig}};
     if (!a.heights.empty()) o["heights_mm"] = parse_number_list(a.heights, "--jig-heights");
     if (!a.effects.empty()) o["effects"] = split_list(a.effects);
-    if (!a.device.empty()) o["device"] = a.device;
+    if (!a.device.empty()) o["device"] = json_path("--device", a.device);
     if (!a.after.empty()) o["measured"] = read_plan_csv(a.after, "--after");
     char *res = nullptr;
     const bool shown = !a.quiet && isatty(2); // a bar, on a terminal only

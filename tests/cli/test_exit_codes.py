@@ -96,6 +96,28 @@ def test_two_outputs_on_one_file_are_refused(tmp_path, small_dataset, args):
     assert not list(tmp_path.iterdir())
 
 
+def test_file_names_that_are_not_utf8(tmp_path, small_dataset):
+    """A dataset named in Latin-1 is read (its name shown with U+FFFD in the
+    results); an output that libcdm must be told in JSON is refused, naming
+    the option."""
+    import shutil
+    data = os.fsencode(str(tmp_path)) + b"/caf\xe9.csv"
+    shutil.copyfile(small_dataset, data)
+    out = str(tmp_path / "cal.json")
+    r = cdm("calib", "fit", data, "--effects", "cable_gain", "--out", out, "--json", str(tmp_path / "fit.json"),
+            timeout=300, errors="replace")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "fit.json").read_text(encoding="utf-8"))["error_mm"]
+    assert json.loads((tmp_path / "cal.json").read_text(encoding="utf-8"))["effects"]
+    d = tmp_path / "d.json"
+    r = cdm("calib", "diagnose", data, "--quiet", "--no-candidates", "--json", str(d), timeout=300, errors="replace")
+    assert r.returncode == 0, r.stderr
+    assert "caf\ufffd.csv" in d.read_text(encoding="utf-8")
+    r = cdm("calib", "fit", str(small_dataset), "--effects", "cable_gain", "--out",
+            os.fsencode(str(tmp_path)) + b"/cal\xe9.json")
+    assert r.returncode == 2 and "--out" in r.stderr and "not UTF-8" in r.stderr, r.stderr
+
+
 def test_fit_without_effects_is_usage(tmp_path, small_dataset):
     r = cdm("calib", "fit", str(small_dataset), "--out", str(tmp_path / "c.json"))
     assert r.returncode == 2 and "--effects" in r.stderr

@@ -2,6 +2,7 @@
 // session, the jig placed anew. Thin: the logic is fit_calibration() with
 // FitCalibrationOptions::check, and the diagnosis's judge().
 #include <cmath>
+#include <cstdio>
 
 #include "api/errors.h"
 #include "api/jobs.h"
@@ -22,19 +23,31 @@ using cdm::diag::Acc;
 // The calibration's own figures from its "fit" block (what `cdm calib fit`
 // wrote): the data it was fitted on and its per-sample error; null when
 // the file has none.
-json fitted_on(const cdm::io::JsonValue &cal) {
+// What the calibration's own fit says of itself (its data, its RMS per
+// axis): shown beside the check, so checked as everything shown is. An RMS
+// that is no number of mm in [0, 1000] is refused at its line and column.
+bool fitted_on(const cdm::io::JsonValue &cal, const std::string &source, json &out, std::string &err) {
+    out = nullptr;
     const auto *fit = cal.find("fit");
-    if (!fit || fit->type != cdm::io::JsonValue::Object) return nullptr;
-    json out = json::object();
+    if (!fit || fit->type != cdm::io::JsonValue::Object) return true;
+    out = json::object();
     if (const auto *d = fit->find("data"); d && d->type == cdm::io::JsonValue::String) out["data"] = d->str;
-    if (const auto *e = fit->find("error_mm"); e && e->type == cdm::io::JsonValue::Object) {
-        for (const char *axis : {"x", "y", "z"}) {
-            const auto *a = e->find(axis);
-            const auto *r = a ? a->find("rms") : nullptr;
-            if (r && r->type == cdm::io::JsonValue::Number) out["error_mm"][axis]["rms"] = r->number;
+    const auto *e = fit->find("error_mm");
+    if (!e || e->type != cdm::io::JsonValue::Object) return true;
+    for (const char *axis : {"x", "y", "z"}) {
+        const auto *a = e->find(axis);
+        const auto *r = a ? a->find("rms") : nullptr;
+        if (!r) continue;
+        if (r->type != cdm::io::JsonValue::Number || !(r->number >= 0 && r->number <= 1000)) {
+            char got[32] = "";
+            if (r->type == cdm::io::JsonValue::Number) std::snprintf(got, sizeof got, "%g", r->number);
+            err = cdm::io::where(source, *r) + "fit.error_mm." + axis + ".rms must be an RMS in mm (0 to 1000), got " +
+                  (r->type == cdm::io::JsonValue::Number ? std::string(got) : std::string(r->type_name()));
+            return false;
         }
+        out["error_mm"][axis]["rms"] = r->number;
     }
-    return out;
+    return true;
 }
 
 // The jig's placement as fitted here: the Jig-stage effects' values and
@@ -208,7 +221,7 @@ std::string check_words(const cdm::diag::Verdict &v, size_t failing) {
            "an effect this session shows (`cdm calib diagnose` on this data says which)";
 }
 
-json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const cdm::io::JsonValue &cal,
+json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const json &fitted,
                  const cdm::Model &calibration, const Eigen::MatrixXd &cov, double max_error_mm) {
     // n_free: the jig's placement fitted here (the judge takes the fixture
     // heights' offsets out itself, at their degrees of freedom)
@@ -226,7 +239,7 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
             {"error_mm", cdm::diag::stats3(cf.fitted.err)},
             {"position_error_mm", position_error(cf.fitted)},
             {"nominal_error_mm", cdm::diag::stats3(cf.nominal.err)},
-            {"calibration_fit", fitted_on(cal)},
+            {"calibration_fit", fitted},
             {"failing", failing_json(cf, data, v, max_error_mm)},
             {"predicted", predicted_json(cf, calibration, cov, v)},
             {"model_check",
@@ -269,6 +282,8 @@ extern "C" int cdm_check(const char *data_csv_path, const char *calibration_json
             whole["fit"].contains("covariance") && !whole["fit"]["covariance"].is_null() &&
             !cdm::diag::covariance_from_json(whole["fit"]["covariance"], calibration, cov, err))
             return cdm::fail(CDM_ERR_PARSE, std::string(calibration_json_path) + ": " + err);
+        json fitted;
+        if (!fitted_on(cal, calibration_json_path, fitted, err)) return cdm::fail(CDM_ERR_PARSE, err);
         cdm::api::JobInputs in;
         if (int rc = cdm::api::open_job_data(data_csv_path, calibration.geometry(), in)) return rc;
         cdm::FitCalibrationOptions opt;
@@ -279,6 +294,6 @@ extern "C" int cdm_check(const char *data_csv_path, const char *calibration_json
         cdm::CalibrationFit cf(calibration.geometry());
         if (!cdm::fit_calibration(in.data, calibration.geometry(), opt, cf, err))
             return cdm::fail(CDM_ERR_INVALID_ARG, err);
-        return cdm::api::return_json(result_json(cf, in.data, cal, calibration, cov, a.max_error_mm), "cdm_check", result_json_out);
+        return cdm::api::return_json(result_json(cf, in.data, fitted, calibration, cov, a.max_error_mm), "cdm_check", result_json_out);
     });
 }

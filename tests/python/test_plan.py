@@ -264,3 +264,21 @@ def test_a_planned_tenth_beats_random_and_regular_tenths(tmp_path):
     planned = true_error("planned")
     others = {name: true_error(name) for name in subsets}
     assert all(planned < v for v in others.values()), (planned, others)
+
+
+def test_python_plan_arguments_are_checked_not_truncated():
+    """Counts are whole numbers (2.5 or True is refused, not truncated), a
+    NaN is named, and effects may be one comma-separated string as the
+    `cdm` command takes them."""
+    for kw in ({"positions": 2.5}, {"positions": True}, {"positions": 4, "holes": 3.9}, {"positions": 4, "samples": "5"}):
+        with pytest.raises(TypeError, match="whole number"):
+            cdm.plan(**{"holes": 5, "heights_mm": [50, 60], **kw})
+    with pytest.raises(ValueError, match="pitch_mm is nan"):
+        cdm.plan(4, holes=5, heights_mm=[50, 60], pitch_mm=float("nan"))
+    with pytest.raises(ValueError, match=r"measured\[0\]\[1\] is inf"):
+        cdm.plan(4, holes=5, heights_mm=[50, 60], measured=[[50, float("inf"), 0]])
+    with pytest.raises(TypeError, match="heights_mm must be numbers"):
+        cdm.plan(4, holes=5, heights_mm="50,60")
+    a = cdm.plan(6, holes=5, heights_mm=[50, 60], effects="exit_pulley,cable_gain", samples=10)
+    b = cdm.plan(6.0, holes=5, heights_mm=[50, 60], effects=["exit_pulley", "cable_gain"], samples=10)
+    assert a["positions"] == b["positions"] and len(a["positions"]) == 6

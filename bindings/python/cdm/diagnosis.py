@@ -22,6 +22,40 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, numbers.Real) and not isinstance(v, bool)
 
 
+def _whole(name: str, v: Any) -> int:
+    """`v` as an int when it is a whole number (2 or 2.0; not True, 2.5 or
+    "2"): a count the library takes as an integer is never truncated."""
+    if isinstance(v, numbers.Integral) and not isinstance(v, bool):
+        return int(v)
+    if _is_number(v) and float(v).is_integer():
+        return int(v)
+    raise TypeError(f"{name} must be a whole number, not {v!r}")
+
+
+def _effect_names(effects: Union[str, Iterable[str]]) -> List[str]:
+    """A list of names, or one string of comma-separated names as the `cdm`
+    command takes them ("exit_pulley,cable_gain")."""
+    if isinstance(effects, str):
+        return [e for e in effects.split(",") if e]
+    return list(effects)
+
+
+def _finite_json(o: Dict[str, Any], function: str) -> bytes:
+    """Options as JSON; a NaN or infinity anywhere is refused naming its key
+    (JSON has none, and the library would only say the text is not JSON)."""
+    def walk(v: Any, where: str) -> None:
+        if isinstance(v, float) and not float("-inf") < v < float("inf"):
+            raise ValueError(f"{function}: {where} is {v!r}, not a finite number")
+        if isinstance(v, dict):
+            for k, x in v.items():
+                walk(x, f"{where}.{k}" if where else str(k))
+        elif isinstance(v, (list, tuple)):
+            for i, x in enumerate(v):
+                walk(x, f"{where}[{i}]")
+    walk(o, "")
+    return json.dumps(o).encode("utf-8")
+
+
 PathLike = Union[str, "os.PathLike[str]"]
 Progress = Callable[[str, float], Any]
 
@@ -182,17 +216,19 @@ def plan(positions: int, samples: int = 100, holes: int = 25, pitch_mm: float = 
     the catalogue; **options: noise_mm, jig_tolerance_mm, alpha, power,
     measured (positions measured already: the plan goes on from them) and
     allowed (the only positions it may choose), each a list of [x, y, z]."""
-    o: Dict[str, Any] = {"positions": int(positions), "samples": int(samples), "holes": int(holes),
-                         "pitch_mm": float(pitch_mm), **options}
+    o: Dict[str, Any] = {"positions": _whole("positions", positions), "samples": _whole("samples", samples),
+                         "holes": _whole("holes", holes), "pitch_mm": float(pitch_mm), **options}
     if heights_mm is not None:
+        if isinstance(heights_mm, (str, bytes)):
+            raise TypeError(f"heights_mm must be numbers (mm), e.g. [30, 40, 50], not {heights_mm!r}")
         o["heights_mm"] = [float(h) for h in heights_mm]
     if effects is not None:
-        o["effects"] = [effects] if isinstance(effects, str) else list(effects)
+        o["effects"] = _effect_names(effects)
     if device_json is not None:
         o["device"] = os.fspath(device_json)
     L = _native.lib()
     out = ctypes.c_void_p()
-    rc: int = L.cdm_plan(json.dumps(o).encode("utf-8"), _native.cdm_progress_fn(), None, ctypes.byref(out))
+    rc: int = L.cdm_plan(_finite_json(o, "cdm.plan"), _native.cdm_progress_fn(), None, ctypes.byref(out))
     if rc < 0:
         raise _native.fail(rc, "cdm_plan")
     try:
@@ -209,12 +245,10 @@ def _run(fn: str, data_csv: PathLike, device_json: PathLike, effects: Optional[U
          jig_tolerance_mm: Optional[float], progress: Optional[Progress], options: Dict[str, Any],
          second: str = "device path") -> Dict[str, Any]:
     if effects is not None:
-        if isinstance(effects, str):
-            effects = [effects]
-        options["effects"] = list(effects)
+        options["effects"] = _effect_names(effects)
     if jig_tolerance_mm is not None:
         options["jig_tolerance_mm"] = float(jig_tolerance_mm)
-    options_json = json.dumps(options).encode("utf-8") if options else None
+    options_json = _finite_json(options, fn) if options else None
 
     # Ctrl-C cancels a long run: while the library works, SIGINT (in the
     # main thread, with Python's default handler) only sets a flag; the

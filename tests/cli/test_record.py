@@ -160,3 +160,22 @@ def test_jig_record_writes_acquisition_time(tmp_path):
     # and the library reads it back
     r = cdm("calib", "fit", str(out), "--effects", "cable_offset", "--out", str(tmp_path / "c.json"))
     assert r.returncode == 0, r.stderr
+
+
+def test_a_pot_at_its_rail_is_no_length(tmp_path):
+    """A position beyond the pots' range (a 1 m hole on a 150 mm frame): the
+    ADC sits at its ceiling, which measures no length. Its samples are left
+    out and the position is named, never written as data; the reachable
+    position is kept whole."""
+    plan = tmp_path / "plan.csv"
+    plan.write_text("x_ref,y_ref,z_ref,samples\n50,0,0,5\n50,1000,1000,5\n")
+    out = tmp_path / "jig.csv"
+    uri = f"sim:?motion=jig&jig_n=3&jig_pitch=1000&jig_heights=50&jig_samples=5&realtime=0&jig_plan={plan}"
+    r = cdm("record", uri, str(out), "--jig", "--plan", str(plan), "--json")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout)
+    assert summary["positions"] == 1 and summary["of"] == 2 and summary["samples"] == 5
+    assert summary["rail_samples"] == 5 and summary["rail_positions"] == [[50, 1000, 1000]]
+    assert "a pot at its ADC's rail (0 or 65535 counts)" in r.stderr
+    rows = out.read_text().splitlines()[1:]
+    assert len(rows) == 5 and all(r.split(",")[1:4] == ["50.0000", "0.0000", "0.0000"] for r in rows)

@@ -3,6 +3,8 @@
 // FitCalibrationOptions::check, and the diagnosis's judge().
 #include <cmath>
 #include <cstdio>
+#include <string>
+#include <vector>
 
 #include "api/errors.h"
 #include "api/jobs.h"
@@ -221,6 +223,34 @@ std::string check_words(const cdm::diag::Verdict &v, size_t failing) {
            "an effect this session shows (`cdm calib diagnose` on this data says which)";
 }
 
+// The jig placement's parameters this session leaves undetermined: a
+// standard error past the parameter's typical size (the catalogue's), so
+// the data know it no better than one knows a jig before measuring; an
+// error of the calibration along it would be taken for the jig's.
+std::vector<std::string> undetermined_jig(const cdm::CalibrationFit &cf) {
+    std::vector<std::string> out;
+    for (size_t k = 0; k < cf.model.effect_count(); ++k) {
+        const auto &d = cf.model.effect_desc(k);
+        if (d.stage != cdm::Stage::Jig) continue;
+        for (size_t q = 0; q < d.params.size(); ++q) {
+            const auto &sd = cf.report.std;
+            const double s = (k < sd.size() && q < sd[k].size()) ? sd[k][q] : 0.0;
+            if (!(s <= d.params[q].scale))
+                out.push_back(d.params[q].name + " +-" + cdm::diag::fmt_num(s, 3) + " " + d.params[q].unit +
+                              " (typical " + cdm::diag::fmt_num(d.params[q].scale, 3) + ")");
+        }
+    }
+    return out;
+}
+
+std::string inconclusive_words(const std::vector<std::string> &undetermined) {
+    std::string list;
+    for (const auto &u : undetermined) list += (list.empty() ? "" : ", ") + u;
+    return "the check is inconclusive: this session does not determine the jig's placement (" + list +
+           "): an error of the calibration along it would be taken for the jig's; measure positions spread over "
+           "the plate, at two heights or more";
+}
+
 json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const json &fitted,
                  const cdm::Model &calibration, const Eigen::MatrixXd &cov, double max_error_mm) {
     // n_free: the jig's placement fitted here (the judge takes the fixture
@@ -232,8 +262,10 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
         if (cf.model.effect_desc(k).stage != cdm::Stage::Jig) names.push_back(cf.model.effect_name(k));
     size_t used = 0;
     for (char ok : cf.fitted.ok) used += ok != 0;
+    const std::vector<std::string> undetermined = undetermined_jig(cf);
     return {{"tool", "cdm calib check"},
             {"effects", names},
+            {"data", {{"path", data.path}, {"rows", data.rows}, {"ignored_columns", data.ignored_columns}}},
             {"positions", used},
             {"jig", jig_json(cf)},
             {"error_mm", cdm::diag::stats3(cf.fitted.err)},
@@ -243,14 +275,19 @@ json result_json(const cdm::CalibrationFit &cf, const cdm::Dataset &data, const 
             {"failing", failing_json(cf, data, v, max_error_mm)},
             {"predicted", predicted_json(cf, calibration, cov, v)},
             {"model_check",
-             {{"holds", v.explained},
+             {{"holds", v.explained && undetermined.empty()},
+              {"conclusive", undetermined.empty()},
+              {"jig_undetermined", undetermined},
               {"chi2_per_dof", v.chi2 / v.dof},
               {"chi2_p_value", v.chi2_p},
               {"chi2_scale", v.chi2_scale},
               {"structure", {{"statistic", v.moran_z}, {"p_value", v.moran_p}, {"variance_scale", v.moran_scale}}},
               {"test", "the diagnosis's: position chi-square against noise + jig tolerance and Moran's I of the "
                        "residual over the plate, each at p >= 1e-3"},
-              {"text", check_words(v, size_t(v.n_failing))}}},
+              {"text", undetermined.empty() ? check_words(v, size_t(v.n_failing))
+                                            : inconclusive_words(undetermined) + " (position chi2/dof " +
+                                                  cdm::diag::fmt_num(v.chi2 / v.dof, 2) + ", " +
+                                                  cdm::diag::fmt_p(v.chi2_p) + ")"}}},
             {"reading_noise_mm", cdm::diag::reading_noise_json(cf.reading)},
             {"glitches", cdm::glitches_json(data)}};
 }

@@ -47,7 +47,19 @@ void print_stats_row(const char *name, const nlohmann::json &s) {
     std::printf("\n");
 }
 
+// The dataset's columns the reader left out, said once (the file is read
+// all the same: docs/calibration.md, "Record a jig session").
+void print_ignored_columns(const nlohmann::json &r) {
+    const nlohmann::json none = nlohmann::json::array();
+    const auto &cols = r.contains("data") ? r["data"].value("ignored_columns", none) : none;
+    if (cols.empty()) return;
+    std::string names;
+    for (const auto &c : cols) names += (names.empty() ? "" : ", ") + c.get<std::string>();
+    std::printf("note: columns ignored (not point, x_ref, y_ref, z_ref, l1..l4, t_s): %s\n", names.c_str());
+}
+
 void print_summary(const nlohmann::json &r) {
+    print_ignored_columns(r);
     std::printf("\nPosition error (mm), estimate - reference, over every sample:\n");
     std::printf("  %-26s  %-34s  %-34s  %-34s\n", "", "x: mean ± std    rms     max", "y: mean ± std    rms     max",
                 "z: mean ± std    rms     max");
@@ -357,6 +369,7 @@ struct CheckArgs {
 void print_check(const CheckArgs &a, const nlohmann::json &r) {
     std::printf("checked %s on %s (%zu positions; %s)\n", a.calibration.c_str(), a.data.c_str(),
                 r["positions"].get<size_t>(), r["jig"]["text"].get<std::string>().c_str());
+    print_ignored_columns(r);
     std::printf("\nPosition error (mm), estimate - reference, over every sample:\n");
     std::printf("  %-26s  %-34s  %-34s  %-34s\n", "", "x: mean ± std    rms     max", "y: mean ± std    rms     max",
                 "z: mean ± std    rms     max");

@@ -85,6 +85,35 @@ def test_a_calibration_that_misses_an_effect_does_not_hold(sessions):
     assert r["position_error_mm"]["x"]["rms"] > good["position_error_mm"]["x"]["rms"]
 
 
+def test_a_session_that_leaves_the_jig_undetermined_is_inconclusive(sessions, tmp_path):
+    """Four positions on one line of one height: the jig's placement takes up
+    any error along what they leave free, so no verdict is drawn from them."""
+    lines = (sessions / "b.csv").read_text().splitlines()
+    points = []
+    for line in lines[1:]:
+        p = line.split(",")[0]
+        if p not in points:
+            points.append(p)
+    keep = set(points[:4])
+    few = tmp_path / "few.csv"
+    few.write_text("\n".join([lines[0]] + [l for l in lines[1:] if l.split(",")[0] in keep]) + "\n")
+    mc = cdm.check(few, sessions / "cal.json")["model_check"]
+    assert not mc["conclusive"] and not mc["holds"], mc
+    assert mc["text"].startswith("the check is inconclusive") and mc["jig_undetermined"]
+    full = cdm.check(sessions / "b.csv", sessions / "cal.json")["model_check"]
+    assert full["conclusive"] and not full["jig_undetermined"]
+
+
+def test_ignored_columns_are_said(sessions, tmp_path):
+    lines = (sessions / "b.csv").read_text().splitlines()
+    extra = tmp_path / "extra.csv"
+    extra.write_text("\n".join([lines[0] + ",operator"] + [l + ",jd" for l in lines[1:]]) + "\n")
+    assert cdm.check(extra, sessions / "cal.json")["data"]["ignored_columns"] == ["operator"]
+    r = subprocess.run([os.environ["CDM_CLI"], "calib", "check", os.fspath(extra), "--calibration",
+                        os.fspath(sessions / "cal.json"), "--quiet"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and "columns ignored" in r.stdout and "operator" in r.stdout, r.stderr
+
+
 def test_max_error_lists_the_positions_beyond_it(sessions):
     r = cdm.check(sessions / "b.csv", sessions / "wrong.json", max_error_mm=0.05)
     beyond = r["failing"]["beyond_max_error"]

@@ -10,6 +10,7 @@ import argparse
 import json
 import os
 import shutil
+import signal
 import sys
 import tempfile
 
@@ -178,6 +179,13 @@ def main(argv: Optional[List[str]] = None) -> int:
                          "positional files)")
     ap.add_argument("--out", required=True, metavar="DIR", help="report directory")
     args = ap.parse_args(argv)
+    # SIGTERM and SIGHUP (what `cdm` passes on when it is stopped) end the
+    # run as Ctrl-C does: through the writer's cleanup, which removes its
+    # temporary directory and leaves the earlier report as it was.
+    def stop(signum: int, _frame: Any) -> None:
+        raise SystemExit(128 + signum)
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, stop)
     runs = args.before + args.diagnosis
     try:
         written = write_report(runs, args.out)

@@ -233,6 +233,14 @@ def test_report_lists_its_json_and_keeps_the_users(tmp_path, small_dataset):
     r = cdm("calib", "check", str(small_dataset), "--calibration", str(cal), "--report", str(out))
     assert r.returncode == 2 and ".cdm-report does not list it" in r.stderr, r.stderr
     assert (out / "check.json").read_text() == "the user's own"
+    # A result of cdm's own by that name is what a report wrote there before
+    # its marker listed the JSON: replaced.
+    (out / "check.json").write_text(json.dumps({"tool": "cdm calib check"}))
+    r = cdm("calib", "check", str(small_dataset), "--calibration", str(cal), "--report", str(out), "--quiet",
+            timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "check.json" in (out / ".cdm-report").read_text().split()
+    assert "diagnosis.json" not in (out / ".cdm-report").read_text().split()
 
 
 def test_report_says_what_to_install(tmp_path, small_dataset):

@@ -971,9 +971,10 @@ CDM_API int cdm_effect_param(size_t i, size_t k, const char **name, const char *
 CDM_API int cdm_nominal_device_json(char **json);
 /**
  * since 1.2: a device description JSON file read and checked as
- * cdm_diagnose reads its device_json_path (unknown keys, ranges, a frame
- * that is no frame: CDM_ERR_INVALID_ARG, or CDM_ERR_IO, with
- * "file:line:col: ..." in cdm_thread_error()), given back as the device
+ * cdm_diagnose reads its device_json_path (a file that cannot be read:
+ * CDM_ERR_IO; unknown keys, ranges, a frame that is no frame:
+ * CDM_ERR_INVALID_ARG with "file:line:col: ..." in cdm_thread_error()),
+ * given back as the device
  * JSON text cdm_nominal_device_json gives (every field, defaults filled
  * in). Free it with cdm_free_string. Any thread.
  */

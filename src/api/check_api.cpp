@@ -22,12 +22,11 @@ namespace {
 using nlohmann::json;
 using cdm::diag::Acc;
 
-// The calibration's own figures from its "fit" block (what `cdm calib fit`
-// wrote): the data it was fitted on and its per-sample error; null when
-// the file has none.
-// What the calibration's own fit says of itself (its data, its RMS per
-// axis): shown beside the check, so checked as everything shown is. An RMS
-// that is no number of mm in [0, 1000] is refused at its line and column.
+// What the calibration's own fit says of itself (the "fit" block `cdm calib
+// fit` wrote: its data, its RMS per axis; null when the file has none):
+// shown beside the check, so checked as everything shown is. The RMS of
+// every axis or of none; each a number of mm in [0, 1000], else refused at
+// its line and column.
 bool fitted_on(const cdm::io::JsonValue &cal, const std::string &source, json &out, std::string &err) {
     out = nullptr;
     const auto *fit = cal.find("fit");
@@ -39,7 +38,11 @@ bool fitted_on(const cdm::io::JsonValue &cal, const std::string &source, json &o
     for (const char *axis : {"x", "y", "z"}) {
         const auto *a = e->find(axis);
         const auto *r = a ? a->find("rms") : nullptr;
-        if (!r) continue;
+        if (!r) {
+            err = cdm::io::where(source, a ? *a : *e) + "fit.error_mm." + axis +
+                  ".rms is missing (the fit block gives the RMS of x, y and z, or no error_mm)";
+            return false;
+        }
         if (r->type != cdm::io::JsonValue::Number || !(r->number >= 0 && r->number <= 1000)) {
             char got[32] = "";
             if (r->type == cdm::io::JsonValue::Number) std::snprintf(got, sizeof got, "%g", r->number);

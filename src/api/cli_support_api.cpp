@@ -19,6 +19,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include <unistd.h>
+
 #include "api/errors.h"
 #include "io/calibration_json.h"
 #include "io/device_json.h"
@@ -472,7 +474,9 @@ int cdm_device_file_read(const char *device_json_path, char **json) {
         if (!device_json_path) return null_arg("cdm_device_file_read", "device_json_path");
         cdm::DeviceGeometry g;
         std::string err;
-        if (!cdm::io::load_device_json(device_json_path, g, err)) return cdm::fail(CDM_ERR_INVALID_ARG, err);
+        if (!cdm::io::load_device_json(device_json_path, g, err))
+            // What could not be read is I/O; what was read and is wrong, the argument.
+            return cdm::fail(access(device_json_path, R_OK) != 0 ? CDM_ERR_IO : CDM_ERR_INVALID_ARG, err);
         return to_c_string(cdm::io::device_to_json(g).dump(2) + "\n", json);
     });
 }

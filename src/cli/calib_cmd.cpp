@@ -211,7 +211,9 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     if (fit_only && effects.empty())
         throw UsageError("calib fit: --effects is required (a comma-separated list, e.g. cable_offset,cable_gain; "
                          "`cdm calib effects` lists them): without effects the calibration would correct nothing");
-    distinct_outputs({{"--out", a.calib_out}, {"--json", a.json_out}});
+    const char *const cal_option = fit_only ? "--out" : "--calibration"; // where each names the calibration
+    distinct_outputs({{cal_option, a.calib_out}, {"--json", a.json_out}});
+    if (!a.calib_out.empty()) json_path(cal_option, a.calib_out);
     {
         std::vector<std::string> inputs = {a.data, a.device};
         inputs.insert(inputs.end(), a.before.begin(), a.before.end());
@@ -227,7 +229,7 @@ int cmd_diagnose(const DiagArgs &a, bool fit_only) {
     nlohmann::json o;
     o["effects"] = effects;
     if (a.jig >= 0) o["jig_tolerance_mm"] = a.jig;
-    if (!a.calib_out.empty()) o["calibration_out"] = json_path("--out", a.calib_out);
+    if (!a.calib_out.empty()) o["calibration_out"] = a.calib_out; // UTF-8: checked above
     if (!fit_only && a.no_candidates) o["candidates"] = false;
     if (!fit_only && a.no_search) o["search"] = false;
     if (a.keep_outliers) o["outliers"] = false;

@@ -101,7 +101,7 @@ int write_outputs(const std::string &json_out, const std::string &report, const 
         jp = report + "/" + name;
         if (!write_atomic(jp, r.dump() + "\n", inputs)) return kExitFailure;
     }
-    if (run_report(jp, before, report) != 0) return kExitFailure;
+    if (run_report(jp, before, report, json_out.empty()) != 0) return kExitFailure;
     std::printf("report: %s/index.html\n", report.c_str());
     return kExitOk;
 }

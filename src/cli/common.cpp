@@ -113,7 +113,7 @@ const std::string &json_path(const std::string &option, const std::string &path)
     try {
         (void)nlohmann::json(path).dump();
     } catch (const nlohmann::json::type_error &) {
-        throw UsageError(option + " " + nlohmann::json(path).dump(-1, ' ', true, nlohmann::json::error_handler_t::replace) +
+        throw UsageError(option + " " + nlohmann::json(path).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
                          ": the name is not UTF-8, and libcdm takes it inside JSON options (UTF-8 only); rename the "
                          "file, or give a link to it with a UTF-8 name");
     }

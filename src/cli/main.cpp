@@ -59,13 +59,23 @@ CLI::App *selected(CLI::App &app) {
 }
 
 // An option given an empty value ("--json ''", "--jig-heights ''") is a
-// usage error: taken as absent, it would silently mean the default.
+// usage error: taken as absent, it would silently mean the default. Except
+// where empty is a value the option documents: no effects (diagnose's and
+// simulate's default), ROS's empty frame id.
 void refuse_empty_values(CLI::App &app) {
+    static const char *const kEmptyAllowed[][2] = {
+        {"diagnose", "--effects"}, {"simulate", "--effects"}, {"bridge", "--frame-id"}};
     for (CLI::App *level = &app; level;) {
-        for (const CLI::Option *o : level->get_options())
-            for (const std::string &v : o->results())
-                if (v.empty() && o->get_expected_max() != 0)
-                    throw UsageError(o->get_name() + ": an empty value (leave the option out for its default)");
+        for (const CLI::Option *o : level->get_options()) {
+            bool allowed = false;
+            for (const auto &a : kEmptyAllowed) allowed = allowed || (level->get_name() == a[0] && o->get_name() == a[1]);
+            for (const std::string &v : o->results()) {
+                if (!v.empty() || o->get_expected_max() == 0 || allowed) continue;
+                if (o->get_positional())
+                    throw UsageError(o->get_name() + ": an empty argument (a name is needed)");
+                throw UsageError(o->get_name() + ": an empty value (leave the option out for its default)");
+            }
+        }
         auto subs = level->get_subcommands();
         level = subs.empty() ? nullptr : subs.front();
     }

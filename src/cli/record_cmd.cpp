@@ -76,7 +76,7 @@ void record_sample(void *user, const cdm_sample *s) {
         if (!c->write_failed) after_write(*c, cdm_recorder_write_sample(c->rec, s));
         return;
     }
-    jig_sample(*c, s);
+    jig_sample(*c, *s->raw);
 }
 
 // The replay header: the device's own info report, byte for byte, so a
@@ -242,19 +242,19 @@ int cmd_record(const std::string &uri, const std::string &file, double seconds, 
         cdm_jig_plan_free(ctx.plan);
         return report_error("open " + uri, rc);
     }
-    if (ja.jig) { // the ADC's ceiling, for the rails (samples before this use 16 bits')
-        cdm_device_info info{};
-        info.struct_size = sizeof info;
-        std::lock_guard<std::mutex> lock(ctx.mu);
-        if (cdm_get_info(dev, &info) == CDM_OK && info.adc_bits >= 1 && info.adc_bits <= 16)
-            ctx.adc_max = uint16_t((1u << info.adc_bits) - 1u);
-    }
     if (ctx.live && !start_live(dev, ja, ctx)) {
         ctx.live->finish();
         cdm_close(dev);
         cdm_dataset_writer_free(ctx.csv); // removes its temporary
         cdm_jig_plan_free(ctx.plan);
         return kExitUsage;
+    }
+    if (ja.jig) { // the device's ADC full scale, then the samples held for it (after start_live: see jig_start)
+        cdm_device_info info{};
+        info.struct_size = sizeof info;
+        const uint32_t bits = cdm_get_info(dev, &info) == CDM_OK ? info.adc_bits : 16;
+        std::lock_guard<std::mutex> lock(ctx.mu);
+        jig_start(ctx, bits);
     }
     record_loop(dev, ctx, seconds, ja.jig);
     cdm_stats st{};
@@ -308,8 +308,9 @@ void add_record_command(CLI::App &app) {
     record->add_flag("--json", r_json,
                      "print the summary as one JSON object: file, format, samples, rejected (the reports the "
                      "reader discarded that the file keeps: none in a CSV) and the device's counters (stats); with "
-                     "--jig: file, positions, of, samples, reports, short_dwells, stats and live (the live "
-                     "analysis's updates, or null)");
+                     "--jig: file, positions (in the file), of, samples, reports, short_dwells, stats, "
+                     "rail_samples and rail_positions (samples with a pot at full scale, left out; positions with "
+                     "every sample so) and live (the live analysis's updates, or null)");
     record->callback([] {
         select_command([] {
             if (int rc = load_plugins(r_plugins); rc != kExitOk) return rc;

@@ -52,7 +52,8 @@ void close_dwell(RecordCtx &c) {
         after_write(c, rc);
     }
     c.rail_samples += rail;
-    if (!kept && rail) c.rail_positions.push_back(c.next_point);
+    if (rail && rail == c.dwell.size()) c.rail_positions.push_back(c.next_point);
+    if (kept) ++c.positions_in_file;
     c.dwell.resize(kept), c.dwell_t.resize(kept);
     if (c.live && !c.write_failed && kept && c.live->add(c.next_point, point, ref, c.dwell, c.dwell_t))
         c.live_stopped = c.done = true;
@@ -64,9 +65,22 @@ void close_dwell(RecordCtx &c) {
 
 } // namespace
 
-void jig_sample(RecordCtx &c, const cdm_sample *s) {
+void jig_start(RecordCtx &c, uint32_t adc_bits) {
+    c.adc_full_scale = adc_bits >= 1 && adc_bits <= 16 ? (1u << adc_bits) - 1u : 0xFFFFu;
+    c.jig_ready = true;
+    for (const cdm_raw &r : c.jig_pending) jig_sample(c, r);
+    c.jig_pending.clear();
+    c.jig_pending.shrink_to_fit();
+}
+
+void jig_sample(RecordCtx &c, const cdm_raw &r) {
+    if (!c.jig_ready) {
+        c.jig_pending.push_back(r);
+        return;
+    }
+    const cdm_raw *raw = &r;
     if (c.done) return;
-    if (s->raw->buttons & CDM_BUTTON_MARK) {
+    if (raw->buttons & CDM_BUTTON_MARK) {
         if (!c.in_dwell) {
             c.in_dwell = true;
             c.dwell.clear();
@@ -75,17 +89,17 @@ void jig_sample(RecordCtx &c, const cdm_sample *s) {
         }
         if (!c.have_t0) {
             c.have_t0 = true;
-            c.t0_us = s->raw->device_time_us;
+            c.t0_us = raw->device_time_us;
         }
         if (c.dwell.size() < size_t(cdm_jig_plan_samples_at(c.plan, c.next_point))) {
-            c.dwell.push_back({s->raw->lengths_mm[0], s->raw->lengths_mm[1], s->raw->lengths_mm[2],
-                                s->raw->lengths_mm[3]});
+            c.dwell.push_back({raw->lengths_mm[0], raw->lengths_mm[1], raw->lengths_mm[2],
+                                raw->lengths_mm[3]});
             bool rail = false;
-            for (uint16_t a : s->raw->pot_adc) rail = rail || a == 0 || a >= c.adc_max;
+            for (uint16_t a : raw->pot_adc) rail = rail || a >= c.adc_full_scale;
             c.dwell_rail.push_back(rail);
             // The device's own clock: acquisition time however fast the
             // recording is replayed (realtime=0).
-            c.dwell_t.push_back(double(int64_t(s->raw->device_time_us - c.t0_us)) * 1e-6);
+            c.dwell_t.push_back(double(int64_t(raw->device_time_us - c.t0_us)) * 1e-6);
         }
     } else if (c.in_dwell) {
         close_dwell(c);
@@ -131,6 +145,13 @@ int finish_jig(RecordCtx &ctx, const std::string &file, const cdm_stats &st, boo
         print_live(ctx.live->take_messages(), false);
         ctx.live_stopped = live.value("stopped", false); // what the summary says, and the exit status
     }
+    if (ctx.rail_samples) // first: it may be why nothing can be committed
+        std::fprintf(stderr,
+                     "cdm: record: warning: %llu samples left out: a pot at its ADC's full scale (%u counts) reads "
+                     "a clipped count, not a length; %zu position%s had every sample so and %s not in the file%s\n",
+                     (unsigned long long)ctx.rail_samples, unsigned(ctx.adc_full_scale), ctx.rail_positions.size(),
+                     ctx.rail_positions.size() == 1 ? "" : "s", ctx.rail_positions.size() == 1 ? "is" : "are",
+                     ctx.rail_positions.empty() ? "" : " (beyond the pots' range: `cdm record --json` lists them)");
     std::string err = ctx.write_err;
     const bool ok = err.empty() && cdm_dataset_writer_commit(ctx.csv) == CDM_OK;
     if (!ok && err.empty()) err = cdm_thread_error();
@@ -143,13 +164,7 @@ int finish_jig(RecordCtx &ctx, const std::string &file, const cdm_stats &st, boo
     if (ctx.refused_samples)
         std::fprintf(stderr, "cdm: record: %llu samples left out: the file could not hold them (first: %s)\n",
                      (unsigned long long)ctx.refused_samples, ctx.first_refusal.c_str());
-    const size_t in_file = ctx.next_point - ctx.rail_positions.size();
-    if (ctx.rail_samples)
-        std::fprintf(stderr,
-                     "cdm: record: warning: %llu samples left out: a pot at its ADC's rail (0 or %u counts) "
-                     "measures no length; %zu positions had no other sample and are not in the file%s\n",
-                     (unsigned long long)ctx.rail_samples, unsigned(ctx.adc_max), ctx.rail_positions.size(),
-                     ctx.rail_positions.empty() ? "" : " (out of the pots' range: `cdm record --json` lists them)");
+    const size_t in_file = ctx.positions_in_file;
     if (json) {
         nlohmann::json rail = nlohmann::json::array();
         for (size_t i : ctx.rail_positions) {

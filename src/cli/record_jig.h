@@ -54,13 +54,18 @@ struct RecordCtx {
     bool in_dwell = false;
     std::vector<std::array<double, 4>> dwell;
     std::vector<double> dwell_t;     // each sample's device time since the first sample (s): the t_s column
-    // A pot at its ADC's rail (0 or the ceiling) measures no length: such
-    // samples are counted and left out; a position with no other sample is
-    // skipped (out of the pots' range), never written as data.
+    // A pot at its ADC's full scale reads a clipped count, not a length
+    // (libcdm's rule: no position from it): such samples are counted and
+    // left out; a position with every sample so is skipped (beyond the
+    // pots' range), never written as data. The full scale is the device's:
+    // samples wait in jig_pending until jig_start() has read it.
     std::vector<uint8_t> dwell_rail;
-    uint16_t adc_max = 0xFFFF; // the device's, once its info is read
+    bool jig_ready = false;
+    std::vector<cdm_raw> jig_pending;
+    uint32_t adc_full_scale = 0;
     uint64_t rail_samples = 0;
-    std::vector<size_t> rail_positions; // skipped: every sample at a rail
+    std::vector<size_t> rail_positions; // skipped: every sample at full scale
+    size_t positions_in_file = 0;
     bool have_t0 = false;
     uint64_t t0_us = 0;
     uint64_t short_dwells = 0;
@@ -82,8 +87,14 @@ struct RecordCtx {
 // A write's outcome: a refused sample is counted, a failure ends the session.
 void after_write(RecordCtx &c, int rc);
 // A sample of a jig session: kept while MARK is held, the dwell closed when
-// it is released (the reader's thread, under c.mu).
-void jig_sample(RecordCtx &c, const cdm_sample *s);
+// it is released (the reader's thread, under c.mu); held in jig_pending
+// until jig_start().
+void jig_sample(RecordCtx &c, const cdm_raw &r);
+// The device's ADC full scale known (from its info, after the open and
+// after start_live): the samples held so far are taken, in order. Under
+// c.mu; on an unpaced source it may wait for the live analysis's updates,
+// which never take c.mu.
+void jig_start(RecordCtx &c, uint32_t adc_bits);
 // The live analysis's lines, each on its own line.
 void print_live(const std::vector<std::string> &lines, bool tty);
 // The plan and the dataset writer (and the analysis with --live).

@@ -9,7 +9,6 @@
 #include <unistd.h>
 
 #include <cerrno>
-#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -24,17 +23,6 @@ extern char **environ;
 namespace cdm::cli {
 
 namespace {
-
-// A stop signal (SIGINT, SIGTERM, SIGHUP) sent to `cdm` alone while the
-// report's child runs is passed on to it: the report is not left drawing
-// into the directory after the command that started it has gone. The
-// command then dies of the same signal, as it would have without a child.
-volatile std::sig_atomic_t g_child = 0;
-volatile std::sig_atomic_t g_signal = 0;
-void forward(int sig) {
-    g_signal = sig;
-    if (g_child > 0) kill(pid_t(g_child), sig);
-}
 
 // Spawns argv with environ plus `extra` (NAME=value entries, replacing any
 // same-named entry); returns the exit status, or -1 with errno when the
@@ -58,27 +46,14 @@ int spawn_wait(const std::vector<std::string> &args, const std::vector<std::stri
     std::fflush(stdout);
     std::fflush(stderr);
     pid_t pid = 0;
-    struct sigaction fwd {}, old[3];
-    fwd.sa_handler = forward;
-    sigemptyset(&fwd.sa_mask);
-    const int sigs[3] = {SIGINT, SIGTERM, SIGHUP};
-    g_signal = 0;
-    for (int k = 0; k < 3; ++k) sigaction(sigs[k], &fwd, &old[k]);
     const int rc = posix_spawnp(&pid, argv[0], nullptr, nullptr, argv.data(), envp.data());
-    g_child = rc == 0 ? pid : 0;
-    if (rc == 0 && g_signal) kill(pid, g_signal); // arrived between the spawn and the line above
-    int status = 0;
-    int waited = rc == 0 ? 0 : -1;
-    while (rc == 0 && (waited = waitpid(pid, &status, 0)) < 0 && errno == EINTR) {
-    }
-    g_child = 0;
-    for (int k = 0; k < 3; ++k) sigaction(sigs[k], &old[k], nullptr);
-    if (g_signal) raise(g_signal); // our own disposition now: the default ends the command
     if (rc != 0) {
         errno = rc;
         return -1;
     }
-    if (waited < 0) return -1;
+    int status = 0;
+    while (waitpid(pid, &status, 0) < 0)
+        if (errno != EINTR) return -1;
     return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
 }
 
@@ -122,7 +97,8 @@ std::vector<std::string> package_dirs() {
 
 } // namespace
 
-int run_report(const std::string &json_path, const std::vector<std::string> &before, const std::string &dir) {
+int run_report(const std::string &json_path, const std::vector<std::string> &before, const std::string &dir,
+               bool claim) {
     const char *env_py = std::getenv("PYTHON");
     const std::string py = env_py && *env_py ? env_py : "python3";
     std::vector<std::string> env;
@@ -153,6 +129,7 @@ int run_report(const std::string &json_path, const std::vector<std::string> &bef
     std::vector<std::string> args{py, "-m", "cdm.report"};
     for (const std::string &b : before) args.push_back(path_arg(b));
     args.insert(args.end(), {path_arg(json_path), "--out", path_arg(dir)});
+    if (claim) args.push_back("--claim");
     const int rc = spawn_wait(args, env);
     if (rc != 0) {
         std::fprintf(stderr, "cdm: --report: %s -m cdm.report failed (exit status %d)\n", py.c_str(), rc);

@@ -176,6 +176,6 @@ def test_a_pot_at_its_rail_is_no_length(tmp_path):
     summary = json.loads(r.stdout)
     assert summary["positions"] == 1 and summary["of"] == 2 and summary["samples"] == 5
     assert summary["rail_samples"] == 5 and summary["rail_positions"] == [[50, 1000, 1000]]
-    assert "a pot at its ADC's rail (0 or 65535 counts)" in r.stderr
+    assert "a pot at its ADC's full scale (65535 counts)" in r.stderr
     rows = out.read_text().splitlines()[1:]
     assert len(rows) == 5 and all(r.split(",")[1:4] == ["50.0000", "0.0000", "0.0000"] for r in rows)

@@ -154,9 +154,12 @@ def test_bad_options_and_files_are_named(sessions, tmp_path):
     assert rc == CDM_ERR_PARSE and "no_such_effect" in err
     # What the calibration's fit says of itself is shown beside the check:
     # an RMS that is no number of mm is refused, not printed.
-    for rms, words in [(1e308, "got 1e+308"), (-1, "got -1"), ("0.1", "got a string")]:
+    for rms, words in [(1e308, "got 1e+308"), (-1, "got -1"), ("0.1", "got a string"), (None, "is missing")]:
         edited = json.loads((sessions / "cal.json").read_text())
-        edited["fit"]["error_mm"]["y"]["rms"] = rms
+        if rms is None:
+            del edited["fit"]["error_mm"]["y"]["rms"]
+        else:
+            edited["fit"]["error_mm"]["y"]["rms"] = rms
         (tmp_path / "edited.json").write_text(json.dumps(edited, indent=1))
         rc, err = _check(sessions / "b.csv", tmp_path / "edited.json", None)
         assert rc == CDM_ERR_PARSE and "edited.json:" in err and "fit.error_mm.y.rms" in err and words in err, err

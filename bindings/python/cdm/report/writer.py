@@ -10,7 +10,6 @@ import argparse
 import json
 import os
 import shutil
-import signal
 import sys
 import tempfile
 
@@ -109,13 +108,16 @@ def _as_check(items: Sequence[Run]) -> Optional[Tuple[str, Dict[str, Any]]]:
     return (os.fspath(item), d) if is_check(d) else None
 
 
-def write_report(runs: Union[Run, Sequence[Run]], out: Union[str, "os.PathLike[str]"]) -> List[str]:
+def write_report(runs: Union[Run, Sequence[Run]], out: Union[str, "os.PathLike[str]"],
+                 claim: bool = False) -> List[str]:
     """Write the report on runs[-1], comparing it with the earlier runs[:-1].
 
     Each run is a diagnosis JSON path or a loaded diagnosis dict; a single
     `cdm calib check` result (its "tool") gets the check's page instead. Raises
     DiagnosisError (naming the file) before writing anything if one is unusable.
-    Returns the paths written (figures, then index.html).
+    Returns the paths written (figures, then index.html). `claim`: the last
+    run is a JSON the caller wrote into `out` for this report, listed as
+    the report's own (`cdm calib ... --report DIR` without --json).
     """
     items: Sequence[Run] = [runs] if isinstance(runs, (str, os.PathLike, dict)) else runs
     inputs = [r for r in items if isinstance(r, (str, os.PathLike))]
@@ -136,11 +138,11 @@ def write_report(runs: Union[Run, Sequence[Run]], out: Union[str, "os.PathLike[s
         doc, figs = render(tmp)
         with open(os.path.join(tmp, "index.html"), "w", encoding="utf-8") as f:
             f.write(doc)
-        # The JSON reported on, where `cdm calib diagnose/check --report`
-        # wrote it into `out`, is the report's file too: listed, kept (an
-        # earlier run compared with is the user's, never claimed).
+        # With `claim` (`cdm calib diagnose/check --report` wrote the JSON
+        # reported on into `out` itself), that JSON is the report's file
+        # too: listed, kept. A file the user named (--json) is never claimed.
         last = items[-1]
-        own_inputs = {os.path.basename(last)} if isinstance(last, (str, os.PathLike)) and os.path.realpath(
+        own_inputs = {os.path.basename(last)} if claim and isinstance(last, (str, os.PathLike)) and os.path.realpath(
             os.path.dirname(os.path.abspath(last))) == os.path.realpath(out) else set()
         new = set(figs + ["index.html"]) | own_inputs
         # The claim first covers both reports' files (a stop half-way leaves
@@ -178,17 +180,13 @@ def main(argv: Optional[List[str]] = None) -> int:
                     help="an earlier run to compare with (repeatable; comes before the "
                          "positional files)")
     ap.add_argument("--out", required=True, metavar="DIR", help="report directory")
+    ap.add_argument("--claim", action="store_true",
+                    help="the last DIAG.json was written into DIR for this report (by `cdm calib ... --report`): "
+                         "list it as the report's own")
     args = ap.parse_args(argv)
-    # SIGTERM and SIGHUP (what `cdm` passes on when it is stopped) end the
-    # run as Ctrl-C does: through the writer's cleanup, which removes its
-    # temporary directory and leaves the earlier report as it was.
-    def stop(signum: int, _frame: Any) -> None:
-        raise SystemExit(128 + signum)
-    for sig in (signal.SIGTERM, signal.SIGHUP):
-        signal.signal(sig, stop)
     runs = args.before + args.diagnosis
     try:
-        written = write_report(runs, args.out)
+        written = write_report(runs, args.out, claim=args.claim)
     except (DiagnosisError, ReportDirError) as e:
         print(f"cdm.report: error: {e}", file=sys.stderr)
         return 2

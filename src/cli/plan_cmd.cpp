@@ -56,9 +56,10 @@ void print_plan(const PlanArgs &a, const nlohmann::json &r) {
                 "with every position (x%.2f)\n",
                 s["plan"].get<double>(), s["whole_plate"].get<double>(),
                 s["plan"].get<double>() / s["whole_plate"].get<double>());
-    std::printf("each effect's test against the nominal model at its typical size (power at alpha %s; %d positions "
+    const int picks = r["design"]["detectability_picks"].get<int>();
+    std::printf("each effect's test against the nominal model at its typical size (power at alpha %s; %d position%s "
                 "chosen for it first):\n",
-                num(r["alpha"].get<double>()).c_str(), r["design"]["detectability_picks"].get<int>());
+                num(r["alpha"].get<double>()).c_str(), picks, picks == 1 ? "" : "s");
     for (const auto &e : r["detectability"])
         std::printf("  %-20s power %.3f (whole plate %.3f)%s\n", e["effect"].get<std::string>().c_str(),
                     e["power"].get<double>(), e["power_whole_plate"].get<double>(),

@@ -54,7 +54,10 @@ void test_decimal_reads_exact_values(void **) {
     reads("5.", 5.0);
     reads(".5", 0.5);
     reads("-.5", -0.5);
-    assert_true(std::signbit([] { double v = 1; cdm::io::parse_decimal("-0", "-0" + 2, v); return v; }()));
+    const std::string minus_zero = "-0";
+    double v = 1;
+    assert_true(cdm::io::parse_decimal(minus_zero.data(), minus_zero.data() + minus_zero.size(), v));
+    assert_true(std::signbit(v));
 }
 
 // A field is read whole or refused: no sign but '-', no space, no trailing

@@ -72,13 +72,11 @@ void check_outputs_first(const std::string &json_out, const std::string &report,
     if (!S_ISDIR(st.st_mode)) throw UsageError("--report " + report + " exists and is not a directory");
     if (const std::string why = report_dir_refusal(report, name); !why.empty()) throw UsageError("--report: " + why);
     const std::string jp = report + "/" + name;
-    struct stat in {};
-    if (stat(jp.c_str(), &st) == 0)
-        for (const auto &p : inputs)
-            if (stat(p.c_str(), &in) == 0 && in.st_dev == st.st_dev && in.st_ino == st.st_ino)
-                throw UsageError("--report: " + jp + " is the input " + p +
-                                 " of this command, which the report would replace: give --json a path, or copy it "
-                                 "elsewhere first");
+    for (const auto &p : inputs)
+        if (same_file(p, jp))
+            throw UsageError("--report: " + jp + " is the input " + p +
+                             " of this command, which the report would replace: give --json a path, or copy it "
+                             "elsewhere first");
 }
 
 // The result's JSON (--json) and HTML report (--report DIR, drawn from the

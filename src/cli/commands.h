@@ -57,6 +57,9 @@ std::vector<double> parse_number_list(const std::string &text, const std::string
 // `path`, for an options JSON of libcdm (UTF-8 only): throws UsageError
 // naming `option` when it is not valid UTF-8.
 const std::string &json_path(const std::string &option, const std::string &path);
+// Both paths exist and are one file (the same device and inode: a link or
+// another spelling of one path included); "" is no file.
+bool same_file(const std::string &a, const std::string &b);
 // Throws UsageError when two of a command's outputs ({option, path}; ""
 // skipped) are one file: the same directory (symbolic links resolved) and
 // name, or, existing, the same inode. The second would replace the first.

@@ -120,6 +120,12 @@ const std::string &json_path(const std::string &option, const std::string &path)
     return path;
 }
 
+bool same_file(const std::string &a, const std::string &b) {
+    struct stat sa {}, sb {};
+    return !a.empty() && !b.empty() && stat(a.c_str(), &sa) == 0 && stat(b.c_str(), &sb) == 0 &&
+           sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+}
+
 void distinct_outputs(const std::vector<std::pair<std::string, std::string>> &outputs) {
     auto where = [](const std::string &path) {
         const size_t slash = path.find_last_of('/');
@@ -133,10 +139,7 @@ void distinct_outputs(const std::vector<std::pair<std::string, std::string>> &ou
         for (size_t k = 0; k < i; ++k) {
             const auto &a = outputs[k], &b = outputs[i];
             if (a.second.empty() || b.second.empty()) continue;
-            struct stat sa {}, sb {};
-            const bool same_inode = stat(a.second.c_str(), &sa) == 0 && stat(b.second.c_str(), &sb) == 0 &&
-                                    sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
-            if (same_inode || where(a.second) == where(b.second))
+            if (same_file(a.second, b.second) || where(a.second) == where(b.second))
                 throw UsageError(a.first + " and " + b.first + " are the same file " + b.second +
                                  ": the second would replace the first");
         }

@@ -55,14 +55,10 @@ void check_output(const std::string &uri, const std::string &file, const std::ve
     for (const std::string &p : {file, file + ".tmp"}) {
         if (stat(p.c_str(), &out) != 0) continue;
         if (!S_ISREG(out.st_mode)) throw UsageError(p + " exists and is not a regular file: not writing over it");
-        auto same = [&](const std::string &in) {
-            struct stat st {};
-            return !in.empty() && stat(in.c_str(), &st) == 0 && st.st_dev == out.st_dev && st.st_ino == out.st_ino;
-        };
         for (const auto &in : uri_inputs(uri))
-            if (same(in)) throw UsageError(p + " is the input " + in + " of " + uri + ": not writing over it");
+            if (same_file(in, p)) throw UsageError(p + " is the input " + in + " of " + uri + ": not writing over it");
         for (const auto &in : also)
-            if (same(in)) throw UsageError(p + " is the input " + in + " of this command: not writing over it");
+            if (same_file(in, p)) throw UsageError(p + " is the input " + in + " of this command: not writing over it");
     }
 }
 

@@ -187,8 +187,8 @@ int finish_jig(RecordCtx &ctx, const std::string &file, const cdm_stats &st, boo
                     (unsigned long long)st.dropped);
     }
     if (ctx.live_stopped) {
-        std::fprintf(stderr, "cdm: record: the live analysis ended the session after %zu of %zu positions: the "
-                             "model is determined\n", ctx.next_point, ctx.plan_n);
+        std::fprintf(stderr, "cdm: record: the live analysis ended the session after %zu of %zu positions walked: "
+                             "the model is determined\n", ctx.next_point, ctx.plan_n);
     } else if (ctx.next_point < ctx.plan_n) {
         std::fprintf(stderr, "cdm: record: the session stopped before the jig plan was complete\n");
         return kExitFailure;
